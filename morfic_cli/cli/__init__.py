@@ -1,0 +1,112 @@
+"""The ``morfic`` command line: app assembly and central error handling.
+
+Every subcommand lives in its own module and stays thin (parse -> call the library -> render).
+``main()`` turns :class:`~morfic_cli.errors.MorficError` and usage errors into
+``Error: <message>`` on stderr with exit status 1; ``MORFIC_DEBUG=1`` re-raises with a traceback.
+Importing this module must not import torch or mujoco: heavy imports happen inside commands.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import click
+import typer
+
+from morfic_cli import __version__
+from morfic_cli.cli import (
+    bench,
+    compare_baselines,
+    diagnose,
+    distance,
+    evaluate,
+    export,
+    report,
+    reproduce,
+    robots,
+    store,
+    train,
+)
+from morfic_cli.errors import MorficError
+
+app = typer.Typer(
+    name="morfic",
+    help=(
+        "MorFiC: PPO locomotion with morphology-conditioned critics, zero-shot transfer to other "
+        "quadrupeds, and critic-calibration diagnostics. Every result goes into a content-addressed "
+        "artifact store (--store, env MORFIC_STORE, default ./artifacts).\n\n"
+        "Example: morfic distance --format json"
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    rich_markup_mode="rich",
+    context_settings={"help_option_names": ["-h", "--help"]},
+    pretty_exceptions_enable=False,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"morfic {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version."),
+) -> None:
+    """Root options."""
+
+
+app.command("train")(train.train)
+app.command("eval")(evaluate.evaluate)
+app.command("diagnose")(diagnose.diagnose)
+app.command("compare-baselines")(compare_baselines.compare_baselines)
+app.command("distance")(distance.distance)
+app.command("export")(export.export)
+app.command("report")(report.report)
+app.command("reproduce")(reproduce.reproduce)
+app.add_typer(store.app, name="store")
+app.add_typer(robots.app, name="robots")
+app.command("bench")(bench.bench)
+
+
+def _fail(message: str, code: int = 1) -> None:
+    sys.stderr.write(f"Error: {message}\n")
+    sys.stderr.flush()
+    sys.exit(code)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console-script entry point: run the app with central error handling."""
+    debug = os.environ.get("MORFIC_DEBUG", "") not in ("", "0")
+    try:
+        rc = app(args=argv, prog_name="morfic", standalone_mode=False)
+        if isinstance(rc, int) and rc != 0:
+            sys.exit(rc)
+    except MorficError as exc:
+        if debug:
+            raise
+        _fail(str(exc))
+    except click.exceptions.NoArgsIsHelpError as exc:
+        if exc.ctx is not None:
+            sys.stdout.write(exc.ctx.get_help() + "\n")
+        sys.exit(0)
+    except click.UsageError as exc:
+        if debug:
+            raise
+        hint = f" Try '{exc.ctx.command_path} --help'." if exc.ctx is not None else ""
+        _fail(f"{exc.format_message()}.{hint}".replace("..", "."))
+    except click.ClickException as exc:
+        if debug:
+            raise
+        _fail(exc.format_message())
+    except click.exceptions.Abort:
+        sys.stderr.write("Aborted.\n")
+        sys.exit(130)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)
+    except KeyboardInterrupt:
+        sys.stderr.write("Interrupted.\n")
+        sys.exit(130)

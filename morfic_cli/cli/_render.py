@@ -1,0 +1,98 @@
+"""Rendering of command output: data rows to stdout (table/json/csv), messages to stderr."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+from morfic_cli.cli._options import OutputFormat
+
+#: Human messages (progress, "wrote artifact ...") go here, never to stdout.
+err_console = Console(stderr=True)
+out_console = Console()
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of a printed table.
+
+    Attributes:
+        key: Row dict key.
+        header: Header shown in the rich table (defaults to ``key``).
+        fmt: Formatter for the rich table cell; json/csv always get the raw value.
+        justify: rich justification ("left", "right", "center").
+    """
+
+    key: str
+    header: str | None = None
+    fmt: Callable[[Any], str] | None = None
+    justify: str = "left"
+
+
+def _cell(value: Any, col: Column) -> str:
+    if col.fmt is not None:
+        return col.fmt(value)
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.3f}" if math.isfinite(value) else str(value)
+    return str(value)
+
+
+def emit_rows(
+    rows: Sequence[dict[str, Any]],
+    fmt: OutputFormat,
+    columns: Sequence[Column] | None = None,
+    title: str | None = None,
+    caption: str | None = None,
+) -> None:
+    """Print ``rows`` on stdout in the requested format.
+
+    Args:
+        rows: One dict per row. json/csv print every key; the table prints ``columns``.
+        fmt: table (rich), json (a list of objects) or csv (pandas, header line first).
+        columns: Columns of the rich table; default every key of the first row.
+        title: Title of the rich table.
+        caption: Caption under the rich table.
+    """
+    rows = list(rows)
+    if fmt == OutputFormat.json:
+        sys.stdout.write(json.dumps(rows, indent=2, default=str) + "\n")
+        return
+    if fmt == OutputFormat.csv:
+        import pandas as pd
+
+        frame = pd.DataFrame(rows, columns=list(rows[0].keys()) if rows else None)
+        frame.to_csv(sys.stdout, index=False)
+        return
+    cols = list(columns) if columns else [Column(k) for k in (rows[0].keys() if rows else [])]
+    table = Table(title=title, caption=caption)
+    for col in cols:
+        table.add_column(col.header or col.key, justify=col.justify)  # type: ignore[arg-type]
+    for row in rows:
+        table.add_row(*(_cell(row.get(col.key), col) for col in cols))
+    out_console.print(table)
+
+
+def emit_object(obj: Any, fmt: OutputFormat) -> None:
+    """Print one object: pretty JSON for json/table, a two-column key,value CSV for csv."""
+    if fmt == OutputFormat.csv and isinstance(obj, dict):
+        emit_rows([{"key": k, "value": json.dumps(v) if isinstance(v, dict | list) else v}
+                   for k, v in obj.items()], fmt)
+        return
+    if fmt == OutputFormat.table:
+        out_console.print_json(json.dumps(obj, default=str))
+        return
+    sys.stdout.write(json.dumps(obj, indent=2, default=str) + "\n")
+
+
+def info(message: str) -> None:
+    """A human message on stderr."""
+    err_console.print(message)

@@ -1,0 +1,1 @@
+"""Recording formats: CSV table schemas (and, later, MCAP rollout logs)."""

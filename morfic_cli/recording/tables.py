@@ -1,0 +1,60 @@
+"""CSV table artifacts: one place for each table's columns and how it enters the store."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+DISTANCE_COLUMNS: tuple[str, ...] = ("robot", "d", "reference", "normalize", "n_outside", "outside")
+"""Columns of the distance table (``morfic distance``)."""
+
+
+@dataclass(frozen=True)
+class WrittenArtifact:
+    """An artifact a command wrote: manifest id, the ref it advanced, and that ref's new version."""
+
+    id: str
+    ref: str
+    version: int
+
+
+def rows_to_csv(rows: Sequence[dict], columns: Sequence[str]) -> bytes:
+    """Serialise rows to CSV bytes with pandas, columns in the given order."""
+    import pandas as pd
+
+    buf = io.StringIO()
+    pd.DataFrame(list(rows), columns=list(columns)).to_csv(buf, index=False, lineterminator="\n")
+    return buf.getvalue().encode()
+
+
+def write_distance_table(
+    store_root: Path, rows: Sequence[dict], names: Sequence[str], reference: str, normalize: str
+) -> WrittenArtifact:
+    """Store the distance table as a ``table`` manifest and advance ref ``tables/distance``.
+
+    Args:
+        store_root: Store root directory.
+        rows: Flat rows with :data:`DISTANCE_COLUMNS`.
+        names: Robots in the comparison.
+        reference: Reference robot (m_train).
+        normalize: "span" or "support".
+
+    Returns:
+        The manifest id, ref and ref version.
+    """
+    from morfic_cli.morphology.distance import robot_file_digests
+    from morfic_cli.store import Store
+
+    store = Store(store_root)
+    config = {"table": "distance", "robots": list(names), "reference": reference, "normalize": normalize}
+    with store.writing():
+        mid = store.put_manifest(
+            "table",
+            config=config,
+            files={"distance.csv": rows_to_csv(rows, DISTANCE_COLUMNS)},
+            meta={"robot_toml_sha256": robot_file_digests(sorted({*names, reference}))},
+        )
+        version = store.set_ref("tables/distance", mid)
+    return WrittenArtifact(mid, "tables/distance", version)
