@@ -11,8 +11,12 @@ from __future__ import annotations
 import os
 import sys
 
-import click
 import typer
+
+try:  # typer >= 0.2x vendors its own copy of click
+    from typer._click import exceptions as _click_exc
+except ImportError:  # pragma: no cover - older typer depends on click
+    from click import exceptions as _click_exc
 
 from morfic_cli import __version__
 from morfic_cli.cli import (
@@ -89,23 +93,25 @@ def main(argv: list[str] | None = None) -> None:
         if debug:
             raise
         _fail(str(exc))
-    except click.exceptions.NoArgsIsHelpError as exc:
-        if exc.ctx is not None:
-            sys.stdout.write(exc.ctx.get_help() + "\n")
+    except _click_exc.NoArgsIsHelpError as exc:
+        # typer's rich help is printed while the error is built; plain click returns it as the message.
+        text = exc.format_message()
+        if text.strip():
+            sys.stdout.write(text + "\n")
         sys.exit(0)
-    except click.UsageError as exc:
+    except _click_exc.UsageError as exc:
         if debug:
             raise
         hint = f" Try '{exc.ctx.command_path} --help'." if exc.ctx is not None else ""
         _fail(f"{exc.format_message()}.{hint}".replace("..", "."))
-    except click.ClickException as exc:
+    except _click_exc.ClickException as exc:
         if debug:
             raise
         _fail(exc.format_message())
-    except click.exceptions.Abort:
+    except typer.Abort:
         sys.stderr.write("Aborted.\n")
         sys.exit(130)
-    except click.exceptions.Exit as exc:
+    except typer.Exit as exc:
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
         sys.stderr.write("Interrupted.\n")

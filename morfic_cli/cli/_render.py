@@ -64,7 +64,7 @@ def emit_rows(
     """
     rows = list(rows)
     if fmt == OutputFormat.json:
-        sys.stdout.write(json.dumps(rows, indent=2, default=str) + "\n")
+        sys.stdout.write(json.dumps(rows, indent=2, default=str, ensure_ascii=False) + "\n")
         return
     if fmt == OutputFormat.csv:
         import pandas as pd

@@ -1,0 +1,180 @@
+"""``morfic store``: inspect and maintain the artifact store (thin: the logic is in morfic_cli.store)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+from rich.markup import escape
+
+from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, StoreOpt
+from morfic_cli.cli._render import Column, emit_object, emit_rows, err_console, info
+from morfic_cli.errors import StoreError
+from morfic_cli.store import MANIFEST_KINDS, Store
+
+app = typer.Typer(
+    help=(
+        "Inspect and maintain the artifact store: list and show artifacts, verify hashes, collect "
+        "garbage, move artifacts between machines.\n\nExample: morfic store ls --format json"
+    ),
+    no_args_is_help=True,
+)
+
+
+def human_size(size: Any) -> str:
+    """Bytes as a short human string (``1.5 MiB``); ``-`` for ``None``."""
+    if size is None:
+        return "-"
+    value = float(size)
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if value < 1024 or unit == "GiB":
+            return f"{int(value)} {unit}" if unit == "B" else f"{value:.1f} {unit}"
+        value /= 1024
+    return f"{value:.1f} GiB"
+
+
+def _short_id(oid: Any) -> str:
+    return str(oid)[:12] if oid else "-"
+
+
+def _short_time(time: Any) -> str:
+    return str(time)[:19].replace("T", " ") if time else "-"
+
+
+_LS_COLUMNS = [
+    Column("ref"),
+    Column("id", fmt=_short_id),
+    Column("kind"),
+    Column("created", header="created (UTC)", fmt=_short_time),
+    Column("files", justify="right"),
+    Column("size", fmt=human_size, justify="right"),
+]
+
+
+def _emit(rows: list[dict[str, Any]], fmt: OutputFormat, columns: list[Column], title: str) -> None:
+    """emit_rows, plus a header line for an empty CSV so scripts still see the column names."""
+    if not rows and fmt == OutputFormat.csv:
+        sys.stdout.write(",".join(c.key for c in columns) + "\n")
+        return
+    emit_rows(rows, fmt, columns, title=title)
+
+
+@app.command("ls")
+def ls(
+    kind: Annotated[
+        Optional[str], typer.Option("--kind", help=f"Only this kind: {', '.join(MANIFEST_KINDS)}.")
+    ] = None,
+    all_: Annotated[
+        bool, typer.Option("--all", help="Also list old ref versions (shown as name@N).")
+    ] = False,
+    fmt: FormatOpt = OutputFormat.table,
+    store: StoreOpt = DEFAULT_STORE,
+) -> None:
+    """List the artifacts (manifests) in the store, oldest first.
+
+    Example: morfic store ls --kind run --format json
+    """
+    rows = Store(store).ls(kind, include_superseded=all_)
+    if not rows:
+        info(f"no artifacts{f' of kind {kind}' if kind else ''} in store {escape(str(store))}")
+    _emit(rows, fmt, _LS_COLUMNS, title=f"artifacts in {store}")
+
+
+@app.command("show")
+def show(
+    spec: Annotated[str, typer.Argument(help="Ref (runs/film-s0), ref@N, id or unique id prefix.")],
+    history: Annotated[bool, typer.Option("--history", help="List every version of the ref instead.")] = False,
+    fmt: FormatOpt = OutputFormat.table,
+    store: StoreOpt = DEFAULT_STORE,
+) -> None:
+    """Print one manifest (or, with --history, every version of a ref).
+
+    Example: morfic store show runs/film-s0@1
+    """
+    st = Store(store)
+    if not history:
+        emit_object(st.describe(spec), fmt)
+        return
+    entries = st.ref_history(spec)
+    rows = [{"version": e.version, "id": e.id, "time": e.time, "current": e.version == len(entries)}
+            for e in entries]
+    columns = [Column("version", justify="right"), Column("id", fmt=_short_id),
+               Column("time", header="time (UTC)", fmt=_short_time), Column("current")]
+    _emit(rows, fmt, columns, title=f"history of {spec}")
+
+
+@app.command("verify")
+def verify(store: StoreOpt = DEFAULT_STORE) -> None:
+    """Rehash every object and check the manifest index and refs; exit 1 if anything is wrong.
+
+    Example: morfic store verify --store artifacts
+    """
+    report = Store(store).verify()
+    for problem in report.problems:
+        err_console.print(f"  {problem}", markup=False, highlight=False, soft_wrap=True)
+    if not report.ok:
+        raise StoreError(f"{len(report.problems)} problem(s) found in store {store} (listed above); restore "
+                         "damaged objects from an export (`morfic store import`) or drop what no longer "
+                         "matters and run `morfic store gc`.")
+    leftovers = f"; {report.temp_files} leftover temp file(s), `morfic store gc --yes` removes them" \
+        if report.temp_files else ""
+    info(f"store {escape(str(store))} OK: {report.objects} objects ({human_size(report.bytes)}), "
+         f"{report.manifests} manifests, {report.refs} refs checked{leftovers}")
+
+
+@app.command("gc")
+def gc(
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="Really delete; without it gc only reports.")] = False,
+    fmt: FormatOpt = OutputFormat.table,
+    store: StoreOpt = DEFAULT_STORE,
+) -> None:
+    """Remove objects that no version of any ref reaches (a dry run unless --yes).
+
+    Example: morfic store gc --yes
+    """
+    report = Store(store).gc(dry_run=not yes)
+    rows = [{"id": i.id, "kind": i.kind, "size": i.size} for i in report.removed]
+    if rows or fmt != OutputFormat.table:
+        columns = [Column("id"), Column("kind"), Column("size", fmt=human_size, justify="right")]
+        _emit(rows, fmt, columns, title="unreachable objects")
+    what = f"{len(rows)} unreachable object(s) ({human_size(report.removed_bytes)}) and " \
+        f"{report.temp_files} leftover temp file(s); {report.reachable} reachable object(s) kept"
+    if report.dry_run:
+        hint = "; run `morfic store gc --yes` to delete them" if rows or report.temp_files else ""
+        info(f"dry run: would remove {what}{hint}")
+    else:
+        info(f"removed {what}")
+
+
+@app.command("export")
+def export(
+    refs: Annotated[list[str], typer.Argument(help="Ref names to export, with every version.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Tar file to write.")],
+    store: StoreOpt = DEFAULT_STORE,
+) -> None:
+    """Write the named refs and everything they reach into one tar file.
+
+    Example: morfic store export runs/film-s0 runs/film-s1 --out film.tar
+    """
+    report = Store(store).export_tar(refs, out)
+    info(f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
+         f"to {escape(str(report.path))}")
+
+
+@app.command("import")
+def import_(
+    path: Annotated[Path, typer.Argument(help="Tar file made by `morfic store export`.")],
+    fmt: FormatOpt = OutputFormat.table,
+    store: StoreOpt = DEFAULT_STORE,
+) -> None:
+    """Import an export tar (rehashes every object; safe to run twice).
+
+    Example: morfic store import film.tar --store artifacts
+    """
+    report = Store(store).import_tar(path)
+    rows = [{"ref": name, "status": status} for name, status in report.refs.items()]
+    _emit(rows, fmt, [Column("ref"), Column("status")], title=f"refs imported from {path.name}")
+    info(f"imported {report.objects_added} new object(s) ({report.objects_present} already present), "
+         f"{len(rows)} ref(s) into {escape(str(store))}")

@@ -1,0 +1,249 @@
+"""Store maintenance: reachability, ``verify`` and ``gc``.
+
+Reachability (like git): the roots are *every version of every ref*; from a manifest, its files and
+its inputs are reachable, recursively. ``gc`` deletes every object outside that closure, the index
+markers of deleted manifests, and leftover temp files, under the exclusive store lock so no writer
+can be between "object written" and "ref updated" while it runs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from morfic_cli.errors import StoreError
+from morfic_cli.store.manifest import MANIFEST_MAGIC, Manifest, parse_manifest
+from morfic_cli.store.objects import CHUNK_SIZE, unlink_quiet
+
+if TYPE_CHECKING:
+    from morfic_cli.store import Store
+
+
+@dataclass
+class VerifyReport:
+    """What ``verify`` checked and every problem it found.
+
+    Attributes:
+        objects: Objects rehashed.
+        bytes: Total bytes rehashed.
+        manifests: Index entries checked.
+        refs: Refs checked.
+        temp_files: Leftover temp files (harmless; ``gc`` removes them).
+        problems: One line per problem; empty for a healthy store.
+    """
+
+    objects: int = 0
+    bytes: int = 0
+    manifests: int = 0
+    refs: int = 0
+    temp_files: int = 0
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """Whether no problem was found."""
+        return not self.problems
+
+
+@dataclass(frozen=True)
+class GcItem:
+    """One unreachable object.
+
+    Attributes:
+        id: Object id.
+        kind: The manifest kind, or ``"blob"`` for a plain object.
+        size: Size in bytes.
+    """
+
+    id: str
+    kind: str
+    size: int
+
+
+@dataclass
+class GcReport:
+    """What ``gc`` removed (or, in a dry run, would remove).
+
+    Attributes:
+        dry_run: True if nothing was deleted (only reported).
+        reachable: Objects reachable from some version of some ref (kept).
+        removed: The unreachable objects, by id.
+        temp_files: Leftover temp files under ``tmp/``.
+    """
+
+    dry_run: bool
+    reachable: int = 0
+    removed: list[GcItem] = field(default_factory=list)
+    temp_files: int = 0
+
+    @property
+    def removed_bytes(self) -> int:
+        """Total size of the unreachable objects."""
+        return sum(item.size for item in self.removed)
+
+
+def load_manifest_if_any(store: Store, oid: str, *, strict: bool) -> Manifest | None:
+    """``oid`` parsed as a manifest, or ``None`` for a plain blob.
+
+    Args:
+        store: The store.
+        oid: An existing object id.
+        strict: Raise if an indexed manifest cannot be read (gc must not guess).
+    """
+    indexed = store.index.has(oid)
+    if not indexed and store.objects.read_head(oid, len(MANIFEST_MAGIC)) != MANIFEST_MAGIC:
+        return None
+    try:
+        return parse_manifest(oid, store.objects.get_bytes(oid))
+    except StoreError as exc:
+        if indexed and strict:
+            raise StoreError(f"manifest {oid} cannot be read ({exc}); refusing to decide what is "
+                             "reachable. Run `morfic store verify` and repair the store first.") from exc
+        return None
+
+
+def closure(store: Store, roots: Iterable[str], *, strict: bool = True) -> set[str]:
+    """Every id reachable from ``roots`` (manifest -> files and inputs, recursively).
+
+    Ids that are not stored are included (they are referenced) but not followed.
+    """
+    seen: set[str] = set()
+    stack = list(roots)
+    while stack:
+        oid = stack.pop()
+        if oid in seen:
+            continue
+        seen.add(oid)
+        if not store.objects.has(oid):
+            continue
+        manifest = load_manifest_if_any(store, oid, strict=strict)
+        if manifest is not None:
+            stack.extend(manifest.referenced_ids())
+    return seen
+
+
+def ref_roots(store: Store, names: Iterable[str] | None = None) -> list[str]:
+    """Ids of every version of the given refs (default: every ref)."""
+    names = store.refs.names() if names is None else names
+    return [entry.id for name in names for entry in store.refs.history(name)]
+
+
+def temp_files(store: Store) -> list[str]:
+    """Names of files left in ``tmp/`` (by interrupted writes)."""
+    tmp = store.root / "tmp"
+    return sorted(os.listdir(tmp)) if tmp.is_dir() else []
+
+
+def collect_garbage(store: Store, *, dry_run: bool = True) -> GcReport:
+    """Find (and unless ``dry_run``, delete) what no version of any ref reaches.
+
+    Call with the exclusive store lock held.
+    """
+    report = GcReport(dry_run=dry_run)
+    keep = closure(store, ref_roots(store))
+    report.reachable = sum(1 for oid in keep if store.objects.has(oid))
+    for oid in store.objects.iter_ids():
+        if oid not in keep:
+            manifest = load_manifest_if_any(store, oid, strict=False)
+            kind = manifest.kind if manifest is not None else "blob"
+            report.removed.append(GcItem(id=oid, kind=kind, size=store.objects.size(oid)))
+    leftovers = temp_files(store)
+    report.temp_files = len(leftovers)
+    if not dry_run:
+        _delete(store, [item.id for item in report.removed], leftovers)
+    return report
+
+
+def _delete(store: Store, oids: list[str], leftovers: list[str]) -> None:
+    for oid in oids:
+        store.index.remove(oid)
+        store.objects.remove(oid)
+    for oid in list(store.index.ids()):
+        if not store.objects.has(oid):
+            store.index.remove(oid)
+    for name in leftovers:
+        unlink_quiet(store.root / "tmp" / name)
+
+
+def _rehash(path: os.PathLike[str]) -> tuple[str, int]:
+    digest = hashlib.sha256()
+    size = 0
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(CHUNK_SIZE), b""):
+            digest.update(chunk)
+            size += len(chunk)
+    return digest.hexdigest(), size
+
+
+def verify_store(store: Store) -> VerifyReport:
+    """Rehash every object and check that the index and every ref point at existing objects."""
+    report = VerifyReport()
+    _verify_objects(store, report)
+    _verify_index(store, report)
+    _verify_refs(store, report)
+    report.temp_files = len(temp_files(store))
+    return report
+
+
+def _verify_objects(store: Store, report: VerifyReport) -> None:
+    for oid in store.objects.iter_ids():
+        try:
+            actual, size = _rehash(store.objects.path(oid))
+        except OSError as exc:
+            report.problems.append(f"object {oid} cannot be read: {exc.strerror or exc}")
+            continue
+        report.objects += 1
+        report.bytes += size
+        if actual != oid:
+            report.problems.append(f"object {oid} is corrupt: its bytes hash to {actual}")
+    for path in store.objects.stray_files():
+        report.problems.append(f"unexpected file in objects/: {path.relative_to(store.root)}")
+
+
+def _verify_index(store: Store, report: VerifyReport) -> None:
+    for name in store.index.stray():
+        report.problems.append(f"unexpected file in manifests/: {name}")
+    for oid in store.index.ids():
+        report.manifests += 1
+        if not store.objects.has(oid):
+            report.problems.append(f"manifest index entry {oid} has no object")
+            continue
+        try:
+            manifest = parse_manifest(oid, store.objects.get_bytes(oid, verify=False))
+        except StoreError:
+            report.problems.append(f"manifest index entry {oid} is not a readable manifest")
+            continue
+        _verify_manifest_links(store, manifest, report)
+
+
+def _verify_manifest_links(store: Store, manifest: Manifest, report: VerifyReport) -> None:
+    for name, entry in manifest.files.items():
+        if not store.objects.has(entry.id):
+            report.problems.append(f"manifest {manifest.id}: file '{name}' object {entry.id} is missing")
+        elif store.objects.size(entry.id) != entry.size:
+            report.problems.append(f"manifest {manifest.id}: file '{name}' size {entry.size} does not "
+                                   f"match its object ({store.objects.size(entry.id)} bytes)")
+    for role, oid in manifest.inputs.items():
+        if not store.objects.has(oid):
+            report.problems.append(f"manifest {manifest.id}: input '{role}' {oid} is missing")
+
+
+def _verify_refs(store: Store, report: VerifyReport) -> None:
+    for name in store.refs.names():
+        report.refs += 1
+        try:
+            history = store.refs.history(name)
+        except StoreError as exc:
+            report.problems.append(str(exc))
+            continue
+        if not history:
+            report.problems.append(f"ref '{name}' has an empty history")
+        for entry in history:
+            if not store.objects.has(entry.id):
+                report.problems.append(f"ref '{name}@{entry.version}' points at missing object {entry.id}")
+            elif not store.index.has(entry.id):
+                report.problems.append(f"ref '{name}@{entry.version}' points at {entry.id}, which is not "
+                                       "an indexed manifest")

@@ -1,0 +1,236 @@
+"""Refs: human names for manifests (``runs/film-s0``) with an append-only history.
+
+Each ref is one file ``refs/<name>`` holding its whole history as JSON lines, oldest first::
+
+    {"id":"<64 hex>","time":"2025-01-02T03:04:05.123456Z","version":1}
+    {"id":"<64 hex>","time":"2025-01-02T04:00:00.000000Z","version":2}
+
+The current value is the last line. An update appends a line by writing the full new history to a
+temp file and renaming it over the old one, under the exclusive ``locks/refs.lock``, so
+concurrent writers never lose an update and a crash leaves either the old or the new history.
+
+Version syntax (see :func:`split_spec`): ``name`` is the current version, ``name@N`` (N >= 1)
+is version N counted from the first, ``name@-K`` (K >= 1) is K updates before the current one
+(``name@-1`` is the previous version).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from morfic_cli.errors import ArtifactNotFoundError, StoreError
+from morfic_cli.store.lock import file_lock
+from morfic_cli.store.objects import is_object_id, store_os_error, write_atomic
+
+_SEGMENT = re.compile(r"[A-Za-z0-9._-]+")
+
+#: Longest accepted ref name.
+MAX_REF_LENGTH = 200
+
+
+@dataclass(frozen=True)
+class RefEntry:
+    """One version of a ref.
+
+    Attributes:
+        version: 1-based version number.
+        id: Manifest id the ref pointed to at this version.
+        time: UTC ISO-8601 time of the update.
+    """
+
+    version: int
+    id: str
+    time: str
+
+
+def is_ref_name(name: str) -> bool:
+    """Whether ``name`` is a valid ref name (see :func:`check_ref_name`)."""
+    if not name or len(name) > MAX_REF_LENGTH or ".." in name:
+        return False
+    return all(_SEGMENT.fullmatch(s) and s != "." for s in name.split("/"))
+
+
+def check_ref_name(name: str) -> str:
+    """Return ``name`` if valid: ``[A-Za-z0-9._-]`` segments joined by ``/``, no ``..``, no ``@``.
+
+    Raises:
+        StoreError: Invalid name; the message says what a valid one looks like.
+    """
+    if not is_ref_name(name):
+        raise StoreError(f"invalid ref name '{name}': use segments of letters, digits, '.', '_' and '-' "
+                         "separated by '/', e.g. 'runs/film-s0' (no '..', no '@', at most "
+                         f"{MAX_REF_LENGTH} characters).")
+    return name
+
+
+def split_spec(spec: str) -> tuple[str, int | None]:
+    """Split ``name@N`` into ``(name, N)``; a spec without ``@`` gives ``(spec, None)``.
+
+    Raises:
+        StoreError: The part after ``@`` is not a non-zero integer.
+    """
+    if "@" not in spec:
+        return spec, None
+    name, _, version = spec.rpartition("@")
+    try:
+        number = int(version)
+    except ValueError:
+        number = 0
+    if number == 0 or not version.lstrip("-").isdigit():
+        raise StoreError(f"invalid ref version in '{spec}': use name@N for version N (1 is the first) or "
+                         "name@-K for K updates before the current one (name@-1 is the previous).")
+    return name, number
+
+
+def pick_version(name: str, history: list[RefEntry], number: int) -> RefEntry:
+    """The entry of ``history`` selected by ``@number`` (positive: absolute; negative: back from current).
+
+    Raises:
+        ArtifactNotFoundError: No such version; the message gives the valid range.
+    """
+    count = len(history)
+    index = number - 1 if number > 0 else count - 1 + number
+    if not 0 <= index < count:
+        raise ArtifactNotFoundError(
+            f"ref '{name}' has no version @{number}: it has versions 1..{count} (@{count} is current; "
+            f"@-1 .. @-{count - 1} count back from it). See `morfic store show {name} --history`."
+        )
+    return history[index]
+
+
+def encode_history(entries: list[RefEntry]) -> bytes:
+    """The bytes of a ref history file (one canonical JSON object per line)."""
+    lines = (json.dumps({"id": e.id, "time": e.time, "version": e.version}, sort_keys=True,
+                        separators=(",", ":")) for e in entries)
+    return "".join(line + "\n" for line in lines).encode("ascii")
+
+
+def decode_history(name: str, data: bytes) -> list[RefEntry]:
+    """Parse a ref history file.
+
+    Raises:
+        StoreError: A line that is not a valid entry, or versions that are not 1, 2, 3, ...
+    """
+    entries = []
+    for number, line in enumerate(data.decode("utf-8", "replace").splitlines(), start=1):
+        try:
+            raw = json.loads(line)
+            entry = RefEntry(version=int(raw["version"]), id=str(raw["id"]), time=str(raw["time"]))
+        except (ValueError, KeyError, TypeError):
+            raise StoreError(f"ref '{name}' is damaged (line {number} is not a history entry); "
+                             "run `morfic store verify`.") from None
+        if entry.version != number or not is_object_id(entry.id):
+            raise StoreError(f"ref '{name}' is damaged (line {number}: version {entry.version}, "
+                             f"id {entry.id!r}); run `morfic store verify`.")
+        entries.append(entry)
+    return entries
+
+
+def merge_status(name: str, local: list[RefEntry], incoming: list[RefEntry]) -> str:
+    """How an imported history combines with the local one.
+
+    Returns:
+        ``"created"`` (no local history), ``"unchanged"`` (identical, or the local one already extends
+        the incoming one), or ``"extended"`` (the local history is a strict prefix of the incoming one).
+
+    Raises:
+        StoreError: The histories diverged (neither is a prefix of the other).
+    """
+    if not local:
+        return "created"
+    common = min(len(local), len(incoming))
+    for a, b in zip(local[:common], incoming[:common], strict=True):
+        if a != b:
+            raise StoreError(
+                f"ref '{name}' has diverged: version {a.version} is {a.id[:12]} here but {b.id[:12]} in the "
+                "import. Nothing was imported; rename the local ref or import into another store."
+            )
+    return "extended" if len(incoming) > len(local) else "unchanged"
+
+
+class RefDB:
+    """The ``refs/`` directory: read, list and update ref histories."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.dir = root / "refs"
+        self.tmp_dir = root / "tmp"
+        self.lock_path = root / "locks" / "refs.lock"
+
+    def path(self, name: str) -> Path:
+        """The history file of ref ``name`` (validated)."""
+        return self.dir.joinpath(*check_ref_name(name).split("/"))
+
+    def exists(self, name: str) -> bool:
+        """Whether ref ``name`` exists (``False`` for invalid names)."""
+        return is_ref_name(name) and self.path(name).is_file()
+
+    def history(self, name: str) -> list[RefEntry]:
+        """Every version of ``name``, oldest first; ``[]`` if the ref does not exist."""
+        path = self.path(name)
+        try:
+            data = path.read_bytes()
+        except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+            return []
+        return decode_history(name, data)
+
+    def names(self) -> list[str]:
+        """Every ref name, sorted."""
+        if not self.dir.is_dir():
+            return []
+        found = []
+        for folder, _, files in os.walk(self.dir):
+            rel = Path(folder).relative_to(self.dir).as_posix()
+            for file in files:
+                name = file if rel == "." else f"{rel}/{file}"
+                if is_ref_name(name):
+                    found.append(name)
+        return sorted(found)
+
+    @contextmanager
+    def locked(self) -> Iterator[None]:
+        """Hold the exclusive ref lock (for read-modify-write of histories)."""
+        with file_lock(self.lock_path, exclusive=True):
+            yield
+
+    def append(self, name: str, oid: str, time: str) -> int:
+        """Point ``name`` at ``oid``, appending a version; return the new version number.
+
+        Setting a ref to the id it already points at appends nothing and returns the current version.
+        """
+        self.path(name)
+        with self.locked():
+            history = self.history(name)
+            if history and history[-1].id == oid:
+                return history[-1].version
+            entry = RefEntry(version=len(history) + 1, id=oid, time=time)
+            self.write(name, [*history, entry])
+        return entry.version
+
+    def write(self, name: str, entries: list[RefEntry]) -> None:
+        """Replace the history of ``name`` atomically (caller holds :meth:`locked`)."""
+        path = self.path(name)
+        self._check_no_conflict(name, path)
+        try:
+            write_atomic(self.tmp_dir, path, [encode_history(entries)])
+        except OSError as exc:
+            raise store_os_error(exc, f"updating ref '{name}'", self.root) from exc
+
+    def _check_no_conflict(self, name: str, path: Path) -> None:
+        """Refuse ``a/b`` when ref ``a`` exists, and ``a`` when refs ``a/...`` exist (like git)."""
+        if path.is_dir():
+            raise StoreError(f"cannot create ref '{name}': refs named '{name}/...' exist, and a name "
+                             "cannot be both a ref and a folder of refs; choose another name.")
+        for parent in path.parents:
+            if parent == self.dir:
+                break
+            if parent.is_file():
+                other = parent.relative_to(self.dir).as_posix()
+                raise StoreError(f"cannot create ref '{name}': ref '{other}' exists, and a name cannot "
+                                 "be both a ref and a folder of refs; choose another name.")

@@ -1,0 +1,177 @@
+"""`morfic store ...`: CliRunner for output, `main` (run_cli fixture) for `Error:` and exit codes."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+
+import pytest
+from typer.testing import CliRunner
+
+from morfic_cli.cli import app
+from morfic_cli.store import Store
+
+runner = CliRunner()
+COMMANDS = ["ls", "show", "verify", "gc", "export", "import"]
+
+
+@pytest.fixture
+def store():
+    """The store the CLI uses by default in tests (conftest points MORFIC_STORE at tmp_path)."""
+    return Store(os.environ["MORFIC_STORE"])
+
+
+@pytest.fixture
+def filled(store):
+    ckpt = store.put_manifest("checkpoint", files={"model.pt": b"w"})
+    old = store.put_manifest("run", inputs={"checkpoint": ckpt}, files={"c.csv": b"1"})
+    new = store.put_manifest("run", inputs={"checkpoint": ckpt}, files={"c.csv": b"2"})
+    store.set_ref("runs/film-s0", old)
+    store.set_ref("runs/film-s0", new)
+    return {"ckpt": ckpt, "old": old, "new": new}
+
+
+def _invoke(*args: str):
+    result = runner.invoke(app, ["store", *args])
+    assert result.exit_code == 0, (result.output, result.exception)
+    return result
+
+
+def test_help_lists_subcommands_and_examples():
+    out = _invoke("--help").stdout
+    for name in COMMANDS:
+        assert name in out
+    for name in COMMANDS:
+        assert "Example:" in _invoke(name, "--help").stdout, name
+
+
+def test_ls_json_on_empty_store():
+    result = _invoke("ls", "--format", "json")
+    assert json.loads(result.stdout) == []
+    assert "no artifacts" in result.stderr
+
+
+def test_ls_json_rows(filled):
+    rows = json.loads(_invoke("ls", "--format", "json").stdout)
+    by_id = {r["id"]: r for r in rows}
+    assert set(by_id) == {filled["ckpt"], filled["new"]}  # runs/film-s0@1 only with --all
+    assert by_id[filled["new"]]["ref"] == "runs/film-s0"
+    assert by_id[filled["ckpt"]]["ref"] is None
+    assert by_id[filled["new"]]["kind"] == "run" and by_id[filled["new"]]["created"].endswith("Z")
+    rows = json.loads(_invoke("ls", "--all", "--format", "json").stdout)
+    assert {r["id"]: r["ref"] for r in rows}[filled["old"]] == "runs/film-s0@1"
+    runs = json.loads(_invoke("ls", "--kind", "checkpoint", "--format", "json").stdout)
+    assert [r["id"] for r in runs] == [filled["ckpt"]]
+
+
+def test_ls_csv_and_table(filled):
+    csv = _invoke("ls", "--format", "csv").stdout.splitlines()
+    assert csv[0] == "ref,id,kind,created,files,size" and len(csv) == 3
+    table = _invoke("ls").stdout
+    assert "runs/film-s0" in table and filled["new"][:12] in table
+
+
+def test_ls_empty_csv_has_header():
+    assert _invoke("ls", "--format", "csv").stdout == "ref,id,kind,created,files,size\n"
+
+
+def test_store_option_beats_env(filled, tmp_path):
+    result = runner.invoke(app, ["store", "ls", "--format", "json", "--store", str(tmp_path / "other")])
+    assert result.exit_code == 0 and json.loads(result.stdout) == []
+
+
+def test_show_manifest_and_versions(filled):
+    shown = json.loads(_invoke("show", "runs/film-s0", "--format", "json").stdout)
+    assert shown["id"] == filled["new"] and shown["kind"] == "run" and shown["refs"] == ["runs/film-s0"]
+    assert shown["inputs"] == {"checkpoint": filled["ckpt"]}
+    assert set(shown) >= {"schema", "morfic_version", "created", "config", "files", "meta"}
+    assert json.loads(_invoke("show", "runs/film-s0@1", "-f", "json").stdout)["id"] == filled["old"]
+    assert json.loads(_invoke("show", filled["ckpt"][:8], "-f", "json").stdout)["kind"] == "checkpoint"
+    history = json.loads(_invoke("show", "runs/film-s0", "--history", "-f", "json").stdout)
+    assert [(h["version"], h["id"], h["current"]) for h in history] == [
+        (1, filled["old"], False), (2, filled["new"], True)]
+
+
+def test_verify_and_gc(filled, store):
+    assert "OK" in _invoke("verify").stderr
+    loose = store.put_bytes(b"loose")
+    dry = json.loads(_invoke("gc", "--format", "json").stdout)
+    assert [r["id"] for r in dry] == [loose]
+    assert store.has(loose)
+    assert "dry run" in _invoke("gc").stderr
+    assert [r["id"] for r in json.loads(_invoke("gc", "--yes", "-f", "json").stdout)] == [loose]
+    assert not store.has(loose)
+    assert store.read_manifest("runs/film-s0@1").id == filled["old"]
+
+
+def test_export_import_round_trip(filled, tmp_path):
+    out = tmp_path / "film.tar"
+    assert "exported 1 ref" in _invoke("export", "runs/film-s0", "--out", str(out)).stderr
+    dst = tmp_path / "dst"
+    rows = json.loads(_invoke("import", str(out), "--store", str(dst), "-f", "json").stdout)
+    assert rows == [{"ref": "runs/film-s0", "status": "created"}]
+    rows = json.loads(_invoke("import", str(out), "--store", str(dst), "-f", "json").stdout)
+    assert rows == [{"ref": "runs/film-s0", "status": "unchanged"}]
+    assert Store(dst).resolve("runs/film-s0@1") == filled["old"]
+
+
+# -- `Error:` on stderr and exit 1, through the real entry point ---------------------------------
+
+
+def test_missing_id_is_error_exit_1(run_cli, filled):
+    code, out, err = run_cli("store", "show", "deadbeef")
+    assert code == 1 and out == ""
+    assert err.startswith("Error: no artifact 'deadbeef'") and "morfic store ls" in err
+
+
+def test_unknown_ref_suggests_close_name(run_cli, filled):
+    code, _, err = run_cli("store", "show", "runs/film-s1")
+    assert code == 1 and "Error:" in err and "runs/film-s0" in err
+
+
+def test_ambiguous_version_is_error(run_cli, filled):
+    code, _, err = run_cli("store", "show", "runs/film-s0@7")
+    assert code == 1 and "Error: ref 'runs/film-s0' has no version @7" in err
+
+
+def test_verify_corrupt_store_is_error_with_each_problem(run_cli, filled, store):
+    weights = store.read_manifest(filled["ckpt"]).files["model.pt"].id
+    path = store.object_path(weights)
+    os.chmod(path, 0o644)
+    data = bytearray(path.read_bytes())
+    data[0] ^= 0x01
+    path.write_bytes(bytes(data))
+    code, _, err = run_cli("store", "verify")
+    assert code == 1
+    assert f"  object {weights} is corrupt: its bytes hash to " in err
+    assert "Error: 1 problem(s) found" in err
+
+
+def test_bad_kind_is_error(run_cli):
+    code, _, err = run_cli("store", "ls", "--kind", "model")
+    assert code == 1 and "Error: unknown manifest kind 'model'" in err and "checkpoint" in err
+
+
+def test_disk_full_during_import_is_error_and_store_consistent(run_cli, filled, tmp_path, monkeypatch):
+    out = tmp_path / "film.tar"
+    assert run_cli("store", "export", "runs/film-s0", "--out", str(out))[0] == 0
+    dst = tmp_path / "dst"
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    code, _, err = run_cli("store", "import", str(out), "--store", str(dst))
+    monkeypatch.undo()
+    assert code == 1 and err.startswith("Error: disk full")
+    assert Store(dst).list_refs() == [] and Store(dst).verify().ok
+    assert run_cli("store", "import", str(out), "--store", str(dst))[0] == 0
+    assert Store(dst).resolve("runs/film-s0") == filled["new"]
+
+
+def test_import_of_a_non_export_is_error(run_cli, tmp_path):
+    bogus = tmp_path / "x.tar"
+    bogus.write_text("hello")
+    code, _, err = run_cli("store", "import", str(bogus))
+    assert code == 1 and "Error:" in err and "not a readable tar" in err
