@@ -91,3 +91,11 @@ def test_console_script_entry_point_runs():
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert len(json.loads(proc.stdout)) == 7
+
+
+def test_docs_cli_md_documents_every_subcommand():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "cli.md").read_text()
+    for name in SUBCOMMANDS:
+        assert f"## `morfic {name}" in text, name
