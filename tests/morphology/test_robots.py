@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from paper_facts import PAPER_DESCRIPTORS
 
 from morfic_cli.errors import RobotSpecError, UnknownNameError
 from morfic_cli.morphology.descriptor import DESCRIPTOR_NAMES
@@ -24,17 +25,6 @@ from morfic_cli.morphology.robots import (
 
 ROBOTS = ["go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c"]
 
-# The paper's Table "Morphology randomization parameters" (tab:morphology_support), column by column,
-# in DESCRIPTOR_NAMES order: thigh, calf, hip, foot, base mass; hip/thigh/calf limit min, max.
-PAPER_DESCRIPTORS = {
-    "go2": [1.152, 0.154, 0.678, 0.040, 6.921, -1.047, 1.047, -1.571, 3.491, -2.723, -0.838],
-    "go1": [0.899, 0.158, 0.510, 0.060, 4.800, -0.803, 0.803, -1.047, 4.189, -2.697, -0.916],
-    "a1": [1.013, 0.166, 0.696, 0.060, 6.000, -0.803, 0.803, -1.047, 4.189, -2.697, -0.916],
-    "mini_cheetah": [0.634, 0.064, 0.540, 0.060, 3.300, -1.600, 1.600, -2.600, 2.600, -2.600, -0.800],
-    "aliengo": [0.639, 0.207, 1.000, 0.060, 11.644, -1.222, 1.222, -3.142, 3.142, -2.775, -0.646],
-    "anymal_c": [0.740, 0.337, 0.740, 0.250, 18.210, -0.720, 0.720, -1.650, 4.050, -2.720, -0.780],
-    "b1": [4.300, 1.050, 2.150, 0.050, 29.450, -0.750, 0.750, -1.000, 3.500, -2.600, -0.600],
-}
 
 # The paper's bold up/down marks in the same table (+1 up, -1 down).
 PAPER_MARKS = {
