@@ -1,0 +1,1 @@
+"""The locomotion environment (rsl-rl ``VecEnv``): observations, rewards, commands, terminations, DR."""

@@ -1,0 +1,75 @@
+"""Velocity commands c = (vx, vy, yaw rate) and the curriculum that widens the vx range."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from morfic_cli.config import CommandCfg
+
+
+@dataclass
+class CommandRanges:
+    """Current command ranges (mutable: the curriculum widens ``vx``).
+
+    Attributes:
+        vx: Forward-velocity range (m/s).
+        vy: Lateral-velocity range (m/s).
+        yaw_rate: Yaw-rate range (rad/s).
+    """
+
+    vx: tuple[float, float]
+    vy: tuple[float, float]
+    yaw_rate: tuple[float, float]
+
+    @classmethod
+    def initial(cls, cfg: CommandCfg) -> CommandRanges:
+        """The ranges at the start of training."""
+        return cls(tuple(cfg.vx_init), tuple(cfg.vy), tuple(cfg.yaw_rate))  # type: ignore[arg-type]
+
+
+def sample_commands(n: int, ranges: CommandRanges, cfg: CommandCfg, gen: torch.Generator) -> torch.Tensor:
+    """Sample commands uniformly from the current ranges.
+
+    A fraction ``cfg.zero_fraction`` of envs get a zero command, and planar commands smaller than
+    ``cfg.small_command`` are zeroed, so standing still is part of the task.
+
+    Args:
+        n: Number of commands.
+        ranges: Current ranges.
+        cfg: Command config.
+        gen: Random generator (CPU).
+
+    Returns:
+        Commands (vx, vy, yaw rate). Shape: (n, 3).
+    """
+    u = torch.rand((n, 3), generator=gen)
+    lo = torch.tensor([ranges.vx[0], ranges.vy[0], ranges.yaw_rate[0]])
+    hi = torch.tensor([ranges.vx[1], ranges.vy[1], ranges.yaw_rate[1]])
+    cmd = lo + (hi - lo) * u
+    small = torch.linalg.norm(cmd[:, :2], dim=1) < cfg.small_command
+    cmd[small, :2] = 0.0
+    zero = torch.rand(n, generator=gen) < cfg.zero_fraction
+    cmd[zero] = 0.0
+    return cmd
+
+
+def widen_vx(ranges: CommandRanges, mean_tracking: float, cfg: CommandCfg) -> bool:
+    """Curriculum: widen the vx range when tracking is good enough.
+
+    Args:
+        ranges: Current ranges (updated in place).
+        mean_tracking: Mean per-step r_lin over finished episodes divided by its maximum (4), in [0, 1].
+        cfg: Command config.
+
+    Returns:
+        True when the range changed.
+    """
+    if mean_tracking < cfg.curriculum_threshold:
+        return False
+    lo = max(cfg.vx_limit[0], ranges.vx[0] - cfg.curriculum_step)
+    hi = min(cfg.vx_limit[1], ranges.vx[1] + cfg.curriculum_step)
+    changed = (lo, hi) != ranges.vx
+    ranges.vx = (lo, hi)
+    return changed

@@ -1,0 +1,304 @@
+"""``LocomotionEnv``: the batched quadruped locomotion task as an rsl-rl 5.x ``VecEnv``.
+
+One policy step is ``decimation`` (4) physics steps of ``physics_dt`` (0.005 s): 50 Hz. Each env
+carries its own morphology: in ``train`` mode an 11-D descriptor is sampled from the paper's
+training support at every reset and applied to the Go2 template; in ``descriptor`` mode every env
+is the Go2 template with one target's descriptor (the paper's zero-shot protocol); in ``full``
+mode every env is the target's own generated model. See docs/concepts.md ("The environment").
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from morfic_cli.config import EnvCfg
+from morfic_cli.envs import observations as O
+from morfic_cli.envs.commands import CommandRanges, sample_commands, widen_vx
+from morfic_cli.envs.gait import advance_phase, desired_contact, foot_phases
+from morfic_cli.envs.math import projected_gravity, yaw_quat
+from morfic_cli.envs.randomization import (
+    sample_dynamics,
+    sample_latency,
+    sample_push,
+    sample_reset_joint_pos,
+)
+from morfic_cli.envs.rewards import compute_rewards
+from morfic_cli.envs.state import EnvState
+from morfic_cli.envs.terminations import compute_terminations
+from morfic_cli.errors import MorficError
+from morfic_cli.morphology.descriptor import TRAIN_MAX, TRAIN_MIN, as_descriptor
+from morfic_cli.morphology.robots import RobotSpec, load_robot
+from morfic_cli.sim.backend import SimFrame, SimParams, make_backend
+
+Mode = Literal["train", "descriptor", "full"]
+MODES: tuple[str, ...] = ("train", "descriptor", "full")
+TEMPLATE = "go2"
+FOOT_CONTACT_FORCE = 1.0
+"""A foot is in contact (c_i) when its ground force exceeds this many newtons."""
+
+
+class LocomotionEnv(VecEnv):
+    """Velocity-tracking locomotion with per-env morphology and domain randomisation.
+
+    Observation groups (TensorDict keys), N = num_envs:
+        ``policy`` (N, 48), ``history`` (N, 15, 48), ``critic`` (N, 15, 48, clean),
+        ``privileged`` (N, 18), ``morphology`` (N, 11).
+    """
+
+    def __init__(
+        self,
+        cfg: EnvCfg,
+        *,
+        mode: Mode = "train",
+        robot: str = TEMPLATE,
+        seed: int = 0,
+    ) -> None:
+        """Create the env.
+
+        Args:
+            cfg: Env config (``cfg.num_envs`` envs).
+            mode: "train" (sample descriptors from the support), "descriptor" (Go2 template with
+                ``robot``'s descriptor) or "full" (``robot``'s own model).
+            robot: Target robot for "descriptor" / "full" modes (ignored in "train").
+            seed: Seed of every random draw the env makes.
+        """
+        if mode not in MODES:
+            raise MorficError(f"unknown env mode '{mode}'; valid modes are: {', '.join(MODES)}.")
+        self.cfg = cfg
+        self.mode = mode
+        self.target: RobotSpec = load_robot(robot)
+        self.spec: RobotSpec = self.target if mode == "full" else load_robot(TEMPLATE)
+        self.num_envs = cfg.num_envs
+        self.num_actions = 12
+        self.device = torch.device(cfg.sim.device)
+        self.dt = cfg.sim.physics_dt * cfg.decimation
+        self.max_episode_length = int(math.ceil(cfg.episode_length_s / self.dt))
+        self.gen = torch.Generator().manual_seed(seed)
+        self.backend = make_backend(cfg.sim, self.spec, self.num_envs, template=mode != "full")
+        self._support_lo = torch.as_tensor(TRAIN_MIN, dtype=torch.float32)
+        self._support_hi = torch.as_tensor(TRAIN_MAX, dtype=torch.float32)
+        self._alloc_buffers()
+        if mode == "descriptor":
+            desc = torch.as_tensor(as_descriptor(self.target.descriptor), dtype=torch.float64)
+            self.backend.set_morphology(self._all_ids, desc.expand(self.num_envs, -1).clone())
+        self.params: SimParams = self.backend.params()
+        self._reset_envs(self._all_ids)
+        self._refresh_observations(self.backend.frame(), reset_ids=self._all_ids)
+
+    # ------------------------------------------------------------------ buffers
+    def _alloc_buffers(self) -> None:
+        n, h = self.num_envs, self.cfg.obs.history_len
+        f32 = {"dtype": torch.float32}
+        self._all_ids = torch.arange(n)
+        self.episode_length_buf = torch.zeros(n, dtype=torch.long)
+        self.common_step_counter = 0
+        self.actions = torch.zeros(n, 12, **f32)
+        self.action_prev = torch.zeros(n, 12, **f32)
+        self.action_buffer = torch.zeros(n, self.cfg.rand.max_latency_steps + 1, 12, **f32)
+        self.latency = torch.zeros(n, dtype=torch.long)
+        self.commands = torch.zeros(n, 3, **f32)
+        self.command_ranges = CommandRanges.initial(self.cfg.commands)
+        self.gait_phase = torch.zeros(n, **f32)
+        self.gait_frequency = torch.full((n,), self.cfg.gait.frequency, **f32)
+        self.joint_vel_prev = torch.zeros(n, 12, **f32)
+        self.foot_vel_prev = torch.zeros(n, 4, 3, **f32)
+        self.history = torch.zeros(n, h, O.POLICY_DIM, **f32)
+        self.critic_history = torch.zeros(n, h, O.POLICY_DIM, **f32)
+        self.obs_buf = torch.zeros(n, O.POLICY_DIM, **f32)
+        self.episode_sums: dict[str, torch.Tensor] = {}
+        self.episode_lin_tracking = torch.zeros(n, **f32)
+        self.nonfinite_resets = 0
+        hip_xy = torch.as_tensor(self.spec.hip_pos[:, :2] + self.spec.thigh_offset[:, :2], **f32)
+        self.nominal_foot_pos_b = hip_xy.expand(n, 4, 2).clone()
+        self._obs = TensorDict({}, batch_size=[n])
+
+    # ------------------------------------------------------------------ VecEnv
+    def get_observations(self) -> TensorDict:
+        """The current observation groups (see the class docstring)."""
+        return self._obs
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        """Advance every env by one policy step.
+
+        Args:
+            actions: a_t. Shape: (N, 12).
+
+        Returns:
+            observations, rewards (N,), dones (N,), extras with ``time_outs`` (N,) and ``log``.
+        """
+        a = torch.clamp(actions.detach().to(torch.float32).cpu(), -self.cfg.action_clip, self.cfg.action_clip)
+        self.action_prev = self.actions
+        self.actions = a
+        self.action_buffer = torch.cat([a[:, None], self.action_buffer[:, :-1]], dim=1)
+        applied = self.action_buffer[self._all_ids, self.latency]
+        targets = self.params.default_joint_pos + self.cfg.action_scale * applied
+        frame = self.backend.step(targets, self.cfg.decimation)
+        self.episode_length_buf += 1
+        self.common_step_counter += 1
+        self.gait_phase = advance_phase(self.gait_phase, self.gait_frequency, self.dt)
+
+        state = self._state(frame)
+        reward, terms = compute_rewards(state, self.cfg.rewards)
+        reward = reward * self.dt
+        terminated, term_masks = compute_terminations(state, self.cfg.terminations)
+        bad = frame.bad.cpu()
+        if bad.any():
+            self.nonfinite_resets += int(bad.sum())
+            reward = torch.where(bad, torch.zeros_like(reward), reward)
+            terminated = terminated | bad
+        reward = torch.nan_to_num(reward, nan=0.0, posinf=0.0, neginf=0.0)
+        time_outs = (self.episode_length_buf >= self.max_episode_length) & ~terminated
+        dones = terminated | time_outs
+
+        for name, value in terms.items():
+            value = torch.nan_to_num(value) * self.dt
+            self.episode_sums.setdefault(name, torch.zeros(self.num_envs))
+            self.episode_sums[name] += value
+        self.episode_lin_tracking += torch.nan_to_num(_raw_lin(terms, self.cfg))
+
+        log: dict[str, float] = {f"/reward/{k}": float(torch.nan_to_num(v).mean()) * self.dt for k, v in terms.items()}
+        reset_ids = dones.nonzero(as_tuple=False).flatten()
+        if len(reset_ids):
+            log.update(self._episode_log(reset_ids, time_outs, term_masks, bad))
+        self._push_and_resample()
+        if len(reset_ids):
+            self._reset_envs(reset_ids)
+            frame = self.backend.frame()
+        self._refresh_observations(frame, reset_ids=reset_ids)
+        self.joint_vel_prev = frame.joint_vel.cpu().float().clone()
+        self.foot_vel_prev = frame.foot_vel_w.cpu().float().clone()
+        log["/env/nonfinite_resets"] = float(self.nonfinite_resets)
+        log["/curriculum/vx_max"] = float(self.command_ranges.vx[1])
+        extras = {"time_outs": time_outs, "log": log}
+        return self._obs, reward, dones.to(torch.long), extras
+
+    # ------------------------------------------------------------------ internals
+    def _state(self, frame: SimFrame) -> EnvState:
+        p = self.params
+        f = {k: getattr(frame, k).cpu().float() for k in (
+            "base_pos_w", "base_quat_w", "base_lin_vel_b", "base_ang_vel_b", "joint_pos", "joint_vel",
+            "joint_torque", "foot_pos_w", "foot_vel_w", "foot_force_w", "body_contact_force")}
+        phases = foot_phases(self.gait_phase, self.cfg.gait)
+        return EnvState(
+            base_pos_w=f["base_pos_w"],
+            base_quat_w=f["base_quat_w"],
+            base_lin_vel_b=f["base_lin_vel_b"],
+            base_ang_vel_b=f["base_ang_vel_b"],
+            projected_gravity_b=projected_gravity(f["base_quat_w"]),
+            joint_pos=f["joint_pos"],
+            joint_vel=f["joint_vel"],
+            joint_vel_prev=self.joint_vel_prev,
+            joint_torque=f["joint_torque"],
+            default_joint_pos=p.default_joint_pos.float(),
+            joint_pos_min=p.joint_range[..., 0].float(),
+            joint_pos_max=p.joint_range[..., 1].float(),
+            foot_pos_w=f["foot_pos_w"],
+            foot_vel_w=f["foot_vel_w"],
+            foot_vel_w_prev=self.foot_vel_prev,
+            foot_force_w=f["foot_force_w"],
+            foot_contact=torch.linalg.norm(f["foot_force_w"], dim=-1) > FOOT_CONTACT_FORCE,
+            body_contact_force=f["body_contact_force"],
+            command=self.commands,
+            action=self.actions,
+            action_prev=self.action_prev,
+            gait_phase=phases,
+            desired_contact=desired_contact(phases, self.cfg.gait),
+            gait_frequency=self.gait_frequency,
+            nominal_foot_pos_b=self.nominal_foot_pos_b,
+            nominal_height=p.nominal_height.float(),
+            total_mass=p.total_mass.float(),
+            dt=self.dt,
+        )
+
+    def _reset_envs(self, ids: torch.Tensor) -> None:
+        k = len(ids)
+        if self.mode == "train":
+            u = torch.rand((k, 11), generator=self.gen, dtype=torch.float64)
+            lo, hi = self._support_lo.double(), self._support_hi.double()
+            self.backend.set_morphology(ids, lo + (hi - lo) * u)
+        dyn = sample_dynamics(k, self.cfg.rand, self.gen)
+        self.backend.set_dynamics(ids, dyn.friction, dyn.restitution, dyn.com_offset, dyn.joint_friction)
+        self.params = self.backend.params()
+        p = self.params
+        q = sample_reset_joint_pos(p.default_joint_pos[ids].float(), p.joint_range[ids].float(), self.cfg.rand, self.gen)
+        yaw = (torch.rand(k, generator=self.gen) * 2.0 - 1.0) * math.pi
+        base_pos = torch.zeros(k, 3)
+        base_pos[:, 2] = self.spec.init_height
+        self.backend.reset_envs(ids, base_pos, yaw_quat(yaw), torch.zeros(k, 6), q, torch.zeros(k, 12))
+        self.latency[ids] = sample_latency(k, self.cfg.rand, self.gen)
+        self.action_buffer[ids] = 0.0
+        self.actions[ids] = 0.0
+        self.action_prev[ids] = 0.0
+        self.commands[ids] = sample_commands(k, self.command_ranges, self.cfg.commands, self.gen)
+        self.gait_phase[ids] = torch.rand(k, generator=self.gen)
+        self.episode_length_buf[ids] = 0
+        self.episode_lin_tracking[ids] = 0.0
+        for v in self.episode_sums.values():
+            v[ids] = 0.0
+
+    def _refresh_observations(self, frame: SimFrame, reset_ids: torch.Tensor) -> None:
+        state = self._state(frame)
+        clean = O.policy_obs(state, self.cfg.obs)
+        noisy = O.add_noise(clean, self.cfg.obs, self.gen)
+        self.history = O.push_history(self.history, noisy)
+        self.critic_history = O.push_history(self.critic_history, clean)
+        if len(reset_ids):
+            self.history[reset_ids] = noisy[reset_ids, None].expand(-1, self.cfg.obs.history_len, -1)
+            self.critic_history[reset_ids] = clean[reset_ids, None].expand(-1, self.cfg.obs.history_len, -1)
+        p = self.params
+        self.obs_buf = noisy
+        self._obs = TensorDict(
+            {
+                "policy": noisy,
+                "history": self.history.clone(),
+                "critic": self.critic_history.clone(),
+                "privileged": O.privileged_obs(
+                    p.friction.float(), p.restitution.float(), p.base_mass.float(), p.com_offset.float(),
+                    p.joint_friction.float(),
+                ),
+                "morphology": O.morphology_obs(p.descriptor.float(), self._support_lo, self._support_hi),
+            },
+            batch_size=[self.num_envs],
+        )
+
+    def _push_and_resample(self) -> None:
+        rand = self.cfg.rand
+        push_every = max(1, int(round(rand.push_interval_s / self.dt)))
+        if rand.enabled and rand.pushes and self.common_step_counter % push_every == 0:
+            self.backend.push(self._all_ids, sample_push(self.num_envs, rand, self.gen))
+        every = max(1, int(round(self.cfg.commands.resample_time_s / self.dt)))
+        ids = ((self.episode_length_buf % every) == 0).nonzero(as_tuple=False).flatten()
+        if len(ids):
+            self.commands[ids] = sample_commands(len(ids), self.command_ranges, self.cfg.commands, self.gen)
+
+    def _episode_log(
+        self, ids: torch.Tensor, time_outs: torch.Tensor, masks: dict[str, torch.Tensor], bad: torch.Tensor
+    ) -> dict[str, float]:
+        length_s = self.episode_length_buf[ids].float().clamp(min=1) * self.dt
+        log = {f"/episode_reward/{k}": float((v[ids] / length_s).mean()) for k, v in self.episode_sums.items()}
+        log["/episode/length_s"] = float(length_s.mean())
+        for name, mask in masks.items():
+            log[f"/termination/{name}"] = float(mask[ids].float().mean())
+        log["/termination/time_out"] = float(time_outs[ids].float().mean())
+        log["/termination/nonfinite"] = float(bad[ids].float().mean())
+        full = ids[time_outs[ids]]
+        if len(full):
+            tracking = float((self.episode_lin_tracking[full] / self.episode_length_buf[full].float()).mean()) / 4.0
+            log["/curriculum/lin_tracking"] = tracking
+            widen_vx(self.command_ranges, tracking, self.cfg.commands)
+        return log
+
+    def close(self) -> None:
+        """Release the backend."""
+        self.backend.close()
+
+
+def _raw_lin(terms: dict[str, torch.Tensor], cfg: EnvCfg) -> torch.Tensor:
+    """Unweighted r_lin (in [0, 4]) recovered from its weighted contribution, for the curriculum."""
+    w = cfg.rewards.w_lin
+    return terms["r_lin"] / w if w else torch.zeros_like(terms["r_lin"])

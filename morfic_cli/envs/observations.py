@@ -1,0 +1,127 @@
+"""Observation groups (SPEC section 3; paper Table "Observation streams").
+
+- ``policy``: o_t (48) = [v (3), omega (3), g_proj (3), c (3), q - q0 (12), qdot (12), a_{t-1} (12)],
+  scaled, with sensor noise during training.
+- ``history``: h_t, the last ``history_len`` (15) o_t, newest last, noisy. Shape (N, 15, 48).
+- ``critic``: the same history with clean values (the critic sees clean observations).
+- ``privileged``: p_t (18) = [ground friction, restitution, base mass, COM offset (3), joint friction (12)].
+- ``morphology``: the 11-D descriptor normalised to [-1, 1] over the training support.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from morfic_cli.config import ObsCfg
+from morfic_cli.envs.state import EnvState
+
+POLICY_DIM = 48
+PRIVILEGED_DIM = 18
+
+#: Layout of o_t: (name, start, stop).
+POLICY_LAYOUT: tuple[tuple[str, int, int], ...] = (
+    ("base_lin_vel", 0, 3),
+    ("base_ang_vel", 3, 6),
+    ("projected_gravity", 6, 9),
+    ("command", 9, 12),
+    ("joint_pos", 12, 24),
+    ("joint_vel", 24, 36),
+    ("last_action", 36, 48),
+)
+
+
+def obs_scales(cfg: ObsCfg) -> torch.Tensor:
+    """Per-element scale of o_t. Shape: (48,)."""
+    s = torch.ones(POLICY_DIM)
+    s[0:3] = cfg.lin_vel_scale
+    s[3:6] = cfg.ang_vel_scale
+    s[9:12] = torch.tensor(cfg.command_scale)
+    s[12:24] = cfg.joint_pos_scale
+    s[24:36] = cfg.joint_vel_scale
+    return s
+
+
+def noise_scales(cfg: ObsCfg) -> torch.Tensor:
+    """Uniform-noise half-width of each (scaled) element of o_t; zero for command and last action. Shape: (48,)."""
+    n = torch.zeros(POLICY_DIM)
+    n[0:3] = cfg.noise_lin_vel * cfg.lin_vel_scale
+    n[3:6] = cfg.noise_ang_vel * cfg.ang_vel_scale
+    n[6:9] = cfg.noise_gravity
+    n[12:24] = cfg.noise_joint_pos * cfg.joint_pos_scale
+    n[24:36] = cfg.noise_joint_vel * cfg.joint_vel_scale
+    return n
+
+
+def policy_obs(state: EnvState, cfg: ObsCfg) -> torch.Tensor:
+    """Clean, scaled o_t.
+
+    Args:
+        state: The env state; ``action`` is the action just applied, a_{t-1} for the next decision.
+        cfg: Observation config.
+
+    Returns:
+        o_t. Shape: (N, 48).
+    """
+    raw = torch.cat(
+        [
+            state.base_lin_vel_b,
+            state.base_ang_vel_b,
+            state.projected_gravity_b,
+            state.command,
+            state.joint_pos - state.default_joint_pos,
+            state.joint_vel,
+            state.action,
+        ],
+        dim=1,
+    )
+    return torch.clamp(raw * obs_scales(cfg).to(raw), -cfg.clip, cfg.clip)
+
+
+def add_noise(obs: torch.Tensor, cfg: ObsCfg, gen: torch.Generator) -> torch.Tensor:
+    """o_t with uniform sensor noise U[-n, n] per element. Shape: (N, 48)."""
+    if not cfg.noise:
+        return obs
+    u = torch.rand(obs.shape, generator=gen).to(obs) * 2.0 - 1.0
+    return obs + u * noise_scales(cfg).to(obs)
+
+
+def privileged_obs(
+    friction: torch.Tensor,
+    restitution: torch.Tensor,
+    base_mass: torch.Tensor,
+    com_offset: torch.Tensor,
+    joint_friction: torch.Tensor,
+) -> torch.Tensor:
+    """p_t = [mu_fric, e, m_base, Delta c, mu_joint] (paper Table "Observation streams").
+
+    Scaled to order one: base mass in units of 10 kg, COM offset in units of 0.1 m.
+
+    Args:
+        friction: Shape: (N,). restitution: Shape: (N,). base_mass: (kg), shape (N,).
+        com_offset: (m), shape (N, 3). joint_friction: (N m), shape (N, 12).
+
+    Returns:
+        p_t. Shape: (N, 18).
+    """
+    return torch.cat(
+        [friction[:, None], restitution[:, None], base_mass[:, None] / 10.0, com_offset * 10.0, joint_friction],
+        dim=1,
+    )
+
+
+def morphology_obs(descriptor: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
+    """The normalised descriptor, 2 (m - lo) / (hi - lo) - 1: [-1, 1] inside the training support.
+
+    Args:
+        descriptor: Raw descriptors m. Shape: (N, 11).
+        lo: Train min. Shape: (11,). hi: Train max. Shape: (11,).
+
+    Returns:
+        Shape: (N, 11).
+    """
+    return 2.0 * (descriptor - lo) / (hi - lo) - 1.0
+
+
+def push_history(history: torch.Tensor, obs: torch.Tensor) -> torch.Tensor:
+    """Append o_t as the newest entry, dropping the oldest. Shapes: (N, H, 48), (N, 48) -> (N, H, 48)."""
+    return torch.cat([history[:, 1:], obs[:, None]], dim=1)

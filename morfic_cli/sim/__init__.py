@@ -1,0 +1,1 @@
+"""Simulation backends: batched MuJoCo physics behind one small protocol (cpu now, gpu later)."""

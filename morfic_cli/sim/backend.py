@@ -1,0 +1,199 @@
+"""The protocol every simulation backend implements, and the factory that picks one.
+
+The environment (``envs/``) talks only to this protocol, so a GPU backend (mujoco_warp) can replace
+the CPU one without touching env code. Everything crossing the boundary is a batched torch tensor on
+``backend.device``; the first dimension is always ``num_envs`` (N). Leg order is FL, FR, RL, RR;
+joint order is hip, thigh, calf per leg (12 joints, the builder's model order).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    import torch
+
+    from morfic_cli.config import SimCfg
+    from morfic_cli.morphology.robots import RobotSpec
+
+#: Bodies whose ground contact ``SimFrame.body_contact_force`` reports, in this order.
+CONTACT_BODIES: tuple[str, ...] = (
+    "base", "FL_thigh", "FR_thigh", "RL_thigh", "RR_thigh", "FL_calf", "FR_calf", "RL_calf", "RR_calf",
+)
+
+
+@dataclass
+class SimFrame:
+    """Batched physical state after a step. Shapes use N = num_envs.
+
+    Attributes:
+        base_pos_w: Base position, world frame (m). Shape: (N, 3).
+        base_quat_w: Base orientation quaternion (w, x, y, z), world frame. Shape: (N, 4).
+        base_lin_vel_w: Base linear velocity, world frame (m/s). Shape: (N, 3).
+        base_lin_vel_b: Base linear velocity, base frame (m/s). Shape: (N, 3).
+        base_ang_vel_b: Base angular velocity, base frame (rad/s). Shape: (N, 3).
+        joint_pos: Joint positions q (rad). Shape: (N, 12).
+        joint_vel: Joint velocities qdot (rad/s). Shape: (N, 12).
+        joint_torque: Actuator torques tau (N m). Shape: (N, 12).
+        foot_pos_w: Foot-centre positions, world frame (m). Shape: (N, 4, 3).
+        foot_vel_w: Foot-centre linear velocities, world frame (m/s). Shape: (N, 4, 3).
+        foot_force_w: Ground contact force on each foot, world frame (N). Shape: (N, 4, 3).
+        body_contact_force: Norm of the ground contact force on each of :data:`CONTACT_BODIES` (N).
+            Shape: (N, 9).
+        bad: True where the env's state became non-finite (or MuJoCo flagged it unstable) during
+            this step; the env must reset it. Other envs are unaffected. Shape: (N,).
+    """
+
+    base_pos_w: torch.Tensor
+    base_quat_w: torch.Tensor
+    base_lin_vel_w: torch.Tensor
+    base_lin_vel_b: torch.Tensor
+    base_ang_vel_b: torch.Tensor
+    joint_pos: torch.Tensor
+    joint_vel: torch.Tensor
+    joint_torque: torch.Tensor
+    foot_pos_w: torch.Tensor
+    foot_vel_w: torch.Tensor
+    foot_force_w: torch.Tensor
+    body_contact_force: torch.Tensor
+    bad: torch.Tensor
+
+
+@dataclass
+class SimParams:
+    """Per-env physical parameters currently applied (they follow morphology and randomisation).
+
+    Attributes:
+        joint_range: Joint limits (rad), [..., 0] = min, [..., 1] = max. Shape: (N, 12, 2).
+        default_joint_pos: Default standing pose q0 (rad). Shape: (N, 12).
+        torque_limit: Actuator force limits (N m). Shape: (N, 12).
+        base_mass: Base body mass (kg). Shape: (N,).
+        total_mass: Whole-robot mass (kg). Shape: (N,).
+        nominal_height: Base height above the feet at the default pose (m). Shape: (N,).
+        friction: Ground sliding friction coefficient. Shape: (N,).
+        restitution: Contact restitution coefficient in [0, 1). Shape: (N,).
+        com_offset: Base centre-of-mass offset from its nominal position (m). Shape: (N, 3).
+        joint_friction: Joint dry friction (frictionloss, N m). Shape: (N, 12).
+        descriptor: The 11-D descriptor in effect (raw units). Shape: (N, 11).
+    """
+
+    joint_range: torch.Tensor
+    default_joint_pos: torch.Tensor
+    torque_limit: torch.Tensor
+    base_mass: torch.Tensor
+    total_mass: torch.Tensor
+    nominal_height: torch.Tensor
+    friction: torch.Tensor
+    restitution: torch.Tensor
+    com_offset: torch.Tensor
+    joint_friction: torch.Tensor
+    descriptor: torch.Tensor
+
+
+class SimBackend(Protocol):
+    """Batched quadruped physics for N envs, each of which may have its own morphology."""
+
+    num_envs: int
+    device: torch.device
+    physics_dt: float
+    """Physics time step (s)."""
+    morphology_mutable: bool
+    """True when :meth:`set_morphology` is allowed (the Go2 template); False for ``full`` mode."""
+
+    def step(self, joint_targets: torch.Tensor, nsteps: int) -> SimFrame:
+        """Hold position targets for ``nsteps`` physics steps in every env and return the new frame.
+
+        Args:
+            joint_targets: Position-actuator targets (rad), clipped to each env's joint range.
+                Shape: (N, 12).
+            nsteps: Physics steps (the decimation).
+        """
+        ...
+
+    def frame(self) -> SimFrame:
+        """The current frame without stepping."""
+        ...
+
+    def params(self) -> SimParams:
+        """The per-env physical parameters now in effect."""
+        ...
+
+    def reset_envs(
+        self,
+        env_ids: torch.Tensor,
+        base_pos: torch.Tensor,
+        base_quat: torch.Tensor,
+        base_vel: torch.Tensor,
+        joint_pos: torch.Tensor,
+        joint_vel: torch.Tensor,
+    ) -> None:
+        """Set the state of some envs (all else zeroed: warm-start, actuator activations).
+
+        Args:
+            env_ids: Envs to reset. Shape: (k,), int64.
+            base_pos: Shape: (k, 3). base_quat: (w, x, y, z), shape (k, 4).
+            base_vel: Linear (world) then angular (base frame) velocity. Shape: (k, 6).
+            joint_pos: Shape: (k, 12). joint_vel: Shape: (k, 12).
+        """
+        ...
+
+    def set_morphology(self, env_ids: torch.Tensor, descriptors: torch.Tensor) -> None:
+        """Apply 11-D descriptors (raw units) to some envs' models (SPEC section 2).
+
+        Link masses are set with inertia scaled by the same factor, joint ranges and actuator
+        control ranges follow the new limits, and derived constants are recomputed. Raises
+        ``MorficError`` when ``morphology_mutable`` is False.
+
+        Args:
+            env_ids: Shape: (k,). descriptors: Shape: (k, 11).
+        """
+        ...
+
+    def set_dynamics(
+        self,
+        env_ids: torch.Tensor,
+        friction: torch.Tensor,
+        restitution: torch.Tensor,
+        com_offset: torch.Tensor,
+        joint_friction: torch.Tensor,
+    ) -> None:
+        """Domain randomisation of contact and joint properties for some envs.
+
+        Args:
+            env_ids: Shape: (k,). friction: Shape: (k,). restitution: in [0, 1), shape (k,).
+            com_offset: Base COM offset (m), shape (k, 3). joint_friction: (N m), shape (k, 12).
+        """
+        ...
+
+    def push(self, env_ids: torch.Tensor, delta_vel_xy: torch.Tensor) -> None:
+        """Add a planar velocity kick to some envs' bases. Shapes: (k,), (k, 2) in m/s."""
+        ...
+
+    def close(self) -> None:
+        """Release threads and memory."""
+        ...
+
+
+def make_backend(cfg: SimCfg, robot: RobotSpec, num_envs: int, *, template: bool) -> SimBackend:
+    """Create the backend named by ``cfg.backend``.
+
+    Args:
+        cfg: Simulation config (backend name, threads, physics dt, device).
+        robot: The robot to build: the Go2 template (training and ``descriptor`` mode) or the
+            target's own spec (``full`` mode).
+        num_envs: Number of parallel envs N.
+        template: True when per-env morphology may be applied (``set_morphology``).
+
+    Returns:
+        A :class:`SimBackend`.
+    """
+    from morfic_cli.errors import MorficError
+
+    if cfg.backend == "cpu":
+        from morfic_cli.sim.cpu import CpuBackend
+
+        return CpuBackend(cfg, robot, num_envs, template=template)
+    if cfg.backend == "gpu":
+        raise MorficError("the gpu backend (mujoco_warp) is not available in this release; use --set sim.backend=cpu.")
+    raise MorficError(f"unknown simulation backend '{cfg.backend}'; valid backends are: cpu, gpu.")
