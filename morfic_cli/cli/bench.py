@@ -1,4 +1,4 @@
-"""``morfic bench``: throughput against the raw-physics floor (built by the env issue)."""
+"""``morfic bench``: throughput against the raw-physics floor on this machine."""
 
 from __future__ import annotations
 
@@ -6,17 +6,65 @@ from typing import Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, StoreOpt
-from morfic_cli.errors import NotImplementedYetError
+from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, QuietOpt, StoreOpt
+from morfic_cli.cli._render import Column, emit_object, emit_rows, info
+from morfic_cli.errors import MorficError, NotImplementedYetError
 
 
 def bench(
-    what: Annotated[str, typer.Argument(help="env or train.")],
+    what: Annotated[str, typer.Argument(help="env (train comes with the training issue).")],
+    envs: Annotated[str, typer.Option("--envs", help="Comma-separated env counts, e.g. 256,1024,4096.")] = "256",
+    steps: Annotated[int, typer.Option("--steps", help="Timed policy steps per measurement.")] = 50,
+    backend: Annotated[str, typer.Option("--backend", help="Simulation backend: cpu (gpu later).")] = "cpu",
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the env and the random actions.")] = 0,
     fmt: FormatOpt = OutputFormat.table,
+    quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Measure env or training throughput on this machine.
+    """Measure env steps/s with random actions against the raw physics floor, in one run.
 
-    Example: morfic bench env
+    The floor steps the same MuJoCo models in C with no env logic; ratio = env steps/s divided by
+    the floor in env steps/s (physics steps/s / decimation). The table is stored as an artifact.
+    `--format json` prints one object for a single --envs value, else a list.
+
+    Example: morfic bench env --envs 256,1024 --steps 50 --format json
     """
-    raise NotImplementedYetError(f"bench {what}")
+    if what == "train":
+        raise NotImplementedYetError("bench train")
+    if what != "env":
+        raise MorficError(f"unknown benchmark '{what}'; valid benchmarks are: env, train.")
+    try:
+        counts = [int(x) for x in envs.split(",") if x.strip()]
+    except ValueError as exc:
+        raise MorficError(f"--envs must be comma-separated integers, got '{envs}'.") from exc
+    if not counts or min(counts) < 1 or steps < 1:
+        raise MorficError("--envs and --steps must be positive integers.")
+
+    from morfic_cli.benchmarks import bench_env
+    from morfic_cli.recording.tables import write_bench_table
+
+    rows = []
+    for n in counts:
+        if not quiet:
+            info(f"bench env: {n} envs x {steps} steps on {backend} ...")
+        rows.append(bench_env(n, steps, backend=backend, seed=seed).as_dict())
+    artifact = write_bench_table(store, rows)
+    if fmt == OutputFormat.json and len(rows) == 1:
+        emit_object(rows[0], fmt)
+    else:
+        emit_rows(
+            rows,
+            fmt,
+            columns=[
+                Column("num_envs", "envs", justify="right"),
+                Column("env_steps_per_s", "env steps/s", fmt=lambda v: f"{v:,.0f}", justify="right"),
+                Column("physics_floor_steps_per_s", "physics floor steps/s", fmt=lambda v: f"{v:,.0f}",
+                       justify="right"),
+                Column("floor_env_steps_per_s", "floor env steps/s", fmt=lambda v: f"{v:,.0f}", justify="right"),
+                Column("ratio", justify="right", fmt=lambda v: f"{v:.2f}"),
+                Column("threads", justify="right"),
+            ],
+            title=f"morfic bench env ({rows[0]['cpu_model']}, {rows[0]['cores']} cores)",
+        )
+    if not quiet:
+        info(f"wrote table {artifact.id[:12]} (ref {artifact.ref}@{artifact.version}) to store {store}")

@@ -225,7 +225,9 @@ class LocomotionEnv(VecEnv):
         self.backend.set_dynamics(ids, dyn.friction, dyn.restitution, dyn.com_offset, dyn.joint_friction)
         self.params = self.backend.params()
         p = self.params
-        q = sample_reset_joint_pos(p.default_joint_pos[ids].float(), p.joint_range[ids].float(), self.cfg.rand, self.gen)
+        q = sample_reset_joint_pos(
+            p.default_joint_pos[ids].float(), p.joint_range[ids].float(), self.cfg.rand, self.gen
+        )
         yaw = (torch.rand(k, generator=self.gen) * 2.0 - 1.0) * math.pi
         base_pos = torch.zeros(k, 3)
         base_pos[:, 2] = self.spec.init_height

@@ -97,8 +97,11 @@ def privileged_obs(
     Scaled to order one: base mass in units of 10 kg, COM offset in units of 0.1 m.
 
     Args:
-        friction: Shape: (N,). restitution: Shape: (N,). base_mass: (kg), shape (N,).
-        com_offset: (m), shape (N, 3). joint_friction: (N m), shape (N, 12).
+        friction: Ground friction. Shape: (N,).
+        restitution: Contact restitution. Shape: (N,).
+        base_mass: Base mass (kg). Shape: (N,).
+        com_offset: Base COM offset (m). Shape: (N, 3).
+        joint_friction: Joint dry friction (N m). Shape: (N, 12).
 
     Returns:
         p_t. Shape: (N, 18).
@@ -114,7 +117,8 @@ def morphology_obs(descriptor: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor)
 
     Args:
         descriptor: Raw descriptors m. Shape: (N, 11).
-        lo: Train min. Shape: (11,). hi: Train max. Shape: (11,).
+        lo: Train min. Shape: (11,).
+        hi: Train max. Shape: (11,).
 
     Returns:
         Shape: (N, 11).

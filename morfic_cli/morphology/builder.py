@@ -19,6 +19,13 @@ The model (names are the contract with the env and the descriptor-application co
 * sensors: ``base_linvel`` (velocimeter), ``base_gyro``, ``base_acc`` (accelerometer),
   ``base_quat`` (framequat) at ``imu``; per foot ``{leg}_foot_touch``, ``{leg}_foot_pos``
   (framepos) and ``{leg}_foot_vel`` (framelinvel) at ``{leg}_foot_site``.
+* simulation sensors, only with ``sim_sensors=True`` (what the batched backends read from
+  ``sensordata`` so that no Python loops over contacts are needed), after the sensors above:
+  ``{leg}_{joint}_torque`` (actuatorfrc of each actuator, N m, 12 x 1, actuator order);
+  with a floor, ``{leg}_foot_force`` (contact sensor floor -> ``{leg}_foot_geom``, data force,
+  reduce netforce: the net ground force on the foot in the world frame, N, 4 x 3) and
+  ``{body}_contact_force`` for each of :func:`contact_body_names` (contact sensor floor -> every
+  geom of that body, netforce, world frame, N, 9 x 3).
 * physics: dt 0.005 s, implicitfast integrator, inertias only from the explicit inertials
   (``inertiafromgeom`` false), a ``floor`` plane when asked.
 
@@ -66,12 +73,19 @@ def body_names() -> list[str]:
     return ["base"] + [f"{leg}_{link}" for leg in LEGS for link in ("hip", "thigh", "calf", "foot")]
 
 
-def build_spec(robot: RobotSpec, *, floor: bool = True) -> mujoco.MjSpec:
+def contact_body_names() -> list[str]:
+    """Bodies with a ground-contact sensor (``sim_sensors``): ``base``, the four thighs, the four calves."""
+    return ["base"] + [f"{leg}_thigh" for leg in LEGS] + [f"{leg}_calf" for leg in LEGS]
+
+
+def build_spec(robot: RobotSpec, *, floor: bool = True, sim_sensors: bool = False) -> mujoco.MjSpec:
     """Build the robot as an editable MuJoCo spec.
 
     Args:
         robot: The validated robot.
         floor: Add a ``floor`` plane (and a light) to the world.
+        sim_sensors: Add the simulation sensors (actuator torques; with a floor, foot and body
+            ground-contact forces), see the module docstring.
 
     Returns:
         The spec; ``spec.compile()`` gives the model.
@@ -93,13 +107,15 @@ def build_spec(robot: RobotSpec, *, floor: bool = True) -> mujoco.MjSpec:
         _add_leg(spec, base, robot, li, leg)
     _add_actuators(spec, robot)
     _add_sensors(spec)
+    if sim_sensors:
+        _add_sim_sensors(spec, floor=floor)
     _add_keyframe(spec, robot)
     return spec
 
 
-def build_model(robot: RobotSpec, *, floor: bool = True) -> mujoco.MjModel:
+def build_model(robot: RobotSpec, *, floor: bool = True, sim_sensors: bool = False) -> mujoco.MjModel:
     """Compile the robot into a MuJoCo model (see :func:`build_spec`)."""
-    return build_spec(robot, floor=floor).compile()
+    return build_spec(robot, floor=floor, sim_sensors=sim_sensors).compile()
 
 
 def to_xml(robot: RobotSpec) -> str:
@@ -267,6 +283,38 @@ def _add_sensors(spec: mujoco.MjSpec) -> None:
         _sensor(spec, f"{leg}_foot_touch", s.mjSENS_TOUCH, site)
         _sensor(spec, f"{leg}_foot_pos", s.mjSENS_FRAMEPOS, site)
         _sensor(spec, f"{leg}_foot_vel", s.mjSENS_FRAMELINVEL, site)
+
+
+CONTACT_DATA_FORCE = 1 << int(mujoco.mjtConDataField.mjCONDATA_FORCE)
+"""Contact-sensor ``data`` bit mask selecting only the 3-D force (MJCF ``data="force"``)."""
+
+CONTACT_REDUCE_NETFORCE = 3
+"""Contact-sensor ``reduce`` mode ``netforce`` (MJCF ``reduce="netforce"``: none 0, mindist 1,
+maxforce 2, netforce 3): all matching contacts summed into one synthetic contact whose frame is
+the world frame."""
+
+
+def _contact_sensor(spec: mujoco.MjSpec, name: str, reftype: mujoco.mjtObj, refname: str) -> None:
+    """Net ground force on ``refname`` in the world frame.
+
+    MuJoCo reports the force geom1 (the floor) exerts on geom2 (the robot part): +z when the floor
+    pushes the robot up.
+    """
+    spec.add_sensor(name=name, type=mujoco.mjtSensor.mjSENS_CONTACT, objtype=mujoco.mjtObj.mjOBJ_GEOM,
+                    objname="floor", reftype=reftype, refname=refname,
+                    intprm=[CONTACT_DATA_FORCE, CONTACT_REDUCE_NETFORCE, 1])
+
+
+def _add_sim_sensors(spec: mujoco.MjSpec, *, floor: bool) -> None:
+    for name in joint_names():
+        spec.add_sensor(name=name.removesuffix("_joint") + "_torque", type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
+                        objtype=mujoco.mjtObj.mjOBJ_ACTUATOR, objname=name)
+    if not floor:
+        return
+    for leg in LEGS:
+        _contact_sensor(spec, f"{leg}_foot_force", mujoco.mjtObj.mjOBJ_GEOM, f"{leg}_foot_geom")
+    for body in contact_body_names():
+        _contact_sensor(spec, f"{body}_contact_force", mujoco.mjtObj.mjOBJ_BODY, body)
 
 
 def _add_keyframe(spec: mujoco.MjSpec, robot: RobotSpec) -> None:

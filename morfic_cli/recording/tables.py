@@ -58,3 +58,25 @@ def write_distance_table(
         )
         version = store.set_ref("tables/distance", mid)
     return WrittenArtifact(mid, "tables/distance", version)
+
+
+BENCH_ENV_COLUMNS: tuple[str, ...] = (
+    "num_envs", "steps", "backend", "threads", "env_steps_per_s", "physics_floor_steps_per_s",
+    "floor_env_steps_per_s", "ratio", "cpu_model", "cores",
+)
+"""Columns of the env benchmark table (``morfic bench env``)."""
+
+
+def write_bench_table(store_root: Path, rows: Sequence[dict]) -> WrittenArtifact:
+    """Store a ``morfic bench env`` table as a ``table`` manifest and advance ref ``tables/bench-env``."""
+    from morfic_cli.store import Store
+
+    store = Store(store_root)
+    with store.writing():
+        mid = store.put_manifest(
+            "table",
+            config={"table": "bench-env", "num_envs": [r["num_envs"] for r in rows]},
+            files={"bench_env.csv": rows_to_csv(rows, BENCH_ENV_COLUMNS)},
+        )
+        version = store.set_ref("tables/bench-env", mid)
+    return WrittenArtifact(mid, "tables/bench-env", version)

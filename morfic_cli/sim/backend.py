@@ -132,9 +132,11 @@ class SimBackend(Protocol):
 
         Args:
             env_ids: Envs to reset. Shape: (k,), int64.
-            base_pos: Shape: (k, 3). base_quat: (w, x, y, z), shape (k, 4).
+            base_pos: Base position (m). Shape: (k, 3).
+            base_quat: Base orientation (w, x, y, z). Shape: (k, 4).
             base_vel: Linear (world) then angular (base frame) velocity. Shape: (k, 6).
-            joint_pos: Shape: (k, 12). joint_vel: Shape: (k, 12).
+            joint_pos: Joint positions (rad). Shape: (k, 12).
+            joint_vel: Joint velocities (rad/s). Shape: (k, 12).
         """
         ...
 
@@ -146,7 +148,8 @@ class SimBackend(Protocol):
         ``MorficError`` when ``morphology_mutable`` is False.
 
         Args:
-            env_ids: Shape: (k,). descriptors: Shape: (k, 11).
+            env_ids: Envs to change. Shape: (k,).
+            descriptors: Raw descriptors. Shape: (k, 11).
         """
         ...
 
@@ -161,8 +164,11 @@ class SimBackend(Protocol):
         """Domain randomisation of contact and joint properties for some envs.
 
         Args:
-            env_ids: Shape: (k,). friction: Shape: (k,). restitution: in [0, 1), shape (k,).
-            com_offset: Base COM offset (m), shape (k, 3). joint_friction: (N m), shape (k, 12).
+            env_ids: Envs to change. Shape: (k,).
+            friction: Ground sliding friction. Shape: (k,).
+            restitution: Restitution in [0, 1). Shape: (k,).
+            com_offset: Base COM offset (m). Shape: (k, 3).
+            joint_friction: Joint dry friction (N m). Shape: (k, 12).
         """
         ...
 

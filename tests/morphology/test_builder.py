@@ -11,6 +11,7 @@ from morfic_cli.morphology.builder import (
     body_names,
     build_model,
     build_spec,
+    contact_body_names,
     joint_names,
     nominal_height,
     to_xml,
@@ -205,3 +206,51 @@ def test_xml_round_trips(built, name):
     assert again.nbody == model.nbody and again.nu == model.nu
     assert float(again.body_mass.sum()) == pytest.approx(spec.total_mass)
     np.testing.assert_allclose(again.jnt_range, model.jnt_range)
+
+
+def test_sim_sensors_layout():
+    spec_ = load_robot("go2")
+    plain, model = build_model(spec_), build_model(spec_, sim_sensors=True)
+    extra = {f"{leg}_{j}_torque": 1 for leg in LEGS for j in JOINTS}
+    extra |= {f"{leg}_foot_force": 3 for leg in LEGS}
+    extra |= {f"{body}_contact_force": 3 for body in contact_body_names()}
+    assert model.nsensordata == plain.nsensordata + sum(extra.values()) == plain.nsensordata + 12 + 12 + 27
+    for sensor, dim in extra.items():
+        assert model.sensor(sensor).dim[0] == dim
+        assert model.sensor(sensor).adr[0] >= plain.nsensordata  # appended after the existing sensors
+    torque = model.sensor("RL_calf_torque")
+    assert torque.type[0] == mujoco.mjtSensor.mjSENS_ACTUATORFRC
+    assert torque.objid[0] == model.actuator("RL_calf_joint").id
+    assert contact_body_names() == ["base", "FL_thigh", "FR_thigh", "RL_thigh", "RR_thigh",
+                                    "FL_calf", "FR_calf", "RL_calf", "RR_calf"]
+    no_floor = build_model(spec_, floor=False, sim_sensors=True)  # torques only without a floor
+    assert no_floor.nsensordata == plain.nsensordata + 12
+
+
+def test_contact_sensors_equal_their_mjcf_spelling():
+    """The integer parameters written by the builder mean data="force" reduce="netforce" in MJCF."""
+    spec = build_spec(load_robot("go2"), sim_sensors=True)
+    spec.compile()
+    text = spec.to_xml()
+    assert '<contact geom1="floor" geom2="FL_foot_geom" data="force" reduce="netforce"' in text
+    assert '<contact geom1="floor" body2="RR_calf" data="force" reduce="netforce"' in text
+    parsed = mujoco.MjModel.from_xml_string(text)
+    built = build_model(load_robot("go2"), sim_sensors=True)
+    np.testing.assert_array_equal(parsed.sensor_intprm, built.sensor_intprm)
+    np.testing.assert_array_equal(parsed.sensor_type, built.sensor_type)
+
+
+def test_contact_sensors_report_the_world_frame_ground_force():
+    spec_ = load_robot("go2")
+    model = build_model(spec_, sim_sensors=True)
+    data = _stand(spec_, model, steps=300)
+    force = np.stack([data.sensor(f"{leg}_foot_force").data for leg in LEGS])
+    assert np.all(force[:, 2] > 0)  # the floor pushes each foot up (+z, world frame)
+    assert force[:, 2].sum() == pytest.approx(spec_.total_mass * 9.81, rel=0.1)
+    assert force[:, 1].sum() == pytest.approx(0.0, abs=1e-6)  # left/right splay forces cancel
+    for body in contact_body_names():
+        assert np.all(data.sensor(f"{body}_contact_force").data == 0.0)
+    for leg in LEGS:
+        for j in JOINTS:
+            assert data.sensor(f"{leg}_{j}_torque").data[0] == pytest.approx(
+                data.actuator_force[model.actuator(f"{leg}_{j}_joint").id])

@@ -1,0 +1,414 @@
+"""The CPU backend: MuJoCo C on every core, one ``MjModel`` per env (SPEC section 3).
+
+Each env owns a copy of the robot model, so its morphology (template mode) and its randomised
+dynamics can differ from every other env. All envs are stepped in C by
+:class:`morfic_cli.sim.floor.BatchStepper` (``mujoco.rollout`` with a persistent thread pool); the
+physics state of all envs is one float64 array ``state`` of shape (N, nstate) in MuJoCo's
+``mjSTATE_FULLPHYSICS`` layout ``[time, qpos (19), qvel (18)]``, so resets and pushes are array
+writes, and everything the env needs per step comes from ``state`` and ``sensordata`` with no
+Python loop over envs or contacts.
+
+Where the frame comes from:
+
+* base pose, base and joint velocities: the state after the step (``base_lin_vel_b`` is the world
+  velocity rotated into the base frame, what the velocimeter at ``imu`` reads at that same state;
+  ``base_ang_vel_b`` is the free joint's angular velocity, already in the base frame = the gyro).
+* joint torques, foot positions/velocities, foot and body contact forces: the builder's simulation
+  sensors (``sim_sensors=True``). MuJoCo evaluates sensors at the start of the last physics step,
+  so foot positions/velocities lag the state by one physics step (5 ms) and the forces are those
+  applied during that step; all sensor quantities are mutually consistent.
+
+``bad`` envs: an env whose state is non-finite before the step (it is then not given to MuJoCo),
+whose step raised a MuJoCo warning (MuJoCo resets such an env itself; detected from its time, see
+:mod:`morfic_cli.sim.floor`), or whose result is non-finite is flagged, restored to its home state
+(default pose at the init height) so that it stays finite, and its pre-step state is kept in
+:attr:`CpuBackend.bad_states` for a dump. Envs never share data, so other envs are unaffected.
+
+Restitution: MuJoCo contacts are springs-dampers with ``solref = (timeconst, dampratio)``. A
+restitution coefficient e maps to the damping ratio of a linear spring-damper that bounces with
+that coefficient, zeta = -ln(e) / sqrt(pi^2 + ln(e)^2) (e = 0 gives zeta = 1, critically damped,
+MuJoCo's default; e -> 1 gives zeta -> 0). It is written to every geom's ``solref[1]`` so the
+combined contact (MuJoCo mixes both geoms' solref) has exactly that ratio. Ground friction is
+likewise written to every geom's sliding friction, so every ground contact (MuJoCo takes the
+larger of the two geoms' values) has exactly that coefficient.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import torch
+
+from morfic_cli.config import SimCfg
+from morfic_cli.errors import MorficError
+from morfic_cli.morphology.apply import TemplateInfo, apply_descriptor, clamp_to_limits, model_joint_ranges, summarize
+from morfic_cli.morphology.builder import build_model
+from morfic_cli.morphology.robots import JOINTS, LEGS, RobotSpec
+from morfic_cli.sim.backend import CONTACT_BODIES, SimFrame, SimParams
+from morfic_cli.sim.floor import STATE_SPEC, BatchStepper
+
+NUM_JOINTS = len(LEGS) * len(JOINTS)
+
+
+def restitution_to_dampratio(e: np.ndarray) -> np.ndarray:
+    """Contact damping ratio zeta for a restitution coefficient e (module docstring).
+
+    zeta = -ln(e) / sqrt(pi^2 + ln(e)^2), with zeta = 1 at e = 0.
+
+    Args:
+        e: Restitution in [0, 1). Shape: any.
+
+    Returns:
+        zeta in (0, 1]. Shape: like ``e``.
+    """
+    e = np.asarray(e, dtype=np.float64)
+    safe = np.where(e > 0, e, 1.0)
+    log_e = np.log(safe)
+    return np.where(e > 0, -log_e / np.sqrt(math.pi**2 + log_e**2), 1.0)
+
+
+def quat_rotate_inverse(quat: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """Rotate world vectors into the frame of unit quaternions (w, x, y, z): v_b = R(q)^T v_w.
+
+    Args:
+        quat: Unit quaternions. Shape: (N, 4).
+        vec: World vectors. Shape: (N, 3).
+
+    Returns:
+        Shape: (N, 3).
+    """
+    w, u = quat[:, :1], quat[:, 1:]
+    uv = np.cross(u, vec)
+    return vec - 2.0 * w * uv + 2.0 * np.cross(u, uv)
+
+
+@dataclass(frozen=True)
+class SensorLayout:
+    """Where each frame quantity lives in ``sensordata`` (index arrays, same for every env).
+
+    Attributes:
+        torque: Actuator torques, model joint order. Shape: (12,).
+        foot_pos: Foot-site positions. Shape: (4, 3).
+        foot_vel: Foot-site linear velocities. Shape: (4, 3).
+        foot_force: Net ground force on each foot (world frame). Shape: (4, 3).
+        body_force: Net ground force on each of CONTACT_BODIES (world frame). Shape: (9, 3).
+    """
+
+    torque: np.ndarray
+    foot_pos: np.ndarray
+    foot_vel: np.ndarray
+    foot_force: np.ndarray
+    body_force: np.ndarray
+
+    @classmethod
+    def from_model(cls, model: mujoco.MjModel) -> SensorLayout:
+        """Read the sensor addresses of a model built with ``sim_sensors=True``."""
+
+        def idx(name: str) -> np.ndarray:
+            sensor = model.sensor(name)
+            return int(sensor.adr[0]) + np.arange(int(sensor.dim[0]))
+
+        return cls(
+            torque=np.concatenate([idx(f"{leg}_{j}_torque") for leg in LEGS for j in JOINTS]),
+            foot_pos=np.stack([idx(f"{leg}_foot_pos") for leg in LEGS]),
+            foot_vel=np.stack([idx(f"{leg}_foot_vel") for leg in LEGS]),
+            foot_force=np.stack([idx(f"{leg}_foot_force") for leg in LEGS]),
+            body_force=np.stack([idx(f"{body}_contact_force") for body in CONTACT_BODIES]),
+        )
+
+
+class CpuBackend:
+    """Batched quadruped physics on the CPU (implements :class:`morfic_cli.sim.backend.SimBackend`).
+
+    Args:
+        cfg: Simulation config (threads, physics dt, torch device).
+        robot: The Go2 template (``template=True``) or the target's own spec (``full`` mode).
+        num_envs: Number of envs N.
+        template: Allow :meth:`set_morphology`. In template mode every env starts with the robot's
+            own descriptor applied (so :meth:`params` reports the descriptor actually in effect);
+            in full mode the robot's own model is used unchanged.
+
+    Attributes:
+        models: One ``MjModel`` per env (read them; change them only through this class).
+        state: Physics state of every env, ``mjSTATE_FULLPHYSICS``. Shape: (N, nstate), float64.
+        bad_states: Pre-step states of the envs flagged ``bad`` by the last :meth:`step`, by env id.
+        warnings: MuJoCo warning messages of the last :meth:`step`.
+    """
+
+    def __init__(self, cfg: SimCfg, robot: RobotSpec, num_envs: int, *, template: bool) -> None:
+        if num_envs < 1:
+            raise MorficError(f"num_envs must be at least 1, got {num_envs}.")
+        if not cfg.physics_dt > 0:
+            raise MorficError(f"sim.physics_dt must be positive, got {cfg.physics_dt}.")
+        self.num_envs = int(num_envs)
+        self.device = torch.device(cfg.device)
+        self.physics_dt = float(cfg.physics_dt)
+        self.morphology_mutable = bool(template)
+        self.robot = robot
+
+        nominal = build_model(robot, floor=True, sim_sensors=True)
+        nominal.opt.timestep = self.physics_dt
+        self.info = TemplateInfo.from_model(nominal)
+        self.layout = SensorLayout.from_model(nominal)
+        self._scratch = mujoco.MjData(nominal)
+        self._nominal_ipos = nominal.body_ipos[self.info.base_body].copy()
+        self._qvel0 = 1 + nominal.nq  # first qvel entry in the state vector
+
+        first = copy.copy(nominal)
+        if template:
+            apply_descriptor(first, self._scratch, robot.descriptor, self.info)
+        self.models = [copy.copy(first) for _ in range(self.num_envs)]
+        self._init_arrays(first)
+        self._stepper = BatchStepper(self.models, max(1, int(cfg.num_threads)))
+        self.state = np.tile(self._home_state(0), (self.num_envs, 1))
+        self._sensordata = np.zeros((self.num_envs, nominal.nsensordata))
+        self._refresh_sensors(np.arange(self.num_envs))
+        self._bad = np.zeros(self.num_envs, dtype=bool)
+        self.bad_states: dict[int, np.ndarray] = {}
+        self.warnings: list[str] = []
+
+    # ------------------------------------------------------------------------------------------
+    # per-env bookkeeping
+    # ------------------------------------------------------------------------------------------
+
+    def _init_arrays(self, model: mujoco.MjModel) -> None:
+        n = self.num_envs
+        summary = summarize(model, self._scratch, self.info, self.robot.default_qpos, self.robot.foot_radius)
+        self._descriptor = np.tile(self.robot.descriptor, (n, 1))
+        self._joint_range = np.tile(model_joint_ranges(model, self.info), (n, 1, 1))
+        self._default_qpos = np.tile(summary.default_joint_pos, (n, 1))
+        self._nominal_height = np.full(n, summary.nominal_height)
+        self._total_mass = np.full(n, summary.total_mass)
+        self._base_mass = np.full(n, summary.base_mass)
+        self._torque_limit = np.tile(model.actuator_forcerange[self.info.actuator_ids, 1], (n, 1))
+        floor = model.geom("floor").id
+        self._friction = np.full(n, model.geom_friction[floor, 0])
+        self._restitution = np.zeros(n)  # MuJoCo's default dampratio 1 <-> e = 0
+        self._com_offset = np.zeros((n, 3))
+        self._joint_friction = np.tile(model.dof_frictionloss[self.info.dof_adr], (n, 1))
+
+    def _home_state(self, env: int) -> np.ndarray:
+        """Default pose (clamped into the env's limits) at the init height, at rest. Shape: (nstate,)."""
+        model, data = self.models[env], self._scratch
+        mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+        data.qpos[self.info.qpos_adr] = self._default_qpos[env]
+        state = np.empty(mujoco.mj_stateSize(model, STATE_SPEC))
+        mujoco.mj_getState(model, data, state, STATE_SPEC)
+        return state
+
+    def _refresh_sensors(self, env_ids: np.ndarray) -> None:
+        """Recompute the sensors of some envs at their current state (after a reset), ctrl = default pose."""
+        data = self._scratch
+        for env in env_ids:
+            model = self.models[env]
+            mujoco.mj_setState(model, data, self.state[env], STATE_SPEC)
+            data.ctrl[self.info.actuator_ids] = self._default_qpos[env]
+            data.qacc_warmstart[:] = 0.0
+            mujoco.mj_forward(model, data)
+            self._sensordata[env] = data.sensordata
+
+    def _ids(self, env_ids: torch.Tensor | np.ndarray) -> np.ndarray:
+        ids = _numpy(env_ids).astype(np.int64).reshape(-1)
+        if ids.size and (ids.min() < 0 or ids.max() >= self.num_envs):
+            raise MorficError(f"env ids must be in [0, {self.num_envs}), got {ids.min()}..{ids.max()}.")
+        return ids
+
+    def _rows(self, value: torch.Tensor | np.ndarray, k: int, shape: tuple[int, ...], what: str) -> np.ndarray:
+        arr = _numpy(value).astype(np.float64)
+        if arr.shape != (k, *shape):
+            raise MorficError(f"{what}: expected shape {(k, *shape)}, got {tuple(arr.shape)}.")
+        return arr
+
+    def _tensor(self, arr: np.ndarray, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+        return torch.as_tensor(np.ascontiguousarray(arr)).to(device=self.device, dtype=dtype)
+
+    # ------------------------------------------------------------------------------------------
+    # SimBackend
+    # ------------------------------------------------------------------------------------------
+
+    def step(self, joint_targets: torch.Tensor, nsteps: int) -> SimFrame:
+        """Hold position targets for ``nsteps`` physics steps in every env and return the new frame.
+
+        Args:
+            joint_targets: Position-actuator targets (rad), clipped to each env's joint range;
+                a non-finite row is replaced by the env's default pose and the env flagged bad.
+                Shape: (N, 12).
+            nsteps: Physics steps (the decimation), >= 1.
+
+        Returns:
+            The frame after the step.
+        """
+        targets = self._rows(joint_targets, self.num_envs, (NUM_JOINTS,), "joint_targets")
+        finite_targets = np.isfinite(targets).all(axis=1)
+        targets = np.where(finite_targets[:, None], targets, self._default_qpos)
+        targets = clamp_to_limits(targets, self._joint_range)
+        before = self.state.copy()
+        bad = ~np.isfinite(before).all(axis=1) | ~finite_targets
+        for env in np.flatnonzero(bad):  # MuJoCo never sees a non-finite state
+            self.state[env] = self._home_state(env)
+        ctrl = np.empty((self.num_envs, self._stepper.nu))
+        ctrl[:, self.info.actuator_ids] = targets
+        new_state, sensors, ok = self._stepper.step(self.state, ctrl, nsteps)
+        self.warnings = self._stepper.warnings
+        bad |= ~ok | ~np.isfinite(new_state).all(axis=1) | ~np.isfinite(sensors).all(axis=1)
+        self.state[:] = new_state
+        self._sensordata[:] = sensors
+        self._restore(np.flatnonzero(bad), before)
+        self._bad = bad
+        return self.frame()
+
+    def _restore(self, env_ids: np.ndarray, before: np.ndarray) -> None:
+        self.bad_states = {int(env): before[env].copy() for env in env_ids}
+        for env in env_ids:
+            self.state[env] = self._home_state(env)
+        self._refresh_sensors(env_ids)
+
+    def frame(self) -> SimFrame:
+        """The current frame without stepping (see the module docstring for where each field comes from)."""
+        nq = self.models[0].nq
+        qpos, qvel = self.state[:, 1:1 + nq], self.state[:, self._qvel0:self._qvel0 + self.models[0].nv]
+        quat, lin_vel_w = qpos[:, 3:7], qvel[:, 0:3]
+        sd, lay = self._sensordata, self.layout
+        n = self.num_envs
+        return SimFrame(
+            base_pos_w=self._tensor(qpos[:, 0:3]),
+            base_quat_w=self._tensor(quat),
+            base_lin_vel_w=self._tensor(lin_vel_w),
+            base_lin_vel_b=self._tensor(quat_rotate_inverse(quat, lin_vel_w)),
+            base_ang_vel_b=self._tensor(qvel[:, 3:6]),
+            joint_pos=self._tensor(qpos[:, self.info.qpos_adr]),
+            joint_vel=self._tensor(qvel[:, self.info.dof_adr]),
+            joint_torque=self._tensor(sd[:, lay.torque]),
+            foot_pos_w=self._tensor(sd[:, lay.foot_pos.reshape(-1)].reshape(n, len(LEGS), 3)),
+            foot_vel_w=self._tensor(sd[:, lay.foot_vel.reshape(-1)].reshape(n, len(LEGS), 3)),
+            foot_force_w=self._tensor(sd[:, lay.foot_force.reshape(-1)].reshape(n, len(LEGS), 3)),
+            body_contact_force=self._tensor(
+                np.linalg.norm(sd[:, lay.body_force.reshape(-1)].reshape(n, len(CONTACT_BODIES), 3), axis=-1)),
+            bad=self._tensor(self._bad, torch.bool),
+        )
+
+    def params(self) -> SimParams:
+        """The per-env physical parameters now in effect, as exact float64 tensors (frames are float32)."""
+        f64 = torch.float64
+        return SimParams(
+            joint_range=self._tensor(self._joint_range, f64),
+            default_joint_pos=self._tensor(self._default_qpos, f64),
+            torque_limit=self._tensor(self._torque_limit, f64),
+            base_mass=self._tensor(self._base_mass, f64),
+            total_mass=self._tensor(self._total_mass, f64),
+            nominal_height=self._tensor(self._nominal_height, f64),
+            friction=self._tensor(self._friction, f64),
+            restitution=self._tensor(self._restitution, f64),
+            com_offset=self._tensor(self._com_offset, f64),
+            joint_friction=self._tensor(self._joint_friction, f64),
+            descriptor=self._tensor(self._descriptor, f64),
+        )
+
+    def reset_envs(self, env_ids: torch.Tensor, base_pos: torch.Tensor, base_quat: torch.Tensor,
+                   base_vel: torch.Tensor, joint_pos: torch.Tensor, joint_vel: torch.Tensor) -> None:
+        """Set the state of some envs; time, actuator activations and warm start are zeroed.
+
+        Args:
+            env_ids: Envs to reset. Shape: (k,), int64.
+            base_pos: Base position, world frame (m). Shape: (k, 3).
+            base_quat: Base orientation (w, x, y, z). Shape: (k, 4).
+            base_vel: Linear (world) then angular (base frame) velocity. Shape: (k, 6).
+            joint_pos: Joint positions (rad), written as given. Shape: (k, 12).
+            joint_vel: Joint velocities (rad/s). Shape: (k, 12).
+        """
+        ids = self._ids(env_ids)
+        k = ids.size
+        model = self.models[0]
+        qpos = np.zeros((k, model.nq))
+        qpos[:, 0:3] = self._rows(base_pos, k, (3,), "base_pos")
+        qpos[:, 3:7] = self._rows(base_quat, k, (4,), "base_quat")
+        qpos[:, self.info.qpos_adr] = self._rows(joint_pos, k, (NUM_JOINTS,), "joint_pos")
+        qvel = np.zeros((k, model.nv))
+        qvel[:, 0:6] = self._rows(base_vel, k, (6,), "base_vel")
+        qvel[:, self.info.dof_adr] = self._rows(joint_vel, k, (NUM_JOINTS,), "joint_vel")
+        state = np.zeros((k, self.state.shape[1]))
+        state[:, 1:1 + model.nq] = qpos
+        state[:, self._qvel0:self._qvel0 + model.nv] = qvel
+        self.state[ids] = state
+        self._bad[ids] = False
+        self._refresh_sensors(ids)
+
+    def set_morphology(self, env_ids: torch.Tensor, descriptors: torch.Tensor) -> None:
+        """Apply 11-D descriptors (raw units) to some envs' models (SPEC section 2).
+
+        Args:
+            env_ids: Envs to change. Shape: (k,).
+            descriptors: Raw descriptors (kg, rad). Shape: (k, 11).
+
+        Raises:
+            MorficError: the backend is in ``full`` mode, or a descriptor is invalid.
+        """
+        if not self.morphology_mutable:
+            raise MorficError(f"set_morphology needs the template backend; this one simulates "
+                              f"'{self.robot.name}' in full mode with its own morphology.")
+        ids = self._ids(env_ids)
+        rows = self._rows(descriptors, ids.size, (11,), "descriptors")
+        for env, m in zip(ids, rows, strict=True):
+            model = self.models[env]
+            self._descriptor[env] = apply_descriptor(model, self._scratch, m, self.info)
+            summary = summarize(model, self._scratch, self.info, self.robot.default_qpos, self.robot.foot_radius)
+            self._joint_range[env] = model_joint_ranges(model, self.info)
+            self._default_qpos[env] = summary.default_joint_pos
+            self._nominal_height[env] = summary.nominal_height
+            self._total_mass[env] = summary.total_mass
+            self._base_mass[env] = summary.base_mass
+
+    def set_dynamics(self, env_ids: torch.Tensor, friction: torch.Tensor, restitution: torch.Tensor,
+                     com_offset: torch.Tensor, joint_friction: torch.Tensor) -> None:
+        """Domain randomisation of contact and joint properties for some envs (module docstring).
+
+        Args:
+            env_ids: Envs to change. Shape: (k,).
+            friction: Ground sliding friction coefficient. Shape: (k,).
+            restitution: Contact restitution in [0, 1). Shape: (k,).
+            com_offset: Base COM offset from its nominal position (m). Shape: (k, 3).
+            joint_friction: Joint dry friction (frictionloss, N m). Shape: (k, 12).
+
+        Raises:
+            MorficError: wrong shapes, negative friction or restitution outside [0, 1).
+        """
+        ids = self._ids(env_ids)
+        k = ids.size
+        mu = self._rows(friction, k, (), "friction")
+        e = self._rows(restitution, k, (), "restitution")
+        com = self._rows(com_offset, k, (3,), "com_offset")
+        jf = self._rows(joint_friction, k, (NUM_JOINTS,), "joint_friction")
+        if np.any(~np.isfinite(mu) | (mu < 0)) or np.any(~np.isfinite(jf) | (jf < 0)):
+            raise MorficError("friction and joint_friction must be finite and >= 0.")
+        if np.any(~np.isfinite(e) | (e < 0) | (e >= 1)) or not np.all(np.isfinite(com)):
+            raise MorficError("restitution must be in [0, 1) and com_offset finite.")
+        zeta = restitution_to_dampratio(e)
+        for j, env in enumerate(ids):
+            model = self.models[env]
+            model.geom_friction[:, 0] = mu[j]
+            model.geom_solref[:, 1] = zeta[j]
+            model.body_ipos[self.info.base_body] = self._nominal_ipos + com[j]
+            model.dof_frictionloss[self.info.dof_adr] = jf[j]
+            mujoco.mj_setConst(model, self._scratch)  # the COM moved: inverse weights change
+        self._friction[ids], self._restitution[ids] = mu, e
+        self._com_offset[ids], self._joint_friction[ids] = com, jf
+
+    def push(self, env_ids: torch.Tensor, delta_vel_xy: torch.Tensor) -> None:
+        """Add a planar velocity kick to some envs' bases (world frame). Shapes: (k,), (k, 2) in m/s."""
+        ids = self._ids(env_ids)
+        self.state[ids, self._qvel0:self._qvel0 + 2] += self._rows(delta_vel_xy, ids.size, (2,), "delta_vel_xy")
+
+    def close(self) -> None:
+        """Stop the thread pool and drop the models."""
+        self._stepper.close()
+        self.models = []
+
+
+def _numpy(value: torch.Tensor | np.ndarray | float) -> np.ndarray:
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu().numpy()
+    return np.asarray(value)
