@@ -230,6 +230,11 @@ class CpuBackend:
     # SimBackend
     # ------------------------------------------------------------------------------------------
 
+    @property
+    def stepper(self) -> BatchStepper:
+        """The C stepping engine (benchmarks record and replay its calls)."""
+        return self._stepper
+
     def step(self, joint_targets: torch.Tensor, nsteps: int) -> SimFrame:
         """Hold position targets for ``nsteps`` physics steps in every env and return the new frame.
 

@@ -206,3 +206,57 @@ def physics_floor(models: Sequence[mujoco.MjModel], nsteps: int, num_threads: in
     finally:
         stepper.close()
     return stepper.num_envs * calls * decimation / elapsed
+
+
+class StepRecorder:
+    """Record every ``BatchStepper.step`` call (inputs only) so the same physics can be replayed.
+
+    Used by ``morfic bench env``: the env's own calls are recorded during the timed run, then
+    :func:`replay_floor` times exactly those calls (same models, states, controls, step counts) with
+    no env logic around them: the raw physics floor of that very workload.
+
+    Args:
+        stepper: The stepper whose calls to record (its ``step`` is wrapped until :meth:`stop`).
+    """
+
+    def __init__(self, stepper: BatchStepper) -> None:
+        self.stepper = stepper
+        self.calls: list[tuple[np.ndarray, np.ndarray, int]] = []
+        self._inner = stepper.step
+
+        def _recording_step(state: np.ndarray, ctrl: np.ndarray, nsteps: int):
+            self.calls.append((np.array(state, dtype=np.float64), np.array(ctrl, dtype=np.float64), int(nsteps)))
+            return self._inner(state, ctrl, nsteps)
+
+        stepper.step = _recording_step  # type: ignore[method-assign]
+
+    def stop(self) -> None:
+        """Stop recording (restore the stepper's own ``step``)."""
+        self.stepper.step = self._inner  # type: ignore[method-assign]
+
+
+def replay_floor(
+    models: Sequence[mujoco.MjModel], calls: Sequence[tuple[np.ndarray, np.ndarray, int]], num_threads: int
+) -> float:
+    """Time recorded stepping calls on a fresh stepper: physics steps per second, summed over envs.
+
+    Args:
+        models: The models the calls were made with (one per env).
+        calls: ``(state (N, nstate), ctrl (N, nu), nsteps)`` per call, as recorded by :class:`StepRecorder`.
+        num_threads: Worker threads.
+
+    Returns:
+        Physics steps per second.
+    """
+    if not calls:
+        raise ValueError("replay_floor needs at least one recorded call.")
+    stepper = BatchStepper(models, num_threads)
+    try:
+        stepper.step(*calls[0])  # start the thread pool, untimed
+        t0 = time.perf_counter()
+        for state, ctrl, nsteps in calls:
+            stepper.step(state, ctrl, nsteps)
+        wall = time.perf_counter() - t0
+    finally:
+        stepper.close()
+    return sum(s.shape[0] * n for s, _, n in calls) / wall

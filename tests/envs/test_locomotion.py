@@ -125,3 +125,25 @@ def test_same_seed_gives_identical_rollouts():
 def test_unknown_mode_is_an_error():
     with pytest.raises(MorficError, match="valid modes"):
         LocomotionEnv(_cfg(n=1), mode="sideways")  # type: ignore[arg-type]
+
+
+def test_nan_in_one_envs_state_resets_that_env_only():
+    env = LocomotionEnv(eval_env_cfg(_cfg(n=3)), mode="descriptor", robot="go2", seed=0)
+    try:
+        zeros = torch.zeros((3, 12))
+        for _ in range(3):
+            env.step(zeros)
+        before = env.episode_length_buf.clone()
+        env.backend.state[1, 3] = float("nan")  # base z of env 1 (state = [time, qpos...])
+        obs, rew, dones, extras = env.step(zeros)
+        assert dones.tolist() == [0, 1, 0]
+        assert env.episode_length_buf.tolist() == [int(before[0]) + 1, 0, int(before[2]) + 1]
+        assert extras["log"]["/env/nonfinite_resets"] == 1.0
+        assert rew[1] == 0.0 and torch.isfinite(rew).all()
+        for key in ("policy", "history", "critic", "privileged", "morphology"):
+            assert torch.isfinite(obs[key]).all(), key
+        # the batch carries on
+        obs, rew, dones, _ = env.step(zeros)
+        assert not dones.any() and torch.isfinite(rew).all()
+    finally:
+        env.close()
