@@ -1,0 +1,9 @@
+"""Reinforcement learning: rsl-rl 5.x plug-ins for the MorFiC actor-critic variants.
+
+- :mod:`morfic_cli.rl.models`: ``MorficActor`` and ``MorficCritic`` (rsl-rl ``MLPModel`` subclasses resolved by
+  ``class_name``), the variant table ``VARIANTS`` and the config factory ``model_cfgs``.
+- :mod:`morfic_cli.rl.ppo`: ``MorficPPO`` (rsl-rl ``PPO`` plus the adaptation-module regression and the per-update
+  critic metrics) and ``explained_variance``.
+
+Nothing is imported here, so ``import morfic_cli.rl`` stays cheap; import the submodules (they import torch).
+"""

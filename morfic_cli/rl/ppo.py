@@ -1,0 +1,250 @@
+"""MorFiC's PPO: rsl-rl PPO plus the adaptation-module regression and per-update critic metrics (SPEC section 4).
+
+PPO's loss, its mini-batch loop, the adaptive learning rate and the rollout storage are rsl-rl's, untouched.
+:class:`MorficPPO` adds, per PPO mini-batch and right after PPO's optimiser step on it:
+
+- one step of a separate optimiser on the adaptation loss
+  ``L_adapt = c_adapt * || z_priv_hat(h_t) - sg(z_priv(p_t)) ||^2`` (mean over batch and latent), where z_priv comes
+  from the critic's privileged encoder and sg is stop-gradient; only the actor's adaptation module moves;
+- the KL and clip-fraction diagnostics of that mini-batch, read from the distribution PPO's loss just used.
+
+It hooks in by wrapping the storage's mini-batch generator for the duration of ``update()`` (the code after each
+``yield`` runs when PPO asks for the next mini-batch), so no line of PPO's loss is copied here.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterator
+
+import torch
+import torch.nn as nn
+from rsl_rl.algorithms import PPO
+from rsl_rl.storage import RolloutStorage
+from rsl_rl.utils import reduce_gradients_in_buckets, resolve_optimizer
+
+from morfic_cli.rl.models import MorficActor, MorficCritic
+
+ALGORITHM_CLASS = "morfic_cli.rl.ppo:MorficPPO"
+
+#: Keys MorficPPO adds to rsl-rl's loss dict (logged per update as ``Loss/<key>``).
+EXTRA_LOSS_KEYS: tuple[str, ...] = ("explained_variance", "value_loss", "kl", "clip_fraction", "adaptation_error")
+
+
+def algorithm_cfg() -> dict:
+    """The runner config's ``algorithm`` entry with the paper's PPO hyperparameters (Table "PPO hyperparameters").
+
+    Returns:
+        A fresh dict with ``class_name`` "morfic_cli.rl.ppo:MorficPPO".
+    """
+    return {
+        "class_name": ALGORITHM_CLASS,
+        "optimizer": "adam",
+        "learning_rate": 1.0e-3,
+        "schedule": "adaptive",
+        "desired_kl": 0.01,
+        "num_learning_epochs": 5,
+        "num_mini_batches": 4,
+        "clip_param": 0.2,
+        "gamma": 0.99,
+        "lam": 0.95,
+        "value_loss_coef": 1.0,
+        "use_clipped_value_loss": True,
+        "entropy_coef": 0.01,
+        "max_grad_norm": 1.0,
+        "adaptation_loss_coef": 1.0,
+        "adaptation_learning_rate": None,
+    }
+
+
+def explained_variance(returns: torch.Tensor, values: torch.Tensor) -> float:
+    """Explained variance of the value predictions, ``EV = 1 - Var(R - V) / Var(R)``.
+
+    1 is a perfect critic, 0 is no better than predicting the batch mean of R, below 0 is worse than that. Uses the
+    raw (un-normalised) returns; ``R - V`` is the raw GAE advantage.
+
+    Args:
+        returns: GAE returns R. Any shape, e.g. (T, N, 1).
+        values: Value predictions V for the same samples. Same shape.
+
+    Returns:
+        EV as a float; NaN when Var(R) = 0 (undefined).
+    """
+    r = returns.detach().flatten().double()
+    v = values.detach().flatten().double()
+    var_r = torch.var(r, correction=0)
+    if var_r == 0:
+        return float("nan")
+    return float(1.0 - torch.var(r - v, correction=0) / var_r)
+
+
+class _UpdateStats:
+    """Per-mini-batch sums of the extra metrics, kept as tensors so the device syncs once per update."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.kl = torch.zeros(())
+        self.clip_fraction = torch.zeros(())
+        self.adaptation_error = torch.zeros(())
+
+    def add(self, kl: torch.Tensor, clip_fraction: torch.Tensor, adaptation_error: torch.Tensor) -> None:
+        self.count += 1
+        self.kl = self.kl.to(kl.device) + kl.float()
+        self.clip_fraction = self.clip_fraction.to(kl.device) + clip_fraction.float()
+        self.adaptation_error = self.adaptation_error.to(kl.device) + adaptation_error.float()
+
+    def means(self) -> dict[str, float]:
+        n = max(self.count, 1)
+        return {
+            "kl": self.kl.item() / n,
+            "clip_fraction": self.clip_fraction.item() / n,
+            "adaptation_error": self.adaptation_error.item() / n,
+        }
+
+
+class MorficPPO(PPO):
+    """rsl-rl PPO with the adaptation regression and the per-update metrics of :data:`EXTRA_LOSS_KEYS`.
+
+    Config keys (the runner config's ``algorithm`` entry): every rsl-rl PPO key, plus
+
+    - ``adaptation_loss_coef`` (default 1.0): c_adapt; 0 stops training the adaptation module (the error is still
+      logged). With Adam the coefficient mostly acts as an on/off switch; the step size is the learning rate.
+    - ``adaptation_learning_rate`` (default None = PPO's initial ``learning_rate``): fixed learning rate of the
+      adaptation optimiser (same optimiser type as PPO's, gradient-norm clipped to ``max_grad_norm``).
+
+    Loss-dict entries added to rsl-rl's ``value``, ``surrogate`` and ``entropy``:
+
+    - ``explained_variance``: :func:`explained_variance` of the rollout's raw returns vs the values stored at
+      collection time (before this update).
+    - ``value_loss``: PPO's value loss, the same number as ``value`` (clipped when ``use_clipped_value_loss``).
+    - ``kl``: mean over mini-batches of the mean KL(pi_old || pi_theta), the analytic Gaussian KL rsl-rl's adaptive
+      schedule uses, at the parameters PPO's loss saw on that mini-batch.
+    - ``clip_fraction``: mean over mini-batches of the fraction of samples with ``|ratio - 1| > clip_param``.
+    - ``adaptation_error``: mean over mini-batches of ``||z_priv_hat - z_priv||^2 / 16`` before each adaptation step.
+
+    Only feed-forward models without symmetry augmentation are supported.
+    """
+
+    actor: MorficActor
+    critic: MorficCritic
+
+    def __init__(
+        self,
+        actor: MorficActor,
+        critic: MorficCritic,
+        storage: RolloutStorage,
+        adaptation_loss_coef: float = 1.0,
+        adaptation_learning_rate: float | None = None,
+        **kwargs,
+    ) -> None:
+        """Build PPO, then the adaptation optimiser.
+
+        Args:
+            actor: The policy; must have an adaptation module (``estimate_privileged``).
+            critic: The value function; must have a privileged encoder (``encode_privileged``).
+            storage: rsl-rl rollout storage.
+            adaptation_loss_coef: c_adapt.
+            adaptation_learning_rate: Adaptation optimiser learning rate; None uses ``learning_rate``.
+            **kwargs: rsl-rl PPO arguments (learning_rate, clip_param, ..., device, multi_gpu_cfg).
+        """
+        if not hasattr(actor, "estimate_privileged") or not hasattr(critic, "encode_privileged"):
+            raise TypeError("MorficPPO needs MorficActor / MorficCritic models (adaptation module + z_priv encoder).")
+        if actor.is_recurrent or critic.is_recurrent:
+            raise ValueError("MorficPPO supports feed-forward models only.")
+        if kwargs.get("symmetry_cfg"):
+            raise ValueError("MorficPPO does not support symmetry augmentation.")
+        if actor.privileged_latent_dim != critic.privileged_latent_dim:
+            raise ValueError(
+                f"actor z_priv_hat size {actor.privileged_latent_dim} != critic z_priv size "
+                f"{critic.privileged_latent_dim}."
+            )
+        super().__init__(actor, critic, storage, **kwargs)
+        self.adaptation_loss_coef = adaptation_loss_coef
+        self.adaptation_learning_rate = (
+            adaptation_learning_rate if adaptation_learning_rate is not None else self.learning_rate
+        )
+        self.adaptation_optimizer = resolve_optimizer(kwargs.get("optimizer", "adam"))(
+            self._raw_actor.adaptation.parameters(), lr=self.adaptation_learning_rate
+        )
+
+    def update(self) -> dict[str, float]:
+        """PPO's update (rsl-rl), with the adaptation steps and metrics interleaved per mini-batch.
+
+        Returns:
+            rsl-rl's loss dict plus :data:`EXTRA_LOSS_KEYS`.
+        """
+        storage = self.storage
+        # Raw returns and the values stored at collection time; PPO only normalises the advantages.
+        ev = explained_variance(storage.returns, storage.values)
+        stats = _UpdateStats()
+        storage.mini_batch_generator = functools.partial(  # type: ignore[method-assign]
+            self._tap_mini_batches, storage.mini_batch_generator, stats
+        )
+        try:
+            loss_dict = super().update()
+        finally:
+            del storage.mini_batch_generator  # back to the class method
+        loss_dict.update(stats.means())
+        loss_dict["explained_variance"] = ev
+        loss_dict["value_loss"] = loss_dict["value"]
+        return loss_dict
+
+    def save(self) -> dict:
+        """PPO's checkpoint dict plus ``adaptation_optimizer_state_dict``."""
+        saved = super().save()
+        saved["adaptation_optimizer_state_dict"] = self.adaptation_optimizer.state_dict()
+        return saved
+
+    def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
+        """PPO's load, plus the adaptation optimiser state when the optimiser is loaded and the checkpoint has it."""
+        load_iteration = super().load(loaded_dict, load_cfg, strict)
+        if (load_cfg is None or load_cfg.get("optimizer")) and "adaptation_optimizer_state_dict" in loaded_dict:
+            self.adaptation_optimizer.load_state_dict(loaded_dict["adaptation_optimizer_state_dict"])
+        return load_iteration
+
+    def _tap_mini_batches(
+        self,
+        generator: Callable[[int, int], Iterator[RolloutStorage.Batch]],
+        stats: _UpdateStats,
+        num_mini_batches: int,
+        num_epochs: int,
+    ) -> Iterator[RolloutStorage.Batch]:
+        """Yield PPO's mini-batches; after PPO has stepped on one, record its metrics and step the adaptation loss."""
+        for batch in generator(num_mini_batches, num_epochs):
+            yield batch
+            # PPO.update has run its loss, backward and optimiser step on `batch`; the actor's distribution is still
+            # the one its loss used (PPO does no actor forward pass after the loss).
+            kl, clip_fraction = self._policy_shift(batch)
+            stats.add(kl, clip_fraction, self._adaptation_step(batch))
+
+    def _policy_shift(self, batch: RolloutStorage.Batch) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean KL(pi_old || pi_theta) and clip fraction of one mini-batch. Shapes: (), ()."""
+        with torch.no_grad():
+            n = batch.old_actions_log_prob.shape[0]  # type: ignore[union-attr]
+            new_params = tuple(p[:n] for p in self.actor.output_distribution_params)
+            kl = self.actor.get_kl_divergence(batch.old_distribution_params, new_params).mean()  # type: ignore[arg-type]
+            log_prob = self.actor.get_output_log_prob(batch.actions)[:n]  # type: ignore[arg-type]
+            ratio = torch.exp(log_prob - batch.old_actions_log_prob.squeeze(-1))  # type: ignore[union-attr]
+            clip_fraction = ((ratio - 1.0).abs() > self.clip_param).float().mean()
+        return kl, clip_fraction
+
+    def _adaptation_step(self, batch: RolloutStorage.Batch) -> torch.Tensor:
+        """One optimiser step on L_adapt for one mini-batch; returns the error before the step. Shape: ()."""
+        obs = batch.observations
+        with torch.autocast(
+            device_type=torch.device(self.device).type, enabled=self.use_mixed_precision, dtype=torch.bfloat16
+        ):
+            with torch.no_grad():
+                z_priv = self._raw_critic.encode_privileged(obs)  # target: no gradient reaches the critic
+            z_priv_hat = self._raw_actor.estimate_privileged(obs)
+            error = (z_priv_hat.float() - z_priv.float()).pow(2).mean()
+        if self.adaptation_loss_coef > 0.0:
+            params = list(self._raw_actor.adaptation.parameters())
+            self.adaptation_optimizer.zero_grad()
+            (self.adaptation_loss_coef * error).backward()
+            if self.is_multi_gpu:
+                reduce_gradients_in_buckets(params, self.gpu_world_size, self.grad_reduce_bucket_mb)
+            nn.utils.clip_grad_norm_(params, self.max_grad_norm)
+            self.adaptation_optimizer.step()
+            self.adaptation_optimizer.zero_grad(set_to_none=True)
+        return error.detach()
