@@ -56,11 +56,14 @@ class CommandCfg:
     curriculum_step: float = 0.5
     """How much each end of the vx range widens per curriculum update (m/s)."""
     curriculum_threshold: float = 0.8
-    """Widen when the mean episode r_lin reaches this fraction of its maximum."""
+    """Widen (checked once per max episode length) when the finished episodes' r_lin, summed and divided by the
+    max episode length, reaches this fraction of its maximum (legged_gym's rule: a fall counts as poor tracking)."""
     zero_fraction: float = 0.1
     """Fraction of envs commanded to stand still, so standing is learned too."""
     small_command: float = 0.1
     """Planar commands below this norm (m/s) are set to zero."""
+    fixed: tuple[float, float, float] | None = None
+    """When set, every env is always commanded exactly this (vx, vy, yaw rate) (evaluation); ranges are ignored."""
 
 
 @dataclass(frozen=True)

@@ -64,7 +64,7 @@ def emit_rows(
     """
     rows = list(rows)
     if fmt == OutputFormat.json:
-        sys.stdout.write(json.dumps(rows, indent=2, default=str, ensure_ascii=False) + "\n")
+        sys.stdout.write(json.dumps(json_safe(list(rows)), indent=2, default=str, ensure_ascii=False) + "\n")
         return
     if fmt == OutputFormat.csv:
         import pandas as pd
@@ -81,8 +81,20 @@ def emit_rows(
     out_console.print(table)
 
 
+def json_safe(obj: Any) -> Any:
+    """``obj`` with non-finite floats (NaN, inf) replaced by None, so the JSON printed is valid JSON."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    return obj
+
+
 def emit_object(obj: Any, fmt: OutputFormat) -> None:
     """Print one object: pretty JSON for json/table, a two-column key,value CSV for csv."""
+    obj = json_safe(obj)
     if fmt == OutputFormat.csv and isinstance(obj, dict):
         emit_rows([{"key": k, "value": json.dumps(v) if isinstance(v, dict | list) else v}
                    for k, v in obj.items()], fmt)

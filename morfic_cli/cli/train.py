@@ -1,31 +1,161 @@
-"""``morfic train``: PPO training with one conditioning variant (built by the training issue)."""
+"""``morfic train``: PPO training with one conditioning variant, checkpointed into the store."""
 
 from __future__ import annotations
 
+import signal
 from typing import Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, Device, DeviceOpt, Preset, PresetOpt, SeedOpt, StoreOpt
-from morfic_cli.errors import NotImplementedYetError
+from morfic_cli.cli._options import (
+    DEFAULT_STORE,
+    Device,
+    DeviceOpt,
+    FormatOpt,
+    OutputFormat,
+    Preset,
+    QuietOpt,
+    SeedOpt,
+    StoreOpt,
+)
+from morfic_cli.cli._render import emit_object, info
 
 
 def train(
     variant: Annotated[
-        str, typer.Option("--variant", help="ppo, actor-only, concat, film, film-scaled, adaln, hyper.")
-    ] = "film",
-    preset: PresetOpt = Preset.smoke,
+        str | None,
+        typer.Option("--variant", help="ppo, actor-only, concat, film, film-scaled, adaln, hyper (default film)."),
+    ] = None,
+    preset: Annotated[
+        Preset | None, typer.Option("--preset", help="Budget: smoke (seconds), cpu (2-core machine), paper (GPU).")
+    ] = None,
     seed: SeedOpt = 0,
-    name: Annotated[str | None, typer.Option("--name", help="Run ref name (default <variant>-s<seed>).")] = None,
-    resume: Annotated[str | None, typer.Option("--resume", help="Run ref or checkpoint id to continue.")] = None,
+    name: Annotated[str | None, typer.Option("--name", help="Run name: ref runs/NAME (default <variant>-s<seed>).")]
+    = None,
+    resume: Annotated[
+        str | None, typer.Option("--resume", help="Continue a run: runs/NAME (its latest checkpoint) or a checkpoint.")
+    ] = None,
     device: DeviceOpt = Device.cpu,
     overrides: Annotated[
-        list[str] | None, typer.Option("--set", help="Config override key=value (repeatable).")
+        list[str] | None,
+        typer.Option("--set", help="Config override key=value, repeatable (e.g. ppo.learning_rate=3e-4, "
+                     "env.num_envs=256, max_iterations=50). Unknown keys are an error."),
     ] = None,
+    fmt: FormatOpt = OutputFormat.table,
+    quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Train a policy with one critic-conditioning variant.
+    """Train a policy with one critic-conditioning variant; checkpoints go to ref runs/NAME.
 
-    Example: morfic train --variant film --preset smoke --seed 0
+    A checkpoint is written every save_interval iterations and at the end; Ctrl-C finishes the current iteration,
+    writes a checkpoint and exits (press it twice to abort at once). --resume continues from the latest
+    checkpoint of a run (on CPU, bit-identical to an uninterrupted run); --set max_iterations=N extends it.
+    Prints the last checkpoint (ref, id, iteration, env steps, wall time) on stdout.
+
+    Example: morfic train --variant film --preset cpu --seed 0
     """
-    raise NotImplementedYetError("train")
+    from morfic_cli.rl.config import apply_overrides, preset_cfg
+    from morfic_cli.rl.runner import new_run, resume_run
+    from morfic_cli.store import Store
+
+    st = Store(store)
+    if resume is not None:
+        if variant is not None or preset is not None or name is not None:
+            info("note: --variant/--preset/--name are taken from the checkpoint when resuming; ignored.")
+        run = resume_run(st, resume, overrides, device.value)
+    else:
+        base = preset_cfg((preset or Preset.smoke).value, variant or "film", seed)
+        cfg = apply_overrides(base, list(overrides or []))
+        run = new_run(st, cfg, name or f"{cfg.variant}-s{cfg.seed}", device.value)
+
+    cfg = run.cfg
+    if not quiet:
+        info(f"train: runs/{run.name} variant={cfg.variant} preset={cfg.preset} seed={cfg.seed} "
+             f"envs={cfg.env.num_envs} iterations {run.iteration}->{cfg.max_iterations} "
+             f"({cfg.env.num_envs * cfg.num_steps_per_env:,} transitions each)")
+
+    def on_sigint(signum, frame):  # noqa: ARG001
+        if run.stop_requested:
+            raise KeyboardInterrupt
+        run.stop_requested = True
+        info("Ctrl-C: finishing this iteration and writing a checkpoint (Ctrl-C again to abort at once) ...")
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        with _progress(run, quiet):
+            last = run.train()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        run.env.close()
+    if last is None:
+        info(f"runs/{run.name} is already at iteration {run.iteration} of {cfg.max_iterations}; nothing to do "
+             "(extend it with --set max_iterations=N).")
+        return
+    row = run.rows[-1] if run.rows else {}
+    result = {
+        "ref": f"{last.ref}@{last.version}",
+        "id": last.id,
+        "variant": cfg.variant,
+        "seed": cfg.seed,
+        "iteration": last.iteration,
+        "max_iterations": cfg.max_iterations,
+        "env_steps": int(row.get("env_steps", 0)),
+        "wall_time_s": round(float(row.get("wall_time_s", 0.0)), 1),
+        "mean_reward": row.get("mean_reward"),
+        "explained_variance": row.get("explained_variance"),
+        "interrupted": run.stop_requested and last.iteration < cfg.max_iterations,
+    }
+    if not quiet and result["interrupted"]:
+        info(f"stopped at iteration {last.iteration}; continue with `morfic train --resume runs/{run.name}`.")
+    emit_object(result, fmt)
+
+
+class _progress:
+    """A rich progress bar on stderr fed by the run's per-iteration rows (nothing when quiet)."""
+
+    def __init__(self, run, quiet: bool) -> None:
+        self.run, self.quiet = run, quiet
+        self.bar = None
+
+    def __enter__(self) -> _progress:
+        if self.quiet:
+            return self
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        console = Console(stderr=True)
+        if not console.is_terminal:  # a log file: one plain line every ~1% of the run instead of a live bar
+            every = max(1, self.run.cfg.max_iterations // 100)
+
+            def log_line(row: dict) -> None:
+                it = int(row["iteration"])
+                if it % every == 0 or it == self.run.cfg.max_iterations:
+                    info(f"it {it}/{self.run.cfg.max_iterations}  {row.get('env_steps', 0):,.0f} steps  "
+                         f"{row.get('steps_per_s', 0):,.0f} steps/s  reward {row.get('mean_reward', float('nan')):.2f}"
+                         f"  EV {row.get('explained_variance', float('nan')):.2f}  vx_err "
+                         f"{row.get('tracking.vx_error', float('nan')):.2f}  "
+                         f"vx_max {row.get('curriculum.vx_max', 0):.1f}"
+                         f"  ep {row.get('episode_length_s', float('nan')):.1f}s  {row.get('wall_time_s', 0):.0f}s")
+
+            self.run.progress = log_line
+            return self
+        self.bar = Progress(
+            TextColumn("[bold]train[/]"), BarColumn(), MofNCompleteColumn(),
+            TextColumn("{task.fields[sps]} steps/s  reward {task.fields[reward]}  EV {task.fields[ev]}"),
+            TimeRemainingColumn(), console=console, transient=False,
+        )
+        self.bar.__enter__()
+        task = self.bar.add_task("train", total=self.run.cfg.max_iterations, completed=self.run.iteration,
+                                 sps="-", reward="-", ev="-")
+
+        def update(row: dict) -> None:
+            self.bar.update(task, completed=int(row["iteration"]), sps=f"{row.get('steps_per_s', 0):,.0f}",
+                            reward=f"{row.get('mean_reward', float('nan')):.2f}",
+                            ev=f"{row.get('explained_variance', float('nan')):.2f}")
+
+        self.run.progress = update
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)

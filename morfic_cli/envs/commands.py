@@ -33,7 +33,8 @@ def sample_commands(n: int, ranges: CommandRanges, cfg: CommandCfg, gen: torch.G
     """Sample commands uniformly from the current ranges.
 
     A fraction ``cfg.zero_fraction`` of envs get a zero command, and planar commands smaller than
-    ``cfg.small_command`` are zeroed, so standing still is part of the task.
+    ``cfg.small_command`` are zeroed, so standing still is part of the task. With ``cfg.fixed`` set, every
+    command is that fixed one (evaluation).
 
     Args:
         n: Number of commands.
@@ -44,6 +45,8 @@ def sample_commands(n: int, ranges: CommandRanges, cfg: CommandCfg, gen: torch.G
     Returns:
         Commands (vx, vy, yaw rate). Shape: (n, 3).
     """
+    if cfg.fixed is not None:
+        return torch.tensor(cfg.fixed, dtype=torch.float32).expand(n, 3).clone()
     u = torch.rand((n, 3), generator=gen)
     lo = torch.tensor([ranges.vx[0], ranges.vy[0], ranges.yaw_rate[0]])
     hi = torch.tensor([ranges.vx[1], ranges.vy[1], ranges.yaw_rate[1]])

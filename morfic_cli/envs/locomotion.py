@@ -113,6 +113,7 @@ class LocomotionEnv(VecEnv):
         self.episode_sums: dict[str, torch.Tensor] = {}
         self.episode_lin_tracking = torch.zeros(n, **f32)
         self.nonfinite_resets = 0
+        self._tracking_sum, self._tracking_count = 0.0, 0
         hip_xy = torch.as_tensor(self.spec.hip_pos[:, :2] + self.spec.thigh_offset[:, :2], **f32)
         self.nominal_foot_pos_b = hip_xy.expand(n, 4, 2).clone()
         self._obs = TensorDict({}, batch_size=[n])
@@ -162,9 +163,12 @@ class LocomotionEnv(VecEnv):
         self.episode_lin_tracking += torch.nan_to_num(_raw_lin(terms, self.cfg))
 
         log: dict[str, float] = {f"/reward/{k}": float(torch.nan_to_num(v).mean()) * self.dt for k, v in terms.items()}
+        vx_err = torch.nan_to_num(state.command[:, 0] - state.base_lin_vel_b[:, 0]).abs()
+        log["/tracking/vx_error"] = float(vx_err.mean())
         reset_ids = dones.nonzero(as_tuple=False).flatten()
         if len(reset_ids):
             log.update(self._episode_log(reset_ids, time_outs, term_masks, bad))
+        self._update_curriculum(log)
         self._push_and_resample()
         if len(reset_ids):
             self._reset_envs(reset_ids)
@@ -288,12 +292,86 @@ class LocomotionEnv(VecEnv):
             log[f"/termination/{name}"] = float(mask[ids].float().mean())
         log["/termination/time_out"] = float(time_outs[ids].float().mean())
         log["/termination/nonfinite"] = float(bad[ids].float().mean())
-        full = ids[time_outs[ids]]
-        if len(full):
-            tracking = float((self.episode_lin_tracking[full] / self.episode_length_buf[full].float()).mean()) / 4.0
-            log["/curriculum/lin_tracking"] = tracking
-            widen_vx(self.command_ranges, tracking, self.cfg.commands)
+        # legged_gym's rule: r_lin summed over the episode / the *maximum* episode length, over every finished
+        # episode, so a fall counts as poor tracking. (Averaging over time-outs only let the envs with easy commands,
+        # the ones that survive, widen the range long before the policy walked.)
+        # Decided once per max episode length (as legged_gym) on every episode that ended in that window.
+        self._tracking_sum += float(self.episode_lin_tracking[ids].sum()) / (4.0 * self.max_episode_length)
+        self._tracking_count += len(ids)
         return log
+
+    def _update_curriculum(self, log: dict[str, float]) -> None:
+        """Once per max episode length: widen the vx range if the finished episodes tracked well enough."""
+        if self.common_step_counter % self.max_episode_length != 0 or self._tracking_count == 0:
+            return
+        tracking = self._tracking_sum / self._tracking_count
+        log["/curriculum/lin_tracking"] = tracking
+        widen_vx(self.command_ranges, tracking, self.cfg.commands)
+        self._tracking_sum, self._tracking_count = 0.0, 0
+
+    # ------------------------------------------------------------------ checkpoints
+    _TENSORS = (
+        "episode_length_buf", "actions", "action_prev", "action_buffer", "latency", "commands", "gait_phase",
+        "gait_frequency", "joint_vel_prev", "foot_vel_prev", "history", "critic_history", "obs_buf",
+        "episode_lin_tracking", "nominal_foot_pos_b",
+    )
+
+    def state_dict(self) -> dict:
+        """Everything the env needs to continue exactly where it is: buffers, curriculum, generator, physics.
+
+        Per-env morphology and dynamics are stored as parameters and re-applied on load.
+        """
+        p = self.params
+        return {
+            "num_envs": self.num_envs,
+            "mode": self.mode,
+            "tensors": {k: getattr(self, k).clone() for k in self._TENSORS},
+            "episode_sums": {k: v.clone() for k, v in self.episode_sums.items()},
+            "obs": {k: v.clone() for k, v in self._obs.items()},
+            "counters": {
+                "common_step_counter": self.common_step_counter,
+                "nonfinite_resets": self.nonfinite_resets,
+                "tracking_sum": self._tracking_sum,
+                "tracking_count": self._tracking_count,
+            },
+            "command_vx": tuple(self.command_ranges.vx),
+            "generator": self.gen.get_state(),
+            "params": {
+                "descriptor": p.descriptor.clone(), "friction": p.friction.clone(),
+                "restitution": p.restitution.clone(), "com_offset": p.com_offset.clone(),
+                "joint_friction": p.joint_friction.clone(),
+            },
+            "backend": self.backend.state_dict(),
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore :meth:`state_dict` into an env built with the same config, mode and robot.
+
+        Raises:
+            MorficError: The state was saved from an env with another size or mode.
+        """
+        if state["num_envs"] != self.num_envs or state["mode"] != self.mode:
+            raise MorficError(
+                f"checkpoint env state is for {state['num_envs']} envs in mode '{state['mode']}', this env has "
+                f"{self.num_envs} in mode '{self.mode}'; resume with the run's own env settings."
+            )
+        prm = state["params"]
+        if self.mode != "full":
+            self.backend.set_morphology(self._all_ids, prm["descriptor"])
+        self.backend.set_dynamics(
+            self._all_ids, prm["friction"], prm["restitution"], prm["com_offset"], prm["joint_friction"]
+        )
+        self.params = self.backend.params()
+        self.backend.load_state_dict(state["backend"])
+        for k in self._TENSORS:
+            getattr(self, k).copy_(state["tensors"][k])
+        self.episode_sums = {k: v.clone() for k, v in state["episode_sums"].items()}
+        self._obs = TensorDict({k: v.clone() for k, v in state["obs"].items()}, batch_size=[self.num_envs])
+        c = state["counters"]
+        self.common_step_counter, self.nonfinite_resets = c["common_step_counter"], c["nonfinite_resets"]
+        self._tracking_sum, self._tracking_count = c["tracking_sum"], c["tracking_count"]
+        self.command_ranges.vx = tuple(state["command_vx"])
+        self.gen.set_state(state["generator"])
 
     def close(self) -> None:
         """Release the backend."""

@@ -119,6 +119,18 @@ class SimBackend(Protocol):
         """The per-env physical parameters now in effect."""
         ...
 
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        """The physics state of every env (what a training checkpoint needs to continue bit-exactly).
+
+        Morphology and dynamics are not in it: they are in :meth:`params` and are re-applied with
+        :meth:`set_morphology` / :meth:`set_dynamics` before :meth:`load_state_dict`.
+        """
+        ...
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        """Restore what :meth:`state_dict` returned (same number of envs and robot)."""
+        ...
+
     def reset_envs(
         self,
         env_ids: torch.Tensor,

@@ -402,6 +402,18 @@ class CpuBackend:
         self._friction[ids], self._restitution[ids] = mu, e
         self._com_offset[ids], self._joint_friction[ids] = com, jf
 
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        """Physics state (N, nstate) and the last sensor readings (N, nsensordata), float64 copies."""
+        return {"state": torch.from_numpy(self.state.copy()), "sensordata": torch.from_numpy(self._sensordata.copy())}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        """Restore :meth:`state_dict`'s arrays; shapes must match this backend's."""
+        for key, target in (("state", self.state), ("sensordata", self._sensordata)):
+            value = np.asarray(state[key], dtype=np.float64)
+            if value.shape != target.shape:
+                raise ValueError(f"backend {key} has shape {value.shape}, expected {target.shape}.")
+            target[:] = value
+
     def push(self, env_ids: torch.Tensor, delta_vel_xy: torch.Tensor) -> None:
         """Add a planar velocity kick to some envs' bases (world frame). Shapes: (k,), (k, 2) in m/s."""
         ids = self._ids(env_ids)

@@ -31,7 +31,6 @@ def test_every_subcommand_has_help_with_an_example(run_cli, name):
 @pytest.mark.parametrize(
     "argv",
     [
-        ["train", "--variant", "film"],
         ["eval", "runs/film-s0"],
         ["diagnose", "runs/film-s0"],
         ["compare-baselines", "runs/film-s0"],

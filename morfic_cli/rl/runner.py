@@ -1,0 +1,396 @@
+"""Training runs: rsl-rl's OnPolicyRunner with checkpoints in the artifact store (SPEC sections 4 and 8).
+
+rsl-rl does the PPO loop (:class:`~rsl_rl.runners.OnPolicyRunner.learn`); morfic plugs in through its
+``Logger``: :class:`CurveLogger` turns each iteration's metrics into a training-curve row and calls
+:class:`TrainingRun` back, which draws the progress, writes checkpoints and honours Ctrl-C between
+iterations. Store layout of a run named ``NAME``:
+
+- ref ``runs/NAME`` -> ``checkpoint`` manifests: ``model.pt`` (actor and critic weights),
+  ``curve.csv`` and ``curve.png`` (the training curve so far); config = the resolved :class:`TrainCfg`;
+  meta = variant, seed, iteration, env steps, wall time, git commit, finished/interrupted.
+- ref ``resume/NAME`` -> ``checkpoint`` manifests with ``trainer.pt`` (optimiser states, env state,
+  RNG states, logger buffers), input ``checkpoint`` = the weights it belongs to.
+
+Keeping the trainer state apart keeps ``runs/NAME`` small to export (a policy bundle), while
+``--resume`` continues bit-exactly on CPU.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import subprocess
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import torch
+from rsl_rl.runners import OnPolicyRunner
+from rsl_rl.utils.logger import Logger
+from tensordict import TensorDict
+
+from morfic_cli.envs import observations as O
+from morfic_cli.errors import ArtifactNotFoundError, MorficError
+from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
+from morfic_cli.rl.models import model_cfgs
+from morfic_cli.rl.ppo import ALGORITHM_CLASS
+from morfic_cli.store import Store
+
+RUNS_PREFIX = "runs/"
+RESUME_PREFIX = "resume/"
+
+
+def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
+    """The rsl-rl runner config (``obs_groups``, ``algorithm``, ``actor``, ``critic``, ...) of a TrainCfg."""
+    actor, critic, obs_groups = model_cfgs(cfg.variant)
+    actor["hidden_dims"] = list(cfg.model.actor_hidden_dims)
+    actor["distribution_cfg"]["init_std"] = cfg.model.init_std
+    if cfg.model.critic_hidden_dims is not None:
+        critic["hidden_dims"] = list(cfg.model.critic_hidden_dims)
+    algorithm = {"class_name": ALGORITHM_CLASS, "optimizer": "adam", **dataclasses.asdict(cfg.ppo),
+                 "rnd_cfg": None, "symmetry_cfg": None}
+    return {
+        "obs_groups": obs_groups,
+        "num_steps_per_env": cfg.num_steps_per_env,
+        "save_interval": cfg.save_interval,
+        "check_for_nan": True,
+        "algorithm": algorithm,
+        "actor": actor,
+        "critic": critic,
+        "logger": "tensorboard",
+    }
+
+
+def dummy_observations(cfg: TrainCfg, batch: int = 1) -> TensorDict:
+    """Zero observations with the env's group shapes, to build models without an env. Batch shape: (batch,)."""
+    h = cfg.env.obs.history_len
+    return TensorDict(
+        {
+            "policy": torch.zeros(batch, O.POLICY_DIM),
+            "history": torch.zeros(batch, h, O.POLICY_DIM),
+            "critic": torch.zeros(batch, h, O.POLICY_DIM),
+            "privileged": torch.zeros(batch, O.PRIVILEGED_DIM),
+            "morphology": torch.zeros(batch, 11),
+        },
+        batch_size=[batch],
+    )
+
+
+def build_models(cfg: TrainCfg) -> tuple[torch.nn.Module, torch.nn.Module]:
+    """A fresh (actor, critic) pair of a config, on CPU, without an env."""
+    from rsl_rl.utils import resolve_class
+    from rsl_rl.utils.utils import resolve_obs_groups
+
+    rcfg = rsl_rl_cfg(cfg)
+    obs = dummy_observations(cfg)
+    groups = resolve_obs_groups(obs, rcfg["obs_groups"], ["actor", "critic"])
+    actor_class, actor_kwargs = resolve_class(rcfg["actor"])
+    critic_class, critic_kwargs = resolve_class(rcfg["critic"])
+    actor = actor_class(obs, groups, "actor", 12, **actor_kwargs)
+    critic = critic_class(obs, groups, "critic", 1, **critic_kwargs)
+    return actor, critic
+
+
+@dataclasses.dataclass
+class TrainedModels:
+    """A checkpoint's models, ready for evaluation (eval mode, CPU)."""
+
+    actor: torch.nn.Module
+    critic: torch.nn.Module
+    cfg: TrainCfg
+    checkpoint_id: str
+    meta: dict[str, Any]
+
+
+def load_trained(store: Store, spec: str) -> TrainedModels:
+    """Load a checkpoint's actor and critic (``spec``: ``runs/NAME``, ``runs/NAME@N``, id or prefix).
+
+    Raises:
+        ArtifactNotFoundError: Nothing by that name.
+        MorficError: It is not a training checkpoint.
+    """
+    manifest = store.read_manifest(spec)
+    if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
+        raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training checkpoint; "
+                          "pass a run ref such as runs/film-s0 (see `morfic store ls --kind checkpoint`).")
+    cfg = train_cfg_from_dict(manifest.config)
+    actor, critic = build_models(cfg)
+    state = torch.load(io.BytesIO(store.read_file(manifest.id, "model.pt")), map_location="cpu", weights_only=True)
+    actor.load_state_dict(state["actor"])
+    critic.load_state_dict(state["critic"])
+    actor.eval()
+    critic.eval()
+    return TrainedModels(actor, critic, cfg, manifest.id, dict(manifest.meta))
+
+
+def git_commit() -> str | None:
+    """The commit of the morfic checkout this code runs from, or None outside a git checkout."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
+                             text=True, timeout=5, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+class _Sink:
+    """Stands in for rsl-rl's log writer so its Logger keeps its episode buffers; writes nothing."""
+
+
+class CurveLogger(Logger):
+    """rsl-rl's Logger, but each iteration becomes a curve row handed to ``on_iteration`` (no console dump)."""
+
+    def __init__(self, *args: Any, dt: float, on_iteration: Callable[[dict[str, float]], None], **kwargs: Any):
+        super().__init__(*args, **kwargs)
+        self.dt = dt
+        self.on_iteration = on_iteration
+        self.wall_time_s = 0.0
+
+    def init_logging_writer(self) -> None:
+        """No writer, no git snapshot: the store keeps the run."""
+        self.writer = _Sink()  # type: ignore[assignment]
+
+    def log(self, it: int, start_it: int, total_it: int, collect_time: float, learn_time: float, loss_dict: dict,
+            learning_rate: float, action_std: torch.Tensor, rnd_weight: float | None, **_: Any) -> None:
+        """Build the curve row of iteration ``it`` (0-based) and pass it on."""
+        size = self.cfg["num_steps_per_env"] * self.num_envs
+        self.tot_timesteps += size
+        self.tot_time += collect_time + learn_time
+        self.wall_time_s += collect_time + learn_time
+        row: dict[str, float] = {
+            "iteration": it + 1,
+            "env_steps": self.tot_timesteps,
+            "wall_time_s": self.wall_time_s,
+            "steps_per_s": size / max(collect_time + learn_time, 1e-9),
+            "collect_s": collect_time,
+            "learn_s": learn_time,
+            "mean_reward": sum(self.rewbuffer) / len(self.rewbuffer) if self.rewbuffer else float("nan"),
+            "episode_length_s": (sum(self.lenbuffer) / len(self.lenbuffer) * self.dt) if self.lenbuffer
+            else float("nan"),
+            "learning_rate": learning_rate,
+            "action_std": float(action_std.detach().mean()),
+        }
+        row.update({k: float(v) for k, v in loss_dict.items()})
+        keys = dict.fromkeys(k for extras in self.ep_extras for k in extras)
+        for key in keys:
+            values = [float(e[key]) for e in self.ep_extras if key in e]
+            name = key.strip("/").replace("/", ".")
+            if name.startswith("reward.") or name == "env.nonfinite_resets":
+                continue  # per-step means; the episode means below are what the curve shows
+            row[name] = max(values) if name == "curriculum.vx_max" else sum(values) / len(values)
+        self.ep_extras.clear()
+        self.on_iteration(row)
+
+    def state_dict(self) -> dict[str, Any]:
+        """The episode buffers and counters, for exact curves after a resume."""
+        return {"rewbuffer": list(self.rewbuffer), "lenbuffer": list(self.lenbuffer),
+                "cur_reward_sum": self.cur_reward_sum.clone(), "cur_episode_length": self.cur_episode_length.clone(),
+                "tot_timesteps": self.tot_timesteps, "tot_time": self.tot_time, "wall_time_s": self.wall_time_s}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict`."""
+        self.rewbuffer = deque(state["rewbuffer"], maxlen=100)
+        self.lenbuffer = deque(state["lenbuffer"], maxlen=100)
+        self.cur_reward_sum.copy_(state["cur_reward_sum"])
+        self.cur_episode_length.copy_(state["cur_episode_length"])
+        self.tot_timesteps, self.tot_time = state["tot_timesteps"], state["tot_time"]
+        self.wall_time_s = state["wall_time_s"]
+
+
+class _StoreRunner(OnPolicyRunner):
+    """OnPolicyRunner whose own file checkpoints are switched off: :class:`TrainingRun` writes to the store."""
+
+    def save(self, path: str, infos: dict | None = None) -> None:  # noqa: ARG002
+        """No files: checkpoints go to the artifact store."""
+
+
+class _Stop(Exception):
+    """Raised from the iteration hook to leave rsl-rl's loop after a Ctrl-C checkpoint."""
+
+
+@dataclasses.dataclass
+class Checkpoint:
+    """A checkpoint written to the store."""
+
+    id: str
+    ref: str
+    version: int
+    iteration: int
+
+
+class TrainingRun:
+    """One training run: env + rsl-rl runner + store checkpoints. Use :func:`new_run` or :func:`resume_run`."""
+
+    def __init__(self, store: Store, cfg: TrainCfg, name: str, device: str = "cpu") -> None:
+        from morfic_cli.envs.locomotion import LocomotionEnv
+
+        self.store, self.cfg, self.name, self.device = store, cfg, name, device
+        torch.manual_seed(cfg.seed)
+        self.env = LocomotionEnv(cfg.env, mode="train", seed=cfg.seed)
+        with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the models on stdout
+            self.runner = _StoreRunner(self.env, rsl_rl_cfg(cfg), log_dir=None, device=device)
+        old = self.runner.logger
+        self.runner.logger = CurveLogger(
+            log_dir="", cfg=old.cfg, env_cfg=old.env_cfg, num_envs=old.num_envs, is_distributed=False,
+            gpu_world_size=1, gpu_global_rank=0, device=old.device, dt=self.env.dt, on_iteration=self._on_iteration,
+        )
+        self.rows: list[dict[str, float]] = []
+        self.iteration = 0
+        self.parent: str | None = None
+        self.stop_requested = False
+        self.progress: Callable[[dict[str, float]], None] | None = None
+        self.checkpoints: list[Checkpoint] = []
+        self._fresh = True
+
+    # ------------------------------------------------------------------ the loop
+    def train(self) -> Checkpoint | None:
+        """Run to ``cfg.max_iterations`` (or until Ctrl-C), checkpointing on the way; returns the last checkpoint."""
+        remaining = self.cfg.max_iterations - self.iteration
+        if remaining <= 0:
+            return self.checkpoints[-1] if self.checkpoints else None
+        self.runner.current_learning_iteration = self.iteration
+        try:
+            self.runner.learn(remaining, init_at_random_ep_len=self._fresh and self.cfg.init_at_random_ep_len)
+        except _Stop:
+            pass
+        return self.checkpoints[-1] if self.checkpoints else None
+
+    def _on_iteration(self, row: dict[str, float]) -> None:
+        self.iteration = int(row["iteration"])
+        self.rows.append(row)
+        if self.progress is not None:
+            self.progress(row)
+        last = self.iteration >= self.cfg.max_iterations
+        if self.stop_requested or last or self.iteration % self.cfg.save_interval == 0:
+            self.save_checkpoint(finished=last, interrupted=self.stop_requested and not last)
+        if self.stop_requested and not last:
+            raise _Stop
+
+    # ------------------------------------------------------------------ checkpoints
+    def save_checkpoint(self, *, finished: bool, interrupted: bool = False) -> Checkpoint:
+        """Write the weights manifest (advancing ``runs/NAME``) and the trainer-state manifest (``resume/NAME``)."""
+        from morfic_cli.recording.curves import curve_csv, curve_png
+
+        alg = self.runner.alg
+        model = _to_bytes({"actor": alg._raw_actor.state_dict(), "critic": alg._raw_critic.state_dict()})
+        saved = alg.save()
+        saved.pop("actor_state_dict"), saved.pop("critic_state_dict")
+        trainer = _to_bytes({
+            "iteration": self.iteration,
+            "alg": saved,
+            "learning_rate": alg.learning_rate,
+            "env": self.env.state_dict(),
+            "logger": self.runner.logger.state_dict(),
+            "torch_rng": torch.get_rng_state(),
+        })
+        logger: CurveLogger = self.runner.logger  # type: ignore[assignment]
+        meta = {
+            "variant": self.cfg.variant, "seed": self.cfg.seed, "preset": self.cfg.preset, "iteration": self.iteration,
+            "max_iterations": self.cfg.max_iterations, "env_steps": logger.tot_timesteps,
+            "wall_time_s": round(logger.wall_time_s, 3), "git_commit": git_commit(), "finished": finished,
+            "interrupted": interrupted, "parent": self.parent, "device": self.device, "run": self.name,
+            "vx_max": float(self.env.command_ranges.vx[1]),
+        }
+        with self.store.writing():
+            ckpt = self.store.put_manifest(
+                "checkpoint", config=train_cfg_to_dict(self.cfg), meta=meta,
+                files={"model.pt": model, "curve.csv": curve_csv(self.rows), "curve.png": curve_png(self.rows)},
+            )
+            state = self.store.put_manifest("checkpoint", config={"role": "trainer-state"},
+                                            inputs={"checkpoint": ckpt}, files={"trainer.pt": trainer},
+                                            meta={"iteration": self.iteration, "run": self.name})
+            version = self.store.set_ref(RUNS_PREFIX + self.name, ckpt)
+            self.store.set_ref(RESUME_PREFIX + self.name, state)
+        self.parent = ckpt
+        out = Checkpoint(ckpt, RUNS_PREFIX + self.name, version, self.iteration)
+        self.checkpoints.append(out)
+        return out
+
+    def _restore(self, ckpt_id: str, trainer: dict[str, Any], rows: list[dict[str, float]]) -> None:
+        alg = self.runner.alg
+        model = torch.load(io.BytesIO(self.store.read_file(ckpt_id, "model.pt")), map_location=self.device,
+                           weights_only=True)
+        loaded = dict(trainer["alg"], actor_state_dict=model["actor"], critic_state_dict=model["critic"])
+        alg.load(loaded, None, True)
+        alg.learning_rate = trainer["learning_rate"]
+        self.env.load_state_dict(trainer["env"])
+        self.runner.logger.load_state_dict(trainer["logger"])  # type: ignore[attr-defined]
+        torch.set_rng_state(trainer["torch_rng"])
+        self.iteration = int(trainer["iteration"])
+        self.rows = rows
+        self.parent = ckpt_id
+        self._fresh = False
+
+
+def _to_bytes(obj: Any) -> bytes:
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return buf.getvalue()
+
+
+def check_device(device: str) -> None:
+    """Raise MorficError when ``device`` cannot train here."""
+    if device == "cpu":
+        return
+    if device == "cuda":
+        if not torch.cuda.is_available():
+            raise MorficError("--device cuda: no CUDA device is available on this machine (or torch is a CPU "
+                              "build); train with --device cpu, or on a GPU machine.")
+        raise MorficError("--device cuda: the GPU simulation backend is not part of this release; "
+                          "train with --device cpu.")
+    raise MorficError(f"unknown device '{device}'; valid devices are: cpu, cuda.")
+
+
+def new_run(store: Store, cfg: TrainCfg, name: str, device: str = "cpu") -> TrainingRun:
+    """A fresh run under ``runs/NAME``.
+
+    Raises:
+        MorficError: ``runs/NAME`` already exists (resume it or pick another --name).
+    """
+    check_device(device)
+    if store.has_ref(RUNS_PREFIX + name):
+        raise MorficError(f"run '{RUNS_PREFIX}{name}' already exists in {store.root}; continue it with "
+                          f"`--resume {RUNS_PREFIX}{name}` or choose another --name.")
+    return TrainingRun(store, cfg, name, device)
+
+
+def resume_run(store: Store, spec: str, overrides: list[str] | None = None, device: str = "cpu") -> TrainingRun:
+    """Continue the run whose checkpoint ``spec`` names (``runs/NAME`` = its latest checkpoint).
+
+    ``overrides`` may change e.g. ``max_iterations``; the config otherwise is the checkpoint's.
+
+    Raises:
+        ArtifactNotFoundError: No such checkpoint.
+        MorficError: Not a checkpoint, or its trainer state is not in this store (an exported policy bundle).
+    """
+    check_device(device)
+    try:
+        manifest = store.read_manifest(spec)
+    except ArtifactNotFoundError:
+        if not spec.startswith(RUNS_PREFIX) and store.has_ref(RUNS_PREFIX + spec):
+            manifest = store.read_manifest(RUNS_PREFIX + spec)
+        else:
+            raise
+    if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
+        raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-s0.")
+    name = manifest.meta.get("run") or spec.removeprefix(RUNS_PREFIX).split("@")[0]
+    state_id = None
+    if store.has_ref(RESUME_PREFIX + name):
+        for entry in reversed(store.ref_history(RESUME_PREFIX + name)):
+            if store.read_manifest(entry.id).inputs.get("checkpoint") == manifest.id:
+                state_id = entry.id
+                break
+    if state_id is None:
+        raise MorficError(f"checkpoint '{spec}' has no trainer state in {store.root} (policy bundles carry weights "
+                          "only), so it cannot be resumed; start a new run with `morfic train`.")
+    cfg = apply_overrides(train_cfg_from_dict(manifest.config), list(overrides or []))
+    trainer = torch.load(io.BytesIO(store.read_file(state_id, "trainer.pt")), map_location="cpu", weights_only=False)
+    from morfic_cli.recording.curves import read_curve_csv
+
+    rows = read_curve_csv(store.read_file(manifest.id, "curve.csv"))
+    run = TrainingRun(store, cfg, name, device)
+    run._restore(manifest.id, trainer, rows)
+    return run
+
