@@ -90,6 +90,9 @@ class DomainRandCfg:
     """Action latency sampled per episode in 0..max policy steps (paper: up to 6)."""
     init_joint_scale: tuple[float, float] = (0.5, 1.5)
     """Reset joint positions are the default pose times this uniform factor (clamped into limits)."""
+    random_reset_pose: bool = True
+    """Apply ``init_joint_scale`` at reset even when ``enabled`` is off, so evaluation envs start apart (else
+    the N envs of an evaluation would be identical copies and their spread meaningless)."""
 
 
 @dataclass(frozen=True)

@@ -8,29 +8,38 @@ import typer
 
 from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, QuietOpt, StoreOpt
 from morfic_cli.cli._render import Column, emit_object, emit_rows, info
-from morfic_cli.errors import MorficError, NotImplementedYetError
+from morfic_cli.errors import MorficError
 
 
 def bench(
-    what: Annotated[str, typer.Argument(help="env (train comes with the training issue).")],
+    what: Annotated[str, typer.Argument(help="env (env steps/s vs the physics floor) or train (PPO iterations of "
+                                        "a preset vs the same floor).")],
     envs: Annotated[str, typer.Option("--envs", help="Comma-separated env counts, e.g. 256,1024,4096.")] = "256",
     steps: Annotated[int, typer.Option("--steps", help="Timed policy steps per measurement.")] = 50,
     backend: Annotated[str, typer.Option("--backend", help="Simulation backend: cpu (gpu later).")] = "cpu",
     seed: Annotated[int, typer.Option("--seed", help="Seed of the env and the random actions.")] = 0,
+    preset: Annotated[str, typer.Option("--preset", help="bench train: training preset (smoke, cpu, paper).")] = "cpu",
+    variant: Annotated[str, typer.Option("--variant", help="bench train: actor-critic variant.")] = "film",
+    iterations: Annotated[int, typer.Option("--iterations", help="bench train: timed PPO iterations.")] = 5,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Measure env steps/s with random actions against the raw physics floor, in one run.
+    """Measure env steps/s (or training steps/s) against the raw physics floor, in one run.
+
+    bench train times --iterations PPO iterations of a preset (after one warm-up iteration) and replays
+    their physics calls as the floor: fraction_of_floor is what training keeps of the raw simulation rate.
 
     The floor steps the same MuJoCo models in C with no env logic; ratio = env steps/s divided by
     the floor in env steps/s (physics steps/s / decimation). The table is stored as an artifact.
     `--format json` prints one object for a single --envs value, else a list.
 
-    Example: morfic bench env --envs 256,1024 --steps 50 --format json
+    Examples: morfic bench env --envs 256,1024 --steps 50 --format json;
+    morfic bench train --preset cpu --iterations 5
     """
     if what == "train":
-        raise NotImplementedYetError("bench train")
+        _bench_train(preset, variant, iterations, seed, fmt, quiet, store)
+        return
     if what != "env":
         raise MorficError(f"unknown benchmark '{what}'; valid benchmarks are: env, train.")
     try:
@@ -66,5 +75,24 @@ def bench(
             ],
             title=f"morfic bench env ({rows[0]['cpu_model']}, {rows[0]['cores']} cores)",
         )
+    if not quiet:
+        info(f"wrote table {artifact.id[:12]} (ref {artifact.ref}@{artifact.version}) to store {store}")
+
+
+def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: OutputFormat, quiet: bool,
+                 store) -> None:
+    from morfic_cli.benchmarks import bench_train
+    from morfic_cli.recording.tables import write_bench_train_table
+
+    if iterations < 1:
+        raise MorficError("--iterations must be a positive integer.")
+    if not quiet:
+        info(f"bench train: {preset} preset, {variant}, 1 warm-up + {iterations} timed iterations ...")
+    row = bench_train(preset, variant, iterations, seed).as_dict()
+    artifact = write_bench_train_table(store, [row])
+    if fmt == OutputFormat.csv:
+        emit_rows([row], fmt)
+    else:
+        emit_object(row, fmt)
     if not quiet:
         info(f"wrote table {artifact.id[:12]} (ref {artifact.ref}@{artifact.version}) to store {store}")

@@ -1,7 +1,8 @@
-"""``morfic eval``: the paper's zero-shot protocol on target robots (built by the eval issue)."""
+"""``morfic eval``: the paper's zero-shot protocol on target robots."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -10,27 +11,127 @@ from morfic_cli.cli._options import (
     DEFAULT_STORE,
     EvalMode,
     FormatOpt,
-    ModeOpt,
     OutputFormat,
+    QuietOpt,
     RobotsOpt,
+    SeedOpt,
     StoreOpt,
 )
-from morfic_cli.errors import NotImplementedYetError
+from morfic_cli.cli._render import Column, emit_rows, info
+from morfic_cli.errors import MorficError
 
 
 def evaluate(
-    run: Annotated[str, typer.Argument(help="Run ref or checkpoint id.")],
+    run: Annotated[str, typer.Argument(help="Run ref (runs/film-s0 = its latest checkpoint), ref@N or checkpoint id.")],
     robots: RobotsOpt = "all",
     command_vx: Annotated[str, typer.Option("--command-vx", help="Forward command(s) in m/s, e.g. 2.0,2.5.")] = "2.0",
-    mode: ModeOpt = EvalMode.descriptor,
+    mode: Annotated[
+        str, typer.Option("--mode", help="descriptor (Go2 template with the target's descriptor, the paper's), full "
+                          "(the target's own model), or both.")
+    ] = EvalMode.descriptor.value,
     envs: Annotated[int, typer.Option("--envs", help="Parallel envs per robot.")] = 64,
-    steps: Annotated[int, typer.Option("--steps", help="Policy steps per rollout.")] = 500,
-    video: Annotated[bool, typer.Option("--video", help="Render an MP4 of a few envs.")] = False,
+    steps: Annotated[int, typer.Option("--steps", help="Policy steps per rollout (50 per second).")] = 500,
+    seed: SeedOpt = 0,
+    video: Annotated[bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")]
+    = False,
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Also write the table CSV (and videos next to it) here.")
+    ] = None,
     fmt: FormatOpt = OutputFormat.table,
+    quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Zero-shot evaluation of a trained policy on each target robot.
+    """Zero-shot evaluation of a trained policy on each target robot (paper protocol by default).
 
-    Example: morfic eval runs/film-s0 --robots go1,a1 --command-vx 2.0
+    Per robot and command: v_x mean ± std over envs (alive steps only), v_x^max (best 1 s moving average),
+    survival S (no termination in --steps), tracking ratio and a validity verdict (a survivor that stands
+    still, lies down or drags its feet is not a transfer). Actions are the policy mean; no pushes or
+    randomisation. Stores the table (ref evals/<run>) and one MCAP log per robot and command.
+
+    Example: morfic eval runs/film-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
     """
-    raise NotImplementedYetError("eval")
+    from morfic_cli.evaluation.protocol import EvalCfg, parse_commands
+    from morfic_cli.evaluation.protocol import evaluate as run_eval
+    from morfic_cli.morphology.distance import parse_robot_list
+    from morfic_cli.store import Store
+
+    names = parse_robot_list(robots)
+    if not names:
+        raise MorficError("--robots is empty; give 'all' or names such as go1,a1 (see `morfic robots ls`).")
+    modes = ("descriptor", "full") if mode == "both" else (mode,)
+    if any(m not in ("descriptor", "full") for m in modes):
+        raise MorficError(f"unknown --mode '{mode}'; valid modes are: descriptor, full, both.")
+    try:
+        commands = parse_commands(command_vx)
+    except ValueError as exc:
+        raise MorficError(f"--command-vx takes comma-separated numbers in m/s (e.g. 2.0,2.5), got '{command_vx}'.") \
+            from exc
+    if envs < 1 or steps < 1:
+        raise MorficError("--envs and --steps must be positive integers.")
+    cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed)
+    st = Store(store)
+
+    with _progress(len(names) * len(modes) * len(commands) * steps, quiet) as progress:
+        result = run_eval(st, run, cfg, on_rollout_start=progress.start, on_step=progress.step,
+                          keep_models=4 if video else 0)
+    if video:
+        from morfic_cli.evaluation.media import store_videos
+
+        for path in store_videos(st, result, out):
+            info(f"video: {path}")
+    if out is not None:
+        from morfic_cli.evaluation.protocol import EVAL_COLUMNS
+        from morfic_cli.recording.tables import rows_to_csv
+
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_bytes(rows_to_csv(result.rows, EVAL_COLUMNS))
+    if not quiet:
+        info(f"stored {result.ref}@{result.version} ({result.id[:12]}) with {len(result.rollouts)} MCAP rollout logs")
+    emit_rows(
+        result.rows,
+        fmt,
+        columns=[
+            Column("robot", "robot"),
+            Column("mode", "mode"),
+            Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:.1f}", justify="right"),
+            Column("d", "d", fmt=lambda v: "-" if v is None else f"{v:.3f}", justify="right"),
+            Column("cell", "v_x ± σ / S", justify="right"),
+            Column("cell_max", "v_x^max ± σ / S", justify="right"),
+            Column("tracking_ratio", "tracking", fmt=lambda v: f"{v:.2f}", justify="right"),
+            Column("verdict", "validity"),
+        ],
+        title=f"zero-shot transfer of {run}",
+        caption="v_x: mean forward velocity over alive steps; S: survival; validity: moving, upright, no dragging",
+    )
+
+
+class _progress:
+    """A rich progress bar over all policy steps of the evaluation (stderr; nothing when quiet)."""
+
+    def __init__(self, total: int, quiet: bool) -> None:
+        self.total, self.quiet = total, quiet
+        self.bar = None
+        self.task = None
+
+    def __enter__(self) -> _progress:
+        if not self.quiet:
+            from rich.console import Console
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self.bar = Progress(TextColumn("[bold]eval[/] {task.description}"), BarColumn(), MofNCompleteColumn(),
+                                TimeRemainingColumn(), console=Console(stderr=True))
+            self.bar.__enter__()
+            self.task = self.bar.add_task("", total=self.total)
+        return self
+
+    def start(self, robot: str, mode: str, vx: float) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, description=f"{robot} {mode} vx={vx:g}")
+
+    def step(self, t: int) -> None:  # noqa: ARG002
+        if self.bar is not None:
+            self.bar.advance(self.task)
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)

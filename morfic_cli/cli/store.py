@@ -152,13 +152,17 @@ def gc(
 def export(
     refs: Annotated[list[str], typer.Argument(help="Ref names to export, with every version.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Tar file to write.")],
+    latest: Annotated[bool, typer.Option("--latest", help="Only each ref's current version (a small snapshot, "
+                                         "e.g. a trained policy without its earlier checkpoints).")] = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Write the named refs and everything they reach into one tar file.
 
+    With --latest only the current version of each ref goes in; it arrives as version 1 of that ref.
+
     Example: morfic store export runs/film-s0 runs/film-s1 --out film.tar
     """
-    report = Store(store).export_tar(refs, out)
+    report = Store(store).export_tar(refs, out, latest=latest)
     info(f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
          f"to {escape(str(report.path))}")
 

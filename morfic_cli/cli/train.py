@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import signal
+import sys
 from typing import Annotated
 
 import typer
@@ -103,7 +104,7 @@ def train(
         "wall_time_s": round(float(row.get("wall_time_s", 0.0)), 1),
         "mean_reward": row.get("mean_reward"),
         "explained_variance": row.get("explained_variance"),
-        "interrupted": run.stop_requested and last.iteration < cfg.max_iterations,
+        "interrupted": run.interrupted,
     }
     if not quiet and result["interrupted"]:
         info(f"stopped at iteration {last.iteration}; continue with `morfic train --resume runs/{run.name}`.")
@@ -130,12 +131,13 @@ class _progress:
             def log_line(row: dict) -> None:
                 it = int(row["iteration"])
                 if it % every == 0 or it == self.run.cfg.max_iterations:
-                    info(f"it {it}/{self.run.cfg.max_iterations}  {row.get('env_steps', 0):,.0f} steps  "
+                    sys.stderr.write(f"it {it}/{self.run.cfg.max_iterations}  {row.get('env_steps', 0):,.0f} steps  "
                          f"{row.get('steps_per_s', 0):,.0f} steps/s  reward {row.get('mean_reward', float('nan')):.2f}"
                          f"  EV {row.get('explained_variance', float('nan')):.2f}  vx_err "
                          f"{row.get('tracking.vx_error', float('nan')):.2f}  "
                          f"vx_max {row.get('curriculum.vx_max', 0):.1f}"
-                         f"  ep {row.get('episode_length_s', float('nan')):.1f}s  {row.get('wall_time_s', 0):.0f}s")
+                         f"  ep {row.get('episode_length_s', float('nan')):.1f}s  {row.get('wall_time_s', 0):.0f}s\n")
+                    sys.stderr.flush()
 
             self.run.progress = log_line
             return self

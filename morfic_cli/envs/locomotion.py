@@ -114,6 +114,8 @@ class LocomotionEnv(VecEnv):
         self.episode_lin_tracking = torch.zeros(n, **f32)
         self.nonfinite_resets = 0
         self._tracking_sum, self._tracking_count = 0.0, 0
+        self.last_state: EnvState | None = None
+        self.last_reward_terms: dict[str, torch.Tensor] = {}
         hip_xy = torch.as_tensor(self.spec.hip_pos[:, :2] + self.spec.thigh_offset[:, :2], **f32)
         self.nominal_foot_pos_b = hip_xy.expand(n, 4, 2).clone()
         self._obs = TensorDict({}, batch_size=[n])
@@ -145,6 +147,7 @@ class LocomotionEnv(VecEnv):
 
         state = self._state(frame)
         reward, terms = compute_rewards(state, self.cfg.rewards)
+        self.last_state, self.last_reward_terms = state, terms  # pre-reset view of this step (evaluation logs)
         reward = reward * self.dt
         terminated, term_masks = compute_terminations(state, self.cfg.terminations)
         bad = frame.bad.cpu()

@@ -65,13 +65,13 @@ def sample_reset_joint_pos(
     Args:
         default: q0. Shape: (k, 12).
         joint_range: Limits. Shape: (k, 12, 2).
-        cfg: Randomisation config (no scaling when disabled).
+        cfg: Randomisation config (no scaling when both ``enabled`` and ``random_reset_pose`` are off).
         gen: Generator.
 
     Returns:
         Shape: (k, 12).
     """
     q = default.clone()
-    if cfg.enabled:
+    if cfg.enabled or cfg.random_reset_pose:
         q = q * _uniform(tuple(default.shape), *cfg.init_joint_scale, gen).to(q)
     return torch.clamp(q, joint_range[..., 0], joint_range[..., 1])

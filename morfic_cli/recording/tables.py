@@ -80,3 +80,26 @@ def write_bench_table(store_root: Path, rows: Sequence[dict]) -> WrittenArtifact
         )
         version = store.set_ref("tables/bench-env", mid)
     return WrittenArtifact(mid, "tables/bench-env", version)
+
+
+BENCH_TRAIN_COLUMNS: tuple[str, ...] = (
+    "preset", "variant", "num_envs", "iterations", "transitions", "s_per_iteration", "collect_s_per_iteration",
+    "learn_s_per_iteration", "train_steps_per_s", "floor_env_steps_per_s", "fraction_of_floor", "torch_threads",
+    "cpu_model", "cores",
+)
+"""Columns of the training benchmark table (``morfic bench train``)."""
+
+
+def write_bench_train_table(store_root: Path, rows: Sequence[dict]) -> WrittenArtifact:
+    """Store a ``morfic bench train`` table as a ``table`` manifest and advance ref ``tables/bench-train``."""
+    from morfic_cli.store import Store
+
+    store = Store(store_root)
+    with store.writing():
+        mid = store.put_manifest(
+            "table",
+            config={"table": "bench-train", "preset": [r["preset"] for r in rows]},
+            files={"bench_train.csv": rows_to_csv(rows, BENCH_TRAIN_COLUMNS)},
+        )
+        version = store.set_ref("tables/bench-train", mid)
+    return WrittenArtifact(mid, "tables/bench-train", version)

@@ -85,7 +85,8 @@ def build_models(cfg: TrainCfg) -> tuple[torch.nn.Module, torch.nn.Module]:
 
     rcfg = rsl_rl_cfg(cfg)
     obs = dummy_observations(cfg)
-    groups = resolve_obs_groups(obs, rcfg["obs_groups"], ["actor", "critic"])
+    with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the resolved groups on stdout
+        groups = resolve_obs_groups(obs, rcfg["obs_groups"], ["actor", "critic"])
     actor_class, actor_kwargs = resolve_class(rcfg["actor"])
     critic_class, critic_kwargs = resolve_class(rcfg["critic"])
     actor = actor_class(obs, groups, "actor", 12, **actor_kwargs)
@@ -240,6 +241,7 @@ class TrainingRun:
         self.iteration = 0
         self.parent: str | None = None
         self.stop_requested = False
+        self.interrupted = False
         self.progress: Callable[[dict[str, float]], None] | None = None
         self.checkpoints: list[Checkpoint] = []
         self._fresh = True
@@ -263,9 +265,11 @@ class TrainingRun:
         if self.progress is not None:
             self.progress(row)
         last = self.iteration >= self.cfg.max_iterations
-        if self.stop_requested or last or self.iteration % self.cfg.save_interval == 0:
-            self.save_checkpoint(finished=last, interrupted=self.stop_requested and not last)
-        if self.stop_requested and not last:
+        stop = self.stop_requested and not last  # read once: a Ctrl-C during the save counts for the next iteration
+        if stop or last or self.iteration % self.cfg.save_interval == 0:
+            self.save_checkpoint(finished=last, interrupted=stop)
+        if stop:
+            self.interrupted = True
             raise _Stop
 
     # ------------------------------------------------------------------ checkpoints

@@ -397,9 +397,9 @@ class Store:
         with self._lock.exclusive():
             return collect_garbage(self, dry_run=dry_run)
 
-    def export_tar(self, refs: list[str], out: Path) -> ExportReport:
-        """Write the closure of ``refs`` (every version) and their histories to the tar ``out``."""
-        return export_tar(self, refs, Path(out))
+    def export_tar(self, refs: list[str], out: Path, *, latest: bool = False) -> ExportReport:
+        """Write the closure of ``refs`` (every version, or only the current one with ``latest``) to the tar ``out``."""
+        return export_tar(self, refs, Path(out), latest=latest)
 
     def import_tar(self, path: Path) -> ImportReport:
         """Import a tar made by :meth:`export_tar`; idempotent (see :class:`ImportReport`)."""

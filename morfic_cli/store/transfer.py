@@ -26,7 +26,7 @@ from typing import IO, TYPE_CHECKING
 
 from morfic_cli import __version__
 from morfic_cli.errors import ArtifactNotFoundError, StoreError
-from morfic_cli.store.gc import closure, ref_roots
+from morfic_cli.store.gc import closure
 from morfic_cli.store.manifest import parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, is_object_id, object_relpath, store_os_error, unlink_quiet
 from morfic_cli.store.refs import RefEntry, check_ref_name, decode_history, encode_history, merge_status
@@ -89,8 +89,12 @@ def _add_bytes(tar: tarfile.TarFile, name: str, data: bytes, mode: int = 0o644) 
     tar.addfile(_info(name, len(data), mode), io.BytesIO(data))
 
 
-def export_tar(store: Store, refs: list[str], out: Path) -> ExportReport:
+def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False) -> ExportReport:
     """Write the closure of ``refs`` (objects and ref histories) to the tar file ``out``.
+
+    With ``latest``, only each ref's current version goes in, as a one-version history (version 1 in the
+    importing store): a small snapshot, e.g. a trained policy without its earlier checkpoints. Such a
+    snapshot and a full export of the same ref do not merge into one store (their histories differ).
 
     Raises:
         ArtifactNotFoundError: A name that is not a ref.
@@ -106,7 +110,9 @@ def export_tar(store: Store, refs: list[str], out: Path) -> ExportReport:
     report = ExportReport(path=out, refs=names)
     with store.reading():
         histories = {name: store.refs.history(name) for name in names}
-        ids = sorted(closure(store, ref_roots(store, names)))
+        if latest:
+            histories = {name: [RefEntry(1, h[-1].id, h[-1].time)] for name, h in histories.items()}
+        ids = sorted(closure(store, [entry.id for h in histories.values() for entry in h]))
         missing = [oid for oid in ids if not store.objects.has(oid)]
         if missing:
             raise StoreError(f"cannot export: {len(missing)} reachable object(s) are missing (first: "

@@ -31,13 +31,11 @@ def test_every_subcommand_has_help_with_an_example(run_cli, name):
 @pytest.mark.parametrize(
     "argv",
     [
-        ["eval", "runs/film-s0"],
         ["diagnose", "runs/film-s0"],
         ["compare-baselines", "runs/film-s0"],
         ["export", "runs/film-s0"],
         ["report"],
         ["reproduce"],
-        ["bench", "train"],
     ],
 )
 def test_later_commands_say_not_implemented_yet(run_cli, argv):

@@ -161,3 +161,22 @@ def test_import_rejects_incomplete_export(src, tmp_path):
     with pytest.raises(StoreError, match="incomplete"):
         dst.import_tar(cut)
     assert dst.list_refs() == []
+
+
+def test_export_latest_is_a_one_version_snapshot(src, tmp_path):
+    """runs/a@2 alone: its run manifest and c.csv = 2 objects (not @1's run, c.csv, checkpoint, model.pt)."""
+    out = tmp_path / "latest.tar"
+    report = src.export_tar(["runs/a"], out, latest=True)
+    assert report.objects == 2
+    dst = Store(tmp_path / "dst")
+    assert dst.import_tar(out).refs == {"runs/a": "created"}
+    head = src.ref_history("runs/a")[-1]
+    assert _history(dst, "runs/a") == [(1, head.id, head.time)]
+    assert dst.read_file("runs/a", "c.csv") == b"2"
+    assert dst.verify().ok and dst.gc(dry_run=False).removed == []
+    # the full history does not merge onto the snapshot (version 1 differs): refused, nothing changes
+    full = tmp_path / "full.tar"
+    src.export_tar(["runs/a"], full)
+    with pytest.raises(StoreError, match="diverged"):
+        dst.import_tar(full)
+    assert _history(dst, "runs/a") == [(1, head.id, head.time)]

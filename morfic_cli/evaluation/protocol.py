@@ -1,0 +1,147 @@
+"""The paper's zero-shot protocol over robots x commands, with MCAP logs and a table in the store.
+
+One evaluation = one ``eval`` manifest (ref ``evals/<run name>``) holding ``eval.csv`` (a row per robot and
+command), with inputs ``checkpoint`` (the evaluated weights) and ``rollout/<robot>/<mode>/vx<cmd>`` (one
+``rollout`` manifest per robot and command, holding that rollout's MCAP log; see docs/mcap.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from morfic_cli import __version__
+from morfic_cli.evaluation.metrics import paper_cell
+from morfic_cli.evaluation.rollout import Rollout, run_rollout
+from morfic_cli.store import Store
+
+#: Columns of the eval table, in order.
+EVAL_COLUMNS: tuple[str, ...] = (
+    "robot", "mode", "command_vx", "d", "vx_mean", "vx_std", "vx_max_mean", "vx_max_std", "survival",
+    "tracking_ratio", "valid", "valid_fraction", "verdict", "cell", "cell_max", "num_envs", "steps",
+)
+
+EVALS_PREFIX = "evals/"
+
+
+@dataclass(frozen=True)
+class EvalCfg:
+    """An evaluation (defaults: the paper's protocol, SPEC section 5)."""
+
+    robots: tuple[str, ...]
+    modes: tuple[str, ...] = ("descriptor",)
+    command_vx: tuple[float, ...] = (2.0,)
+    num_envs: int = 64
+    steps: int = 500
+    seed: int = 0
+
+
+@dataclass
+class EvalResult:
+    """What :func:`evaluate` wrote: the table rows, the eval manifest id and its ref."""
+
+    rows: list[dict[str, Any]]
+    id: str
+    ref: str
+    version: int
+    rollouts: dict[str, Rollout]
+
+
+def rollout_role(robot: str, mode: str, command_vx: float) -> str:
+    """Input role of a rollout manifest, e.g. ``rollout/go1/descriptor/vx2.0``."""
+    return f"rollout/{robot}/{mode}/vx{command_vx:g}"
+
+
+def metrics_row(rollout: Rollout, distance: float | None) -> dict[str, Any]:
+    """One row of the eval table."""
+    m = rollout.metrics()
+    return {
+        "robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx, "d": distance,
+        **{k: v for k, v in dataclasses.asdict(m).items()},
+        "cell": paper_cell(m), "cell_max": paper_cell(m, use_max=True),
+        "num_envs": int(rollout.arrays["done"].shape[1]), "steps": int(rollout.arrays["done"].shape[0]),
+    }
+
+
+def write_rollout_log(path: Path, rollout: Rollout, metadata: dict[str, Any]) -> None:
+    """The rollout as an MCAP log (docs/mcap.md)."""
+    from morfic_cli.recording.rollout_log import RolloutLogWriter
+
+    a = rollout.arrays
+    fields = ("base_pos", "base_quat", "base_lin_vel", "base_ang_vel", "command", "joint_pos", "joint_vel", "action",
+              "reward", "reward_terms", "value", "done", "time_out")
+    num_steps, num_envs = a["done"].shape
+    with RolloutLogWriter(path, num_envs=num_envs, term_names=rollout.term_names, metadata=metadata) as log:
+        for t in range(num_steps):
+            log.write_step(t, (t + 1) * rollout.dt, {k: a[k][t] for k in fields})
+
+
+def evaluate(
+    store: Store,
+    spec: str,
+    cfg: EvalCfg,
+    *,
+    on_rollout_start: Callable[[str, str, float], None] | None = None,
+    on_step: Callable[[int], None] | None = None,
+    keep_models: int = 0,
+) -> EvalResult:
+    """Evaluate checkpoint ``spec`` on every robot x mode x command of ``cfg`` and store the results.
+
+    ``keep_models`` > 0 keeps that many envs' MjModels in each returned rollout (for ``--video``).
+
+    Raises:
+        ArtifactNotFoundError / MorficError: ``spec`` is not a training checkpoint.
+    """
+    from morfic_cli.morphology.distance import distance_table
+    from morfic_cli.morphology.robots import list_robots
+    from morfic_cli.recording.tables import rows_to_csv
+    from morfic_cli.rl.runner import load_trained
+
+    trained = load_trained(store, spec)
+    distances = {r.robot: r.d for r in distance_table(list_robots())}  # span over the whole library, as `distance`
+    run_name = trained.meta.get("run") or spec.split("@")[0].removeprefix("runs/")
+    rows, rollouts, inputs = [], {}, {"checkpoint": trained.checkpoint_id}
+    with tempfile.TemporaryDirectory(prefix="morfic-eval-") as tmp:
+        for robot in cfg.robots:
+            for mode in cfg.modes:
+                for vx in cfg.command_vx:
+                    if on_rollout_start is not None:
+                        on_rollout_start(robot, mode, vx)
+                    rollout = run_rollout(trained.actor, trained.critic, trained.cfg.env, robot=robot, mode=mode,
+                                          command_vx=vx, num_envs=cfg.num_envs, steps=cfg.steps, seed=cfg.seed,
+                                          on_step=on_step, keep_models=keep_models)
+                    role = rollout_role(robot, mode, vx)
+                    rollouts[role] = rollout
+                    rows.append(metrics_row(rollout, distances.get(robot)))
+                    meta = {"run": run_name, "checkpoint": trained.checkpoint_id, "robot": robot,
+                            "descriptor": [float(x) for x in rollout.descriptor], "mode": mode,
+                            "command": [vx, 0.0, 0.0], "seed": cfg.seed, "morfic_version": __version__,
+                            "term_names": rollout.term_names}
+                    path = Path(tmp) / f"{robot}-{mode}-vx{vx:g}.mcap"
+                    write_rollout_log(path, rollout, meta)
+                    inputs[role] = store.put_manifest(
+                        "rollout", config={"robot": robot, "mode": mode, "command_vx": vx, "num_envs": cfg.num_envs,
+                                           "steps": cfg.steps, "seed": cfg.seed},
+                        inputs={"checkpoint": trained.checkpoint_id}, files={"rollout.mcap": path},
+                        meta={k: v for k, v in meta.items() if k != "term_names"})
+        config = {"spec": spec, **dataclasses.asdict(cfg)}
+        with store.writing():
+            mid = store.put_manifest("eval", config=config, inputs=inputs,
+                                     files={"eval.csv": rows_to_csv(rows, EVAL_COLUMNS)},
+                                     meta={"run": run_name, "iteration": trained.meta.get("iteration")})
+            ref = EVALS_PREFIX + run_name
+            version = store.set_ref(ref, mid)
+    return EvalResult(rows, mid, ref, version, rollouts)
+
+
+def parse_commands(text: str) -> tuple[float, ...]:
+    """``"2.0,2.5"`` -> (2.0, 2.5). Raises ValueError on anything else."""
+    values = tuple(float(x) for x in text.split(",") if x.strip())
+    if not values:
+        raise ValueError(text)
+    return values
+

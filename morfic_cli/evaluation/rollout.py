@@ -1,0 +1,165 @@
+"""Roll a trained policy out on one robot and command (SPEC section 5), recording every step.
+
+Reuses the training env (:class:`~morfic_cli.envs.locomotion.LocomotionEnv`) in its evaluation
+configuration (:func:`~morfic_cli.config.eval_env_cfg`: no randomisation, pushes, latency or sensor noise)
+with the command fixed to (vx, 0, 0), and the trained models: the actor's mean action and the critic's
+value per step. Nothing of the env or the models is re-implemented here.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from morfic_cli.config import EnvCfg, eval_env_cfg
+from morfic_cli.evaluation.metrics import TransferMetrics, transfer_metrics
+
+#: Arrays a rollout records per step for all envs, with their per-env shapes (K = reward terms).
+RECORDED: dict[str, tuple[int, ...]] = {
+    "base_pos": (3,), "base_quat": (4,), "base_lin_vel": (3,), "base_ang_vel": (3,), "command": (3,),
+    "joint_pos": (12,), "joint_vel": (12,), "action": (12,), "reward": (), "value": (), "done": (),
+    "time_out": (), "tilt": (), "height_ratio": (), "foot_slip": (),
+}
+
+
+@dataclass
+class Rollout:
+    """A recorded rollout of one robot and command.
+
+    Attributes:
+        robot: Target robot.
+        mode: "descriptor" or "full".
+        command_vx: Commanded forward velocity (m/s).
+        seed: Env seed.
+        dt: Policy step (s).
+        term_names: Names of the reward terms (columns of ``arrays["reward_terms"]``).
+        descriptor: The 11-D descriptor in effect (raw units). Shape: (11,).
+        arrays: :data:`RECORDED` plus ``reward_terms``, each (T, N, ...); float32, ``done``/``time_out`` bool.
+    """
+
+    robot: str
+    mode: str
+    command_vx: float
+    seed: int
+    dt: float
+    term_names: list[str]
+    descriptor: np.ndarray
+    arrays: dict[str, np.ndarray]
+    models: list = dataclasses.field(default_factory=list)
+    """``mujoco.MjModel`` copies of the first envs (``keep_models``), for rendering."""
+    qpos_adr: np.ndarray | None = None
+    """qpos addresses of the 12 joints in those models (the free joint is qpos[0:7]). Shape: (12,)."""
+
+    def qpos(self, num_envs: int) -> np.ndarray:
+        """Full qpos of the first ``num_envs`` envs at each step. Shape: (T, num_envs, nq)."""
+        a = self.arrays
+        nq = self.models[0].nq
+        out = np.zeros((a["done"].shape[0], num_envs, nq))
+        out[..., 0:3] = a["base_pos"][:, :num_envs]
+        out[..., 3:7] = a["base_quat"][:, :num_envs]
+        out[..., self.qpos_adr] = a["joint_pos"][:, :num_envs]
+        return out
+
+    @property
+    def terminated(self) -> np.ndarray:
+        """Falls (done and not a time-out). Shape: (T, N) bool."""
+        return self.arrays["done"] & ~self.arrays["time_out"]
+
+    def metrics(self) -> TransferMetrics:
+        """The zero-shot metrics of this rollout (:func:`~morfic_cli.evaluation.metrics.transfer_metrics`)."""
+        a = self.arrays
+        return transfer_metrics(a["base_lin_vel"][..., 0], self.terminated, self.command_vx, self.dt,
+                                tilt=a["tilt"], height_ratio=a["height_ratio"], foot_slip=a["foot_slip"])
+
+
+def rollout_env_cfg(train_env: EnvCfg, num_envs: int, steps: int, command_vx: float) -> EnvCfg:
+    """The evaluation env config: the run's env, evaluation settings, fixed command, no time-out inside ``steps``."""
+    cfg = eval_env_cfg(train_env)
+    dt = cfg.sim.physics_dt * cfg.decimation
+    return dataclasses.replace(
+        cfg,
+        num_envs=num_envs,
+        episode_length_s=max(cfg.episode_length_s, (steps + 1) * dt),
+        commands=dataclasses.replace(cfg.commands, fixed=(float(command_vx), 0.0, 0.0)),
+    )
+
+
+def run_rollout(
+    actor: torch.nn.Module,
+    critic: torch.nn.Module,
+    train_env: EnvCfg,
+    *,
+    robot: str,
+    mode: str,
+    command_vx: float,
+    num_envs: int,
+    steps: int,
+    seed: int = 0,
+    on_step: Callable[[int], None] | None = None,
+    keep_models: int = 0,
+) -> Rollout:
+    """Run the actor's mean action for ``steps`` policy steps on ``num_envs`` envs of ``robot``.
+
+    Args:
+        actor: Trained actor (eval mode; ``actor(obs)`` is the mean action). Shape: (N, 12).
+        critic: Trained critic (``critic(obs)`` is V). Shape: (N, 1).
+        train_env: The run's env config (observation settings, gains, rewards).
+        robot: Target robot name.
+        mode: "descriptor" (Go2 template with the target's descriptor) or "full" (the target's own model).
+        command_vx: Forward-velocity command (m/s); vy = yaw rate = 0.
+        num_envs: Envs (N).
+        steps: Policy steps (T).
+        seed: Env seed.
+        on_step: Called with the step index after each step (progress).
+        keep_models: Keep copies of the first this many envs' MjModels (CPU backend) for rendering.
+    """
+    from morfic_cli.envs.locomotion import LocomotionEnv
+
+    cfg = rollout_env_cfg(train_env, num_envs, steps, command_vx)
+    env = LocomotionEnv(cfg, mode=mode, robot=robot, seed=seed)
+    try:
+        term_names = None
+        rec: dict[str, list[np.ndarray]] = {k: [] for k in (*RECORDED, "reward_terms")}
+        obs = env.get_observations()
+        nominal = env.params.nominal_height.float()
+        with torch.no_grad():
+            for t in range(steps):
+                action = actor(obs)
+                value = critic(obs).reshape(-1)
+                obs, reward, done, extras = env.step(action)
+                s = env.last_state
+                terms = env.last_reward_terms
+                if term_names is None:
+                    term_names = list(terms)
+                contact = s.foot_contact.float()  # (N, 4)
+                speed = torch.linalg.norm(s.foot_vel_w[..., :2], dim=-1)  # (N, 4)
+                slip = (contact * speed).sum(1) / contact.sum(1).clamp(min=1.0)
+                step = {
+                    "base_pos": s.base_pos_w, "base_quat": s.base_quat_w, "base_lin_vel": s.base_lin_vel_b,
+                    "base_ang_vel": s.base_ang_vel_b, "command": s.command.clone(), "joint_pos": s.joint_pos,
+                    "joint_vel": s.joint_vel, "action": action, "reward": reward, "value": value,
+                    "done": done.bool(), "time_out": extras["time_outs"].bool(),
+                    "tilt": torch.arccos((-s.projected_gravity_b[:, 2]).clamp(-1.0, 1.0)),
+                    "height_ratio": s.base_pos_w[:, 2] / nominal, "foot_slip": slip,
+                    "reward_terms": torch.stack([terms[k] * env.dt for k in term_names], dim=1),
+                }
+                for key, value_t in step.items():
+                    arr = value_t.detach().cpu().numpy()
+                    rec[key].append(arr if arr.dtype == np.bool_ else arr.astype(np.float32))
+                if on_step is not None:
+                    on_step(t)
+        descriptor = env.params.descriptor[0].double().cpu().numpy()
+        dt = env.dt
+        models = [copy.copy(m) for m in getattr(env.backend, "models", [])[:keep_models]]
+        info = getattr(env.backend, "info", None)
+        qpos_adr = None if info is None else np.asarray(info.qpos_adr)
+    finally:
+        env.close()
+    arrays = {k: np.stack(v) for k, v in rec.items()}
+    return Rollout(robot, mode, float(command_vx), seed, dt, term_names or [], descriptor, arrays, models, qpos_adr)
+

@@ -1,0 +1,164 @@
+"""`morfic train` end to end: smoke runs of every variant, exact resume, Ctrl-C, bad input."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import torch
+
+from morfic_cli.recording.curves import read_curve_csv
+from morfic_cli.rl.config import smoke_preset
+from morfic_cli.rl.models import VARIANTS
+from morfic_cli.rl.runner import dummy_observations, load_trained, new_run, resume_run
+from morfic_cli.store import Store
+
+TIMING = {"wall_time_s", "steps_per_s", "collect_s", "learn_s"}
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def _store() -> Store:
+    return Store(os.environ["MORFIC_STORE"])
+
+
+def _weights(store: Store, spec: str) -> dict:
+    return torch.load(io.BytesIO(store.read_file(spec, "model.pt")), weights_only=True)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_smoke_training_of_every_variant_through_the_cli(run_cli, variant):
+    code, out, err = run_cli("train", "--variant", variant, "--preset", "smoke", "--format", "json", "--quiet")
+    assert code == 0, err
+    result = json.loads(out)
+    assert result["ref"] == f"runs/{variant}-s0@2"  # save_interval 1: one checkpoint per iteration
+    assert result["iteration"] == 2 and result["env_steps"] == 2 * 8 * 8
+    store = _store()
+    manifest = store.read_manifest(f"runs/{variant}-s0")
+    assert manifest.kind == "checkpoint"
+    assert manifest.meta["variant"] == variant and manifest.meta["iteration"] == 2 and manifest.meta["finished"]
+    assert manifest.config["variant"] == variant and manifest.config["preset"] == "smoke"
+    assert [e.id for e in store.ref_history(f"runs/{variant}-s0")][-1] == manifest.id
+    assert len(store.ref_history(f"runs/{variant}-s0")) == 2
+    rows = read_curve_csv(store.read_file(manifest.id, "curve.csv"))
+    assert [r["iteration"] for r in rows] == [1, 2]
+    assert {"explained_variance", "value_loss", "kl", "clip_fraction", "adaptation_error"} <= set(rows[0])
+    assert store.read_file(manifest.id, "curve.png")[:8] == b"\x89PNG\r\n\x1a\n"
+    trained = load_trained(store, f"runs/{variant}-s0")
+    with torch.no_grad():
+        assert trained.actor(dummy_observations(trained.cfg, 3)).shape == (3, 12)
+        assert trained.critic(dummy_observations(trained.cfg, 3)).shape == (3, 1)
+
+
+def test_resume_after_interruption_equals_an_uninterrupted_run():
+    store = _store()
+    cfg = smoke_preset("film", seed=3)
+    cfg = type(cfg)(**{**cfg.__dict__, "max_iterations": 3})
+    straight = new_run(store, cfg, "straight")
+    straight.train()
+
+    stopped = new_run(store, cfg, "stopped")
+    stopped.progress = lambda row: setattr(stopped, "stop_requested", True)  # "Ctrl-C" during iteration 1
+    last = stopped.train()
+    assert last.iteration == 1
+    assert store.read_manifest("runs/stopped").meta["interrupted"] is True
+    assert store.verify().ok
+
+    resumed = resume_run(store, "runs/stopped")
+    assert resumed.iteration == 1
+    resumed.train()
+    a, b = _weights(store, "runs/straight"), _weights(store, "runs/stopped")
+    for part in ("actor", "critic"):
+        assert a[part].keys() == b[part].keys()
+        for key in a[part]:
+            assert torch.equal(a[part][key], b[part][key]), f"{part}.{key} differs after resume"
+    rows_a = read_curve_csv(store.read_file("runs/straight", "curve.csv"))
+    rows_b = read_curve_csv(store.read_file("runs/stopped", "curve.csv"))
+    assert [{k: v for k, v in r.items() if k not in TIMING} for r in rows_a] == \
+        [{k: v for k, v in r.items() if k not in TIMING} for r in rows_b]
+
+
+def test_resume_extends_a_finished_run_with_set(run_cli):
+    assert run_cli("train", "--preset", "smoke", "--set", "max_iterations=1", "-q")[0] == 0
+    code, out, err = run_cli("train", "--resume", "runs/film-s0", "--set", "max_iterations=2", "-f", "json", "-q")
+    assert code == 0, err
+    assert json.loads(out)["iteration"] == 2
+    assert _store().read_manifest("runs/film-s0").meta["parent"] == _store().ref_history("runs/film-s0")[0].id
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--set", "ppo.learnin_rate=1e-3"], "unknown config key 'ppo.learnin_rate'"),
+        (["--set", "env.num_envs=many"], "takes an integer"),
+        (["--set", "novalue"], "key=value"),
+        (["--variant", "filmm"], "valid variants are: actor-only, adaln, concat, film, film-scaled, hyper, ppo"),
+        (["--resume", "runs/nothing"], "no artifact 'runs/nothing'"),
+    ],
+)
+def test_bad_input_is_an_error_and_writes_nothing(run_cli, argv, needle):
+    code, out, err = run_cli("train", *(argv if "--resume" in argv else ["--preset", "smoke", *argv]))
+    assert code == 1
+    assert err.startswith("Error: ") and needle in err, err
+    assert out == ""
+    assert _store().list_refs() == []
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the message on a machine without CUDA")
+def test_device_cuda_without_cuda_is_an_error(run_cli):
+    code, _, err = run_cli("train", "--preset", "smoke", "--device", "cuda")
+    assert code == 1 and "no CUDA device" in err
+
+
+def test_an_existing_run_name_is_not_overwritten(run_cli):
+    assert run_cli("train", "--preset", "smoke", "--set", "max_iterations=1", "-q")[0] == 0
+    before = _store().ref_history("runs/film-s0")
+    code, _, err = run_cli("train", "--preset", "smoke", "-q")
+    assert code == 1 and "already exists" in err and "--resume runs/film-s0" in err
+    assert _store().ref_history("runs/film-s0") == before
+
+
+def test_a_policy_bundle_without_trainer_state_cannot_be_resumed(run_cli, tmp_path):
+    assert run_cli("train", "--preset", "smoke", "--set", "max_iterations=1", "-q")[0] == 0
+    tar = tmp_path / "bundle.tar"
+    assert run_cli("store", "export", "runs/film-s0", "--out", str(tar))[0] == 0
+    other = tmp_path / "other"
+    assert run_cli("store", "import", str(tar), "--store", str(other))[0] == 0
+    code, _, err = run_cli("train", "--resume", "runs/film-s0", "--store", str(other))
+    assert code == 1 and "no trainer state" in err
+    assert load_trained(Store(other), "runs/film-s0").meta["iteration"] == 1  # but it evaluates
+
+
+def test_sigint_writes_a_checkpoint_and_exits_cleanly(tmp_path):
+    store_dir = tmp_path / "sig"
+    env = dict(os.environ, MORFIC_STORE=str(store_dir))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "morfic_cli", "train", "--preset", "smoke", "--set", "max_iterations=500",
+         "-f", "json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )
+    deadline = time.time() + 120
+    while time.time() < deadline and not (store_dir / "refs").exists():  # the first checkpoint is written
+        time.sleep(0.2)
+    time.sleep(3.0)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    result = json.loads(out)
+    assert result["interrupted"] is True and 1 <= result["iteration"] < 500
+    store = Store(store_dir)
+    assert store.verify().ok
+    assert store.read_manifest("runs/film-s0").meta["interrupted"] is True
+    assert "--resume runs/film-s0" in err
