@@ -70,10 +70,13 @@ def evaluate(
         raise MorficError("--envs and --steps must be positive integers.")
     cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed)
     st = Store(store)
+    from morfic_cli.rl.runner import load_trained
+
+    trained = load_trained(st, run)  # bad refs fail here, before the progress bar starts
 
     with _progress(len(names) * len(modes) * len(commands) * steps, quiet) as progress:
         result = run_eval(st, run, cfg, on_rollout_start=progress.start, on_step=progress.step,
-                          keep_models=4 if video else 0)
+                          keep_models=4 if video else 0, trained=trained)
     if video:
         from morfic_cli.evaluation.media import store_videos
 

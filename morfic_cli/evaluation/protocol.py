@@ -12,12 +12,15 @@ import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from morfic_cli import __version__
 from morfic_cli.evaluation.metrics import paper_cell
 from morfic_cli.evaluation.rollout import Rollout, run_rollout
 from morfic_cli.store import Store
+
+if TYPE_CHECKING:
+    from morfic_cli.rl.runner import TrainedModels
 
 #: Columns of the eval table, in order.
 EVAL_COLUMNS: tuple[str, ...] = (
@@ -88,10 +91,12 @@ def evaluate(
     on_rollout_start: Callable[[str, str, float], None] | None = None,
     on_step: Callable[[int], None] | None = None,
     keep_models: int = 0,
+    trained: TrainedModels | None = None,
 ) -> EvalResult:
     """Evaluate checkpoint ``spec`` on every robot x mode x command of ``cfg`` and store the results.
 
-    ``keep_models`` > 0 keeps that many envs' MjModels in each returned rollout (for ``--video``).
+    ``keep_models`` > 0 keeps that many envs' MjModels in each returned rollout (for ``--video``). ``trained``:
+    the checkpoint already loaded with :func:`~morfic_cli.rl.runner.load_trained` (else it is loaded here).
 
     Raises:
         ArtifactNotFoundError / MorficError: ``spec`` is not a training checkpoint.
@@ -101,7 +106,8 @@ def evaluate(
     from morfic_cli.recording.tables import rows_to_csv
     from morfic_cli.rl.runner import load_trained
 
-    trained = load_trained(store, spec)
+    if trained is None:
+        trained = load_trained(store, spec)
     distances = {r.robot: r.d for r in distance_table(list_robots())}  # span over the whole library, as `distance`
     run_name = trained.meta.get("run") or spec.split("@")[0].removeprefix("runs/")
     rows, rollouts, inputs = [], {}, {"checkpoint": trained.checkpoint_id}

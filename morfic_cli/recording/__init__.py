@@ -1,1 +1,1 @@
-"""Recording formats: CSV table schemas (and, later, MCAP rollout logs)."""
+"""Recording formats: CSV tables, training curves, MCAP rollout logs, offscreen videos."""

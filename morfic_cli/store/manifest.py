@@ -34,7 +34,7 @@ from morfic_cli.store.objects import is_object_id
 SCHEMA_VERSION = 1
 
 #: Valid values of a manifest's ``kind``.
-MANIFEST_KINDS = ("run", "checkpoint", "eval", "diagnosis", "rollout", "table", "report", "export")
+MANIFEST_KINDS = ("run", "checkpoint", "eval", "diagnosis", "rollout", "table", "report", "export", "media")
 
 #: The exact key set of a manifest document.
 MANIFEST_KEYS = frozenset({"schema", "kind", "morfic_version", "created", "config", "inputs", "files", "meta"})

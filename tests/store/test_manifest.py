@@ -64,7 +64,7 @@ def test_read_manifest_fields(store, tmp_path):
 
 
 def test_manifest_kinds(store):
-    assert MANIFEST_KINDS == ("run", "checkpoint", "eval", "diagnosis", "rollout", "table", "report", "export")
+    assert MANIFEST_KINDS == ("run", "checkpoint", "eval", "diagnosis", "rollout", "table", "report", "export", "media")
     with pytest.raises(StoreError, match="unknown manifest kind 'model'.*checkpoint"):
         store.put_manifest("model")
     assert not store.root.exists() or store.ls() == []

@@ -1,0 +1,65 @@
+"""Videos of evaluation rollouts (``morfic eval --video``): render, encode, store, and write next to ``--out``.
+
+Each rollout that kept its first envs' models (``keep_models``) becomes one ``media`` manifest holding
+``video.mp4`` (or ``video.gif`` without ffmpeg) and ``frames.png`` (a contact sheet of six frames), with inputs
+``rollout`` (the rollout's MCAP manifest) and ``eval``. Rendering is :mod:`morfic_cli.recording.video`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from morfic_cli.evaluation.protocol import EvalResult
+from morfic_cli.store import Store
+
+VIDEO_EVERY = 2
+"""Render every second policy step: 25 frames per second of a 50 Hz policy."""
+
+
+def media_name(role: str) -> str:
+    """File stem of a rollout's media: ``rollout/go1/descriptor/vx2`` -> ``go1-descriptor-vx2``."""
+    return role.removeprefix("rollout/").replace("/", "-")
+
+
+def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: int = VIDEO_EVERY) -> list[Path | str]:
+    """Render every rollout of ``result`` that kept models, store each as a ``media`` manifest.
+
+    Args:
+        store: The store ``result`` was written to.
+        result: What :func:`~morfic_cli.evaluation.protocol.evaluate` returned (with ``keep_models`` > 0).
+        out: The ``--out`` table path; the videos and frame grids are also written beside it as
+            ``<out stem>-<robot>-<mode>-vx<cmd>.<mp4|gif>`` and ``...-frames.png``.
+        every: Keep every ``every``-th policy step.
+
+    Returns:
+        The written paths when ``out`` is given, else the media manifest ids.
+
+    Raises:
+        MorficError: No working OpenGL backend (with the packages to install).
+    """
+    from morfic_cli.recording.video import encode_video, frame_grid_png, render_frames
+
+    inputs = store.read_manifest(result.id).inputs
+    written: list[Path | str] = []
+    for role, rollout in result.rollouts.items():
+        if not rollout.models:
+            continue
+        frames = render_frames(rollout.models, rollout.qpos(len(rollout.models)), every=every)
+        fps = 1.0 / (rollout.dt * every)
+        data, ext = encode_video(frames, fps)
+        sheet = frame_grid_png(frames, n=6, fps=fps)
+        mid = store.put_manifest(
+            "media", config={"every": every, "fps": fps, "num_envs": len(rollout.models)},
+            inputs={"rollout": inputs[role], "eval": result.id},
+            files={f"video.{ext}": data, "frames.png": sheet},
+            meta={"robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx})
+        if out is None:
+            written.append(mid)
+            continue
+        out.parent.mkdir(parents=True, exist_ok=True)
+        stem = out.parent / f"{out.stem}-{media_name(role)}"
+        video_path, sheet_path = stem.with_name(stem.name + f".{ext}"), stem.with_name(stem.name + "-frames.png")
+        video_path.write_bytes(data)
+        sheet_path.write_bytes(sheet)
+        written += [video_path, sheet_path]
+    return written
