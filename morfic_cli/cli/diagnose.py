@@ -1,30 +1,268 @@
-"""``morfic diagnose``: critic calibration metrics (built by the diagnose issue)."""
+"""``morfic diagnose``: critic calibration per run and robot, and the fixed-rollout causality analysis."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, RobotsOpt, StoreOpt
-from morfic_cli.errors import NotImplementedYetError
+from morfic_cli.cli._options import (
+    DEFAULT_STORE,
+    EvalMode,
+    FormatOpt,
+    OutputFormat,
+    QuietOpt,
+    RobotsOpt,
+    SeedOpt,
+    StoreOpt,
+)
+from morfic_cli.cli._render import Column, emit_rows, info
+from morfic_cli.errors import MorficError
+
+
+def _num(v: float | None) -> str:
+    return "-" if v is None or v != v else f"{v:.3f}"
 
 
 def diagnose(
-    runs: Annotated[list[str] | None, typer.Argument(help="Run refs or checkpoint ids.")] = None,
+    runs: Annotated[
+        list[str] | None,
+        typer.Argument(help="Run refs (runs/film-s0 = its latest checkpoint), ref@N or checkpoint ids."),
+    ] = None,
     robots: RobotsOpt = "all",
     fixed_rollout: Annotated[
-        str | None, typer.Option("--fixed-rollout", help="Target robot for the fixed-rollout analysis.")
+        str | None,
+        typer.Option(
+            "--fixed-rollout",
+            help="Target robot of the fixed-rollout analysis: one frozen actor, "
+            "every critic scored on its rollout (Flip, Cos vs Monte Carlo).",
+        ),
     ] = None,
-    actor: Annotated[str | None, typer.Option("--actor", help="Actor run for --fixed-rollout.")] = None,
+    actor: Annotated[
+        str | None, typer.Option("--actor", help="Actor run for --fixed-rollout (default: the newest film run).")
+    ] = None,
     critics: Annotated[
-        str | None, typer.Option("--critics", help="Comma-separated critic runs for --fixed-rollout.")
+        str | None,
+        typer.Option(
+            "--critics",
+            help="Comma-separated critic runs for --fixed-rollout (default: the newest run of each variant).",
+        ),
     ] = None,
+    mode: Annotated[
+        str,
+        typer.Option(
+            "--mode",
+            help="descriptor (Go2 template with the target's descriptor, the paper's) or "
+            "full (the target's own model).",
+        ),
+    ] = EvalMode.descriptor.value,
+    command_vx: Annotated[float, typer.Option("--command-vx", help="Forward command in m/s.")] = 2.0,
+    envs: Annotated[int, typer.Option("--envs", help="Parallel envs per rollout.")] = 64,
+    steps: Annotated[
+        int,
+        typer.Option(
+            "--steps",
+            help="Policy steps per rollout (50 per second); must exceed the horizon "
+            "H_eps the returns need (299 at gamma 0.99, --trunc-eps 0.05).",
+        ),
+    ] = 800,
+    trunc_eps: Annotated[
+        float,
+        typer.Option(
+            "--trunc-eps",
+            help="A sample counts (I_eps) when the rollout's end cuts at most this "
+            "fraction of the return scale from its Monte-Carlo return.",
+        ),
+    ] = 0.05,
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Also write the table CSV here.")] = None,
     fmt: FormatOpt = OutputFormat.table,
+    quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Critic calibration (EV, NVB, NVE, ASA, Flip, CosGrad) per robot.
+    """Critic calibration (EV, |NVB|/NVE/ASA, Flip, CosGrad) per run and robot, or the fixed-rollout analysis.
 
-    Example: morfic diagnose runs/film-s0 runs/ppo-s0 --robots aliengo
+    Each run's actor collects rollouts on each robot (actions sampled from the policy, stored as MCAP and reused
+    when asked again); its critic is scored against discounted Monte-Carlo returns (gamma of the run) on the
+    samples whose return the rollout's end does not cut (I_eps). CosGrad is the cosine between the PPO actor
+    gradients with the critic's advantages G - V and with the Monte-Carlo ones G - mean(G). Stores the table and
+    an EV figure (ref diagnoses/calibration). With --fixed-rollout ROBOT, one actor is frozen, its rollout
+    collected once, and every critic scored on exactly those samples (ref diagnoses/fixed-rollout/ROBOT).
+
+    Example: morfic diagnose runs/film-s0 runs/ppo-s0 --robots aliengo,mini_cheetah
+    Example: morfic diagnose --fixed-rollout aliengo --actor runs/film-s0 --critics runs/film-s0,runs/ppo-s0
     """
-    raise NotImplementedYetError("diagnose")
+    from morfic_cli.diagnostics.samples import DiagnoseCfg
+    from morfic_cli.morphology.distance import parse_robot_list
+    from morfic_cli.store import Store
+
+    if mode not in ("descriptor", "full"):
+        raise MorficError(f"unknown --mode '{mode}'; valid modes are: descriptor, full.")
+    if envs < 1 or steps < 1:
+        raise MorficError("--envs and --steps must be positive integers.")
+    if not command_vx == command_vx:  # NaN
+        raise MorficError("--command-vx must be a number in m/s, e.g. 2.0.")
+    st = Store(store)
+    if fixed_rollout is None:
+        if actor is not None or critics is not None:
+            raise MorficError(
+                "--actor and --critics belong to --fixed-rollout ROBOT; without it, name the runs to "
+                "diagnose: morfic diagnose runs/film-s0 runs/ppo-s0."
+            )
+        if not runs:
+            raise MorficError(
+                "name the runs to diagnose (e.g. morfic diagnose runs/film-s0), or give "
+                "--fixed-rollout ROBOT; see `morfic store ls --kind checkpoint` for runs."
+            )
+        if len(set(runs)) != len(runs):
+            raise MorficError(f"a run is named twice: {' '.join(runs)}; give each run once.")
+        names = parse_robot_list(robots)
+        if not names:
+            raise MorficError("--robots is empty; give 'all' or names such as go1,a1 (see `morfic robots ls`).")
+        cfg = DiagnoseCfg(
+            robots=tuple(names),
+            mode=mode,
+            command_vx=command_vx,
+            num_envs=envs,
+            steps=steps,
+            seed=seed,
+            trunc_eps=trunc_eps,
+        )
+        _calibration(st, list(runs), cfg, out, fmt, quiet)
+    else:
+        if runs:
+            raise MorficError(
+                "--fixed-rollout takes its critics from --critics, not as arguments: "
+                f"morfic diagnose --fixed-rollout {fixed_rollout} --critics {','.join(runs)}."
+            )
+        targets = [] if fixed_rollout.strip().lower() == "all" else parse_robot_list(fixed_rollout)
+        if len(targets) != 1:
+            raise MorficError(f"--fixed-rollout takes one robot, got '{fixed_rollout}'; e.g. --fixed-rollout aliengo.")
+        robot = targets[0]
+        critic_specs = [c.strip() for c in critics.split(",") if c.strip()] if critics is not None else None
+        if critics is not None and not critic_specs:
+            raise MorficError("--critics is empty; give runs such as runs/film-s0,runs/ppo-s0, or leave it out.")
+        cfg = DiagnoseCfg(
+            robots=(robot,),
+            mode=mode,
+            command_vx=command_vx,
+            num_envs=envs,
+            steps=steps,
+            seed=seed,
+            trunc_eps=trunc_eps,
+        )
+        _fixed(st, robot, actor, critic_specs, cfg, out, fmt, quiet)
+
+
+def _calibration(st, specs: list[str], cfg, out: Path | None, fmt: OutputFormat, quiet: bool) -> None:
+    from morfic_cli.diagnostics.calibration import CALIBRATION_COLUMNS, check_horizon, diagnose_runs
+    from morfic_cli.rl.runner import load_trained
+
+    trained = [load_trained(st, s) for s in specs]  # bad refs fail here, before the progress bar starts
+    for t in trained:
+        check_horizon(t.cfg.ppo.gamma, cfg)
+    with _progress(len(specs) * len(cfg.robots) * cfg.steps, quiet) as progress:
+        result = diagnose_runs(st, specs, cfg, trained=trained, on_rollout_start=progress.start, on_step=progress.step)
+    _write_out(out, result.rows, CALIBRATION_COLUMNS)
+    if not quiet:
+        reused = sum(r["reused"] for r in result.rows)
+        info(
+            f"stored {result.ref}@{result.version} ({result.id[:12]}): {len(result.rows)} rows, EV figure ev.png/"
+            f"ev.pdf; {len(result.rows) - reused} rollouts collected, {reused} reused"
+        )
+    emit_rows(
+        result.rows,
+        fmt,
+        columns=[
+            Column("run", "run"),
+            Column("variant", "variant"),
+            Column("robot", "robot"),
+            Column("d", "d", fmt=_num, justify="right"),
+            Column("ev", "EV", fmt=_num, justify="right"),
+            Column("cell", "|NVB|/NVE/ASA", justify="right"),
+            Column("flip", "Flip", fmt=_num, justify="right"),
+            Column("cos_grad", "CosGrad", fmt=_num, justify="right"),
+            Column("n_samples", "|I_eps|", justify="right"),
+        ],
+        title="critic calibration",
+        caption="higher is better: EV, ASA, CosGrad; lower: |NVB|, NVE, Flip (over I_eps, vs Monte-Carlo G)",
+    )
+
+
+def _fixed(
+    st, robot: str, actor: str | None, critics: list[str] | None, cfg, out: Path | None, fmt: OutputFormat, quiet: bool
+) -> None:
+    from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS, fixed_rollout, load_models
+
+    models = load_models(st, actor, critics, cfg)  # defaults, bad refs, incompatible critics fail here
+    with _progress(cfg.steps, quiet) as progress:
+        result = fixed_rollout(st, robot, models, cfg, on_rollout_start=progress.start, on_step=progress.step)
+    _write_out(out, result.rows, FIXED_ROLLOUT_COLUMNS)
+    if not quiet:
+        how = "reused" if result.rows[0]["reused"] else "collected"
+        info(
+            f"stored {result.ref}@{result.version} ({result.id[:12]}): actor {result.rows[0]['actor']}, "
+            f"{len(result.rows) - 1} critics, rollout {how}"
+        )
+    emit_rows(
+        result.rows,
+        fmt,
+        columns=[
+            Column("critic", "critic"),
+            Column("variant", "variant"),
+            Column("flip", "Flip", fmt=_num, justify="right"),
+            Column("cos_grad", "Cos.", fmt=_num, justify="right"),
+            Column("asa", "ASA", fmt=_num, justify="right"),
+            Column("ev", "EV", fmt=_num, justify="right"),
+        ],
+        title=f"fixed-rollout diagnostic on {robot} (actor {result.rows[0]['actor']})",
+        caption="Flip: sign-flip rate vs the Monte-Carlo advantage (lower is better); Cos.: actor-gradient cosine "
+        "vs MC (higher is better)",
+    )
+
+
+def _write_out(out: Path | None, rows: list[dict], columns: tuple[str, ...]) -> None:
+    if out is None:
+        return
+    from morfic_cli.recording.tables import rows_to_csv
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_bytes(rows_to_csv(rows, columns))
+
+
+class _progress:
+    """A rich progress bar over the policy steps of the rollouts (stderr; nothing when quiet)."""
+
+    def __init__(self, total: int, quiet: bool) -> None:
+        self.total, self.quiet = total, quiet
+        self.bar = None
+        self.task = None
+
+    def __enter__(self) -> _progress:
+        if not self.quiet:
+            from rich.console import Console
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self.bar = Progress(
+                TextColumn("[bold]diagnose[/] {task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeRemainingColumn(),
+                console=Console(stderr=True),
+            )
+            self.bar.__enter__()
+            self.task = self.bar.add_task("", total=self.total)
+        return self
+
+    def start(self, run: str, robot: str) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, description=f"{run} on {robot}")
+
+    def step(self, t: int) -> None:  # noqa: ARG002
+        if self.bar is not None:
+            self.bar.advance(self.task)
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)

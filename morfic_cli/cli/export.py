@@ -1,23 +1,113 @@
-"""``morfic export``: deployable policies (built by the export issue)."""
+"""``morfic export``: deployable ONNX / TorchScript policies with their metadata, and ``--check``."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, StoreOpt
-from morfic_cli.errors import NotImplementedYetError
+from morfic_cli.cli._options import DEFAULT_STORE, OutputFormat, QuietOpt, StoreOpt
+from morfic_cli.cli._render import emit_object, info
+from morfic_cli.errors import MorficError
+
+if TYPE_CHECKING:
+    from morfic_cli.store import Store
 
 
 def export(
-    run: Annotated[str, typer.Argument(help="Run ref or checkpoint id.")],
-    robot: Annotated[str, typer.Option("--robot", help="Target robot whose descriptor is baked in.")] = "go2",
-    to: Annotated[str, typer.Option("--format", help="onnx or torchscript.")] = "onnx",
+    run: Annotated[
+        str,
+        typer.Argument(
+            help="Run ref (runs/film-s0 = its latest checkpoint), ref@N or checkpoint id; with --check: an export "
+            "(exports/... ref or id) or a directory written with --out."
+        ),
+    ],
+    robot: Annotated[
+        str | None,
+        typer.Option(
+            "--robot",
+            help="Bake this robot's descriptor into the model (its gains, pose and limits go into the "
+            "metadata). Default: the descriptor stays a model input and every robot is described.",
+        ),
+    ] = None,
+    to: Annotated[str, typer.Option("--format", help="onnx (onnxruntime-verified) or torchscript.")] = "onnx",
+    targets: Annotated[
+        bool,
+        typer.Option("--targets", help="Also output the joint position targets q0 + action_scale * a (needs --robot)."),
+    ] = False,
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Also write the model and policy.json into this directory.")
+    ] = None,
+    check: Annotated[
+        bool, typer.Option("--check", help="Re-verify an existing export against its checkpoint instead of exporting.")
+    ] = False,
+    samples: Annotated[int, typer.Option("--samples", help="Random inputs of the verification.")] = 256,
+    quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Export a deployable policy with the metadata a robot stack needs.
 
-    Example: morfic export runs/film-s0 --robot go1 --format onnx
+    The model is the deployed actor path (adaptation module + morphology encoder + actor, observation
+    normalisation included): inputs `history` (N, 15, 48) and, unless --robot bakes it in, `morphology` (N, 11);
+    output `actions` (N, 12) (and `joint_targets` with --targets). ONNX has opset 18 and a dynamic batch axis.
+    policy.json beside it holds the joint order, default pose, action scale, Kp/Kd, torque and joint limits,
+    observation layout and scales, history length, control dt, descriptor, run and checkpoint ids. The export is
+    verified against the torch actor (max |Δ| < 1e-5) before it is stored (ref exports/<run>/<robot>-<format>).
+    docs/deploy.md runs it in a 50 Hz sim-to-sim loop.
+
+    Example: morfic export runs/film-s0 --robot go1 --format onnx --out deploy/go1
     """
-    raise NotImplementedYetError("export")
+    from morfic_cli.export.artifact import ExportCfg, export_policy
+    from morfic_cli.store import Store
+
+    st = Store(store)
+    if check:
+        _check(st, run, samples, quiet)
+        return
+    cfg = ExportCfg(robot=robot, fmt=to, targets=targets, samples=samples)
+    result = export_policy(st, run, cfg, out=out)
+    meta = result.metadata
+    if not quiet:
+        info(f"verified: {result.verification.summary()}")
+        info(f"stored {result.ref} ({result.id[:12]})" + (f", wrote {out}" if out is not None else ""))
+    emit_object(
+        {
+            "ref": result.ref,
+            "id": result.id,
+            "checkpoint": meta["checkpoint"],
+            "format": meta["format"],
+            "robot": meta["baked_robot"],
+            "inputs": [s["name"] for s in meta["inputs"]],
+            "outputs": [s["name"] for s in meta["outputs"]],
+            "files": {name: len(data) for name, data in result.files.items()},
+            "written": [str(p) for p in result.written],
+            "verification": result.verification.to_dict(),
+        },
+        OutputFormat.json,
+    )
+
+
+def _check(st: Store, source: str, samples: int, quiet: bool) -> None:
+    """``--check``: re-verify an export, print the result, fail (exit 1) when anything is wrong."""
+    from morfic_cli.export.artifact import check_export
+
+    result = check_export(st, source, samples=samples)
+    meta = result.metadata
+    if not quiet and result.verification is not None:
+        info(f"check: {result.verification.summary()}")
+    emit_object(
+        {
+            "source": source,
+            "ok": result.ok,
+            "checkpoint": meta.get("checkpoint"),
+            "format": meta.get("format"),
+            "robot": meta.get("baked_robot"),
+            "verification": result.verification.to_dict() if result.verification is not None else None,
+            "problems": result.problems,
+        },
+        OutputFormat.json,
+    )
+    if not result.ok:
+        reasons = result.problems or [result.verification.summary()]
+        raise MorficError(f"export check of {source} failed: " + "; ".join(reasons))

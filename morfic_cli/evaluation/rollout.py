@@ -54,6 +54,9 @@ class Rollout:
     """``mujoco.MjModel`` copies of the first envs (``keep_models``), for rendering."""
     qpos_adr: np.ndarray | None = None
     """qpos addresses of the 12 joints in those models (the free joint is qpos[0:7]). Shape: (12,)."""
+    obs: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    """The observation groups the models saw at each step, before acting (``keep_obs``): group -> (T, N, ...)
+    float32, e.g. ``critic`` (T, N, 15, 48). Row t is s_t, the input of ``action[t]`` and ``value[t]``."""
 
     def qpos(self, num_envs: int) -> np.ndarray:
         """Full qpos of the first ``num_envs`` envs at each step. Shape: (T, num_envs, nq)."""
@@ -102,8 +105,10 @@ def run_rollout(
     seed: int = 0,
     on_step: Callable[[int], None] | None = None,
     keep_models: int = 0,
+    keep_obs: tuple[str, ...] = (),
+    sample_actions: bool = False,
 ) -> Rollout:
-    """Run the actor's mean action for ``steps`` policy steps on ``num_envs`` envs of ``robot``.
+    """Run the actor's mean action (or a sampled one) for ``steps`` policy steps on ``num_envs`` envs of ``robot``.
 
     Args:
         actor: Trained actor (eval mode; ``actor(obs)`` is the mean action). Shape: (N, 12).
@@ -117,6 +122,10 @@ def run_rollout(
         seed: Env seed.
         on_step: Called with the step index after each step (progress).
         keep_models: Keep copies of the first this many envs' MjModels (CPU backend) for rendering.
+        keep_obs: Observation groups to record per step into ``Rollout.obs`` (e.g. ``("critic", "privileged",
+            "morphology")``, the critic's exact inputs), so other models can be scored on the same samples.
+        sample_actions: Act with a ~ N(mean, std) of the actor's Gaussian instead of its mean (a PPO behaviour
+            policy, as the critic diagnostics need), drawn from a generator seeded with ``seed``.
     """
     from morfic_cli.envs.locomotion import LocomotionEnv
 
@@ -125,11 +134,19 @@ def run_rollout(
     try:
         term_names = None
         rec: dict[str, list[np.ndarray]] = {k: [] for k in (*RECORDED, "reward_terms")}
+        obs_rec: dict[str, list[np.ndarray]] = {g: [] for g in keep_obs}
         obs = env.get_observations()
         nominal = env.params.nominal_height.float()
+        gen = torch.Generator().manual_seed(seed) if sample_actions else None
         with torch.no_grad():
             for t in range(steps):
+                for group, kept in obs_rec.items():
+                    kept.append(obs[group].detach().cpu().numpy().astype(np.float32))
                 action = actor(obs)
+                if gen is not None:  # a ~ N(mean, std), rsl-rl's Gaussian with our generator
+                    actor.distribution.update(action)
+                    noise = torch.randn(action.shape, generator=gen).to(action)
+                    action = action + actor.output_std * noise
                 value = critic(obs).reshape(-1)
                 obs, reward, done, extras = env.step(action)
                 s = env.last_state
@@ -161,5 +178,7 @@ def run_rollout(
     finally:
         env.close()
     arrays = {k: np.stack(v) for k, v in rec.items()}
-    return Rollout(robot, mode, float(command_vx), seed, dt, term_names or [], descriptor, arrays, models, qpos_adr)
+    kept_obs = {g: np.stack(v) for g, v in obs_rec.items()}
+    return Rollout(robot, mode, float(command_vx), seed, dt, term_names or [], descriptor, arrays, models, qpos_adr,
+                   kept_obs)
 

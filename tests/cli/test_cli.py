@@ -31,9 +31,7 @@ def test_every_subcommand_has_help_with_an_example(run_cli, name):
 @pytest.mark.parametrize(
     "argv",
     [
-        ["diagnose", "runs/film-s0"],
         ["compare-baselines", "runs/film-s0"],
-        ["export", "runs/film-s0"],
         ["report"],
         ["reproduce"],
     ],

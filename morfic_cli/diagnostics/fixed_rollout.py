@@ -1,0 +1,261 @@
+"""``morfic diagnose --fixed-rollout ROBOT``: one frozen actor, many critics, the same samples (paper Table "causal").
+
+The paper's causality analysis: freeze one actor (MorFiC's by default), collect its rollouts on the target once,
+then score each critic on exactly those samples against the Monte-Carlo reference: the sign-flip rate of its
+advantages and the cosine between the actor gradient its advantages would produce and the MC one (both gradients of
+the *frozen* actor). The MC row is the reference scored against itself (V = mean(G): Flip 0, Cos 1).
+
+Every critic must predict the same returns from the same inputs as the actor's run defines them: same discount,
+reward terms, observation layout and control step; otherwise it is refused (:func:`check_compatible`).
+
+Store: one ``diagnosis`` manifest per call (ref ``diagnoses/fixed-rollout/<robot>``) with ``fixed_rollout.csv``
+(:data:`FIXED_ROLLOUT_COLUMNS`, the MC row first); inputs ``actor``, ``critic/<spec>`` and ``rollout``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import torch
+
+from morfic_cli.config import eval_env_cfg
+from morfic_cli.diagnostics.calibration import DiagnosisResult, check_horizon, reference, run_label, score_critics
+from morfic_cli.diagnostics.samples import DiagnoseCfg, collect_samples
+from morfic_cli.errors import MorficError
+from morfic_cli.store import Store
+
+if TYPE_CHECKING:
+    from morfic_cli.rl.runner import TrainedModels
+
+FIXED_ROLLOUT_PREFIX = "diagnoses/fixed-rollout/"
+
+#: Columns of ``fixed_rollout.csv``, in order.
+FIXED_ROLLOUT_COLUMNS: tuple[str, ...] = (
+    "critic",
+    "variant",
+    "robot",
+    "flip",
+    "cos_grad",
+    "asa",
+    "ev",
+    "nvb",
+    "abs_nvb",
+    "nve",
+    "n_samples",
+    "coverage",
+    "checkpoint",
+    "actor",
+    "actor_variant",
+    "mode",
+    "gamma",
+    "trunc_eps",
+    "h_eps",
+    "num_envs",
+    "steps",
+    "seed",
+    "command_vx",
+    "rollout",
+)
+
+DEFAULT_ACTOR_VARIANT = "film"
+
+
+class _MeanCritic(torch.nn.Module):
+    """The MC reference as a 'critic': V = mean(G) over I_eps for every sample, so A_phi = A_MC."""
+
+    def __init__(self, value: float) -> None:
+        super().__init__()
+        self.value = value
+
+    def forward(self, obs) -> torch.Tensor:  # noqa: D102
+        return torch.full((obs.batch_size[0], 1), self.value, dtype=torch.float64)
+
+
+def newest_runs(store: Store) -> dict[str, str]:
+    """Variant -> ref (``runs/NAME``) of the newest checkpoint of that variant in the store."""
+    from morfic_cli.rl.runner import RUNS_PREFIX
+
+    newest: dict[str, tuple[str, str]] = {}
+    for name in store.list_refs():
+        if not name.startswith(RUNS_PREFIX):
+            continue
+        manifest = store.read_manifest(name)
+        variant = manifest.meta.get("variant")
+        if manifest.kind != "checkpoint" or "model.pt" not in manifest.files or not variant:
+            continue
+        if variant not in newest or manifest.created > newest[variant][0]:
+            newest[variant] = (manifest.created, name)
+    return {v: ref for v, (_, ref) in newest.items()}
+
+
+def default_actor(store: Store) -> str:
+    """The newest ``film`` run.
+
+    Raises:
+        MorficError: The store has none.
+    """
+    runs = newest_runs(store)
+    if DEFAULT_ACTOR_VARIANT not in runs:
+        have = ", ".join(sorted(runs)) or "none"
+        raise MorficError(
+            f"--fixed-rollout needs an actor: no '{DEFAULT_ACTOR_VARIANT}' run in store {store.root} "
+            f"(variants present: {have}); pass --actor runs/NAME or train one with "
+            f"`morfic train --variant {DEFAULT_ACTOR_VARIANT}`."
+        )
+    return runs[DEFAULT_ACTOR_VARIANT]
+
+
+def default_critics(store: Store) -> list[str]:
+    """The newest run of each variant, in the paper's variant order."""
+    from morfic_cli.rl.models import VARIANTS
+
+    runs = newest_runs(store)
+    return [runs[v] for v in VARIANTS if v in runs] + [r for v, r in sorted(runs.items()) if v not in VARIANTS]
+
+
+def check_compatible(actor: TrainedModels, critic: TrainedModels, label: str) -> None:
+    """Refuse a critic that was trained on other returns or other inputs than the actor's run.
+
+    Compared: the discount, the reward config, the (noise-free) observation config, and the control step.
+
+    Raises:
+        MorficError: They differ; the message names what.
+    """
+    a, c = actor.cfg, critic.cfg
+    pairs = {
+        "ppo.gamma": (a.ppo.gamma, c.ppo.gamma),
+        "env.rewards": (a.env.rewards, c.env.rewards),
+        "env.obs": (eval_env_cfg(a.env).obs, eval_env_cfg(c.env).obs),
+        "env.decimation": (a.env.decimation, c.env.decimation),
+        "env.sim.physics_dt": (a.env.sim.physics_dt, c.env.sim.physics_dt),
+    }
+    differ = [k for k, (x, y) in pairs.items() if x != y]
+    if differ:
+        raise MorficError(
+            f"critic {label} was trained with other {', '.join(differ)} than the actor's run, so its "
+            "values predict other returns or read other inputs; pass critics trained with the same "
+            "settings (--critics runs/A,runs/B)."
+        )
+
+
+@dataclass
+class FixedRolloutModels:
+    """The frozen actor and the critics of a fixed-rollout analysis, loaded and checked (:func:`load_models`)."""
+
+    actor_spec: str
+    actor: TrainedModels
+    critic_specs: list[str]
+    critics: list[TrainedModels]
+
+
+def load_models(
+    store: Store, actor_spec: str | None, critic_specs: Sequence[str] | None, cfg: DiagnoseCfg
+) -> FixedRolloutModels:
+    """Resolve the defaults, load the actor and the critics, and check them against each other and ``cfg``.
+
+    Args:
+        store: Artifact store.
+        actor_spec: The actor's checkpoint; None = the newest ``film`` run.
+        critic_specs: The critics' checkpoints; None or empty = the newest run of each variant.
+        cfg: Rollout and metric settings (its steps are checked against the actor's discount).
+
+    Raises:
+        MorficError: No default actor, a critic named twice, a spec that is not a checkpoint, an incompatible
+            critic, or ``cfg.steps`` too short.
+    """
+    from morfic_cli.rl.runner import load_trained
+
+    actor_spec = actor_spec or default_actor(store)
+    specs = list(critic_specs or default_critics(store))
+    if len(set(specs)) != len(specs):
+        raise MorficError(f"--critics names a run twice: {','.join(specs)}; give each critic once.")
+    actor = load_trained(store, actor_spec)
+    critics = [load_trained(store, s) for s in specs]
+    for spec, critic in zip(specs, critics, strict=True):
+        check_compatible(actor, critic, spec)
+    check_horizon(actor.cfg.ppo.gamma, cfg)
+    return FixedRolloutModels(actor_spec, actor, specs, critics)
+
+
+def fixed_rollout(
+    store: Store,
+    robot: str,
+    models: FixedRolloutModels,
+    cfg: DiagnoseCfg,
+    *,
+    on_rollout_start: Callable[[str, str], None] | None = None,
+    on_step: Callable[[int], None] | None = None,
+) -> DiagnosisResult:
+    """Score every critic on the frozen actor's rollout of ``robot``: Flip and CosGrad against MC.
+
+    Args:
+        store: Artifact store.
+        robot: Target robot (its rollout is collected once, or reused from the store).
+        models: The actor and critics (:func:`load_models`).
+        cfg: Rollout and metric settings (``cfg.robots`` is ignored).
+        on_rollout_start: Called with (actor label, robot) before the rollout.
+        on_step: Progress per policy step.
+
+    Returns:
+        The rows (the MC reference first, then one per critic in the given order) and the stored diagnosis.
+    """
+    from morfic_cli.recording.tables import rows_to_csv
+
+    actor, actor_spec = models.actor, models.actor_spec
+    critic_specs, critics = models.critic_specs, models.critics
+    gamma = actor.cfg.ppo.gamma
+    actor_label = run_label(actor, actor_spec)
+    if on_rollout_start is not None:
+        on_rollout_start(actor_label, robot)
+    samples = collect_samples(store, actor, robot, cfg, on_step=on_step)
+    ref = reference(samples, gamma, cfg)
+    mc = _MeanCritic(float(ref.returns.mean()) if ref.returns.numel() else 0.0)
+    scores = score_critics(actor.actor, [mc, *(c.critic for c in critics)], samples, ref, cfg, actor.cfg.ppo.clip_param)
+    common = {
+        "robot": robot,
+        "actor": actor_label,
+        "actor_variant": actor.cfg.variant,
+        "mode": cfg.mode,
+        "gamma": gamma,
+        "trunc_eps": cfg.trunc_eps,
+        "h_eps": ref.h_eps,
+        "num_envs": cfg.num_envs,
+        "steps": cfg.steps,
+        "seed": cfg.seed,
+        "command_vx": float(cfg.command_vx),
+        "rollout": samples.rollout_id,
+        "reused": samples.reused,
+    }
+    rows = [{"critic": "MC", "variant": "mc", "checkpoint": None, **scores[0], **common}]
+    for spec, critic, score in zip(critic_specs, critics, scores[1:], strict=True):
+        rows.append(
+            {
+                "critic": run_label(critic, spec),
+                "variant": critic.cfg.variant,
+                "checkpoint": critic.checkpoint_id,
+                **score,
+                **common,
+            }
+        )
+    rows = [{**{k: row[k] for k in FIXED_ROLLOUT_COLUMNS}, "reused": row["reused"]} for row in rows]
+    inputs = {
+        "actor": actor.checkpoint_id,
+        "rollout": samples.rollout_id,
+        **{f"critic/{s}": c.checkpoint_id for s, c in zip(critic_specs, critics, strict=True)},
+    }
+    config = {"robot": robot, "actor": actor_spec, "critics": critic_specs, **dataclasses.asdict(cfg)}
+    config.pop("robots")
+    ref_name = FIXED_ROLLOUT_PREFIX + robot
+    with store.writing():
+        mid = store.put_manifest(
+            "diagnosis",
+            config=config,
+            inputs=inputs,
+            files={"fixed_rollout.csv": rows_to_csv(rows, FIXED_ROLLOUT_COLUMNS)},
+            meta={"actor": actor_label, "critics": [r["critic"] for r in rows[1:]]},
+        )
+        version = store.set_ref(ref_name, mid)
+    return DiagnosisResult(rows, mid, ref_name, version)

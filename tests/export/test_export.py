@@ -1,0 +1,256 @@
+"""`morfic export`: ONNX and TorchScript exports of a smoke run, verification, metadata, --check, bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+
+from morfic_cli.export.artifact import ExportCfg, check_export, export_policy, plan_export, serialise
+from morfic_cli.export.verify import model_mismatches
+from morfic_cli.morphology.builder import build_model
+from morfic_cli.morphology.robots import list_robots, load_robot
+from morfic_cli.rl.runner import load_trained
+from morfic_cli.store import Store
+
+pytest.importorskip("onnxruntime")
+pytest.importorskip("onnxscript")
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def smoke_store(tmp_path_factory):
+    """A smoke-trained film run and its go1 ONNX export (with joint targets, also written to out/)."""
+    from morfic_cli.rl.config import smoke_preset
+    from morfic_cli.rl.runner import new_run
+
+    base = tmp_path_factory.mktemp("export")
+    store = Store(base / "store")
+    run = new_run(store, smoke_preset("film", seed=0), "film-s0")
+    run.train()
+    run.env.close()
+    export_policy(store, "runs/film-s0", ExportCfg(robot="go1", targets=True), out=base / "out")
+    return base
+
+
+@pytest.fixture
+def store(smoke_store, tmp_path, monkeypatch):
+    root = tmp_path / "store"
+    shutil.copytree(smoke_store / "store", root)
+    shutil.copytree(smoke_store / "out", tmp_path / "out")
+    monkeypatch.setenv("MORFIC_STORE", str(root))
+    return Store(root)
+
+
+def _actor_outputs(actor, history, morphology):
+    n = history.shape[0]
+    with torch.no_grad():
+        return actor(
+            TensorDict({"history": torch.as_tensor(history), "morphology": torch.as_tensor(morphology)}, batch_size=[n])
+        ).numpy()
+
+
+def test_onnx_export_through_the_cli_is_stored_verified_and_written(run_cli, store, tmp_path):
+    out = tmp_path / "deploy"
+    code, stdout, err = run_cli("export", "runs/film-s0", "--robot", "go2", "--out", str(out))
+    assert code == 0, err
+    result = json.loads(stdout)
+    assert result["ref"] == "exports/film-s0/go2-onnx@1"
+    assert result["inputs"] == ["history"] and result["outputs"] == ["actions"]
+    v = result["verification"]
+    assert v["ok"] and v["max_abs_diff"] < 1e-5 and v["batch_sizes"] == [256, 1]
+    assert v["runtime"].startswith("onnxruntime")
+    assert "verified: onnxruntime" in err and "OK" in err  # the verification is printed
+    manifest = store.read_manifest("exports/film-s0/go2-onnx")
+    assert manifest.kind == "export"
+    assert manifest.inputs == {"checkpoint": store.resolve("runs/film-s0")}
+    assert set(manifest.files) == {"policy.onnx", "policy.json"}
+    assert (out / "policy.onnx").read_bytes() == store.read_file(manifest.id, "policy.onnx")
+    meta = json.loads((out / "policy.json").read_text())
+    assert meta["baked_robot"] == "go2" and list(meta["robots"]) == ["go2"]
+    assert meta["checkpoint"] == manifest.inputs["checkpoint"] and meta["run"] == "film-s0"
+
+
+def test_onnx_model_has_opset_17_plus_a_dynamic_batch_and_equals_the_torch_actor(store, tmp_path):
+    import onnx
+    import onnxruntime as ort
+
+    data = (tmp_path / "out" / "policy.onnx").read_bytes()
+    meta = json.loads((tmp_path / "out" / "policy.json").read_text())
+    proto = onnx.load_from_string(data)
+    assert max(o.version for o in proto.opset_import if o.domain in ("", "ai.onnx")) >= 17
+    for value in [*proto.graph.input, *proto.graph.output]:
+        assert value.type.tensor_type.shape.dim[0].dim_param, value.name  # symbolic batch axis
+    assert [i.name for i in proto.graph.input] == ["history"]
+    assert [o.name for o in proto.graph.output] == ["actions", "joint_targets"]
+
+    trained = load_trained(store, "runs/film-s0")
+    session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
+    gen = np.random.default_rng(3)
+    m = np.asarray(meta["robots"]["go1"]["morphology"], dtype=np.float32)
+    q0 = np.asarray(meta["robots"]["go1"]["default_joint_pos"])
+    for batch in (1, 5, 33):
+        history = gen.standard_normal((batch, 15, 48)).astype(np.float32)
+        actions, targets = session.run(None, {"history": history})
+        expected = _actor_outputs(trained.actor, history, np.repeat(m[None], batch, 0))
+        assert actions.shape == (batch, 12)
+        assert np.abs(actions - expected).max() < 1e-5
+        assert (
+            np.abs(targets - np.clip(q0 + 0.25 * expected, *np.asarray(meta["robots"]["go1"]["joint_limits"]).T)).max()
+            < 1e-5
+        )
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+def test_torchscript_export_with_the_descriptor_as_input(store, tmp_path):
+    import io
+
+    result = export_policy(store, "runs/film-s0", ExportCfg(fmt="torchscript"), out=tmp_path / "ts")
+    assert result.ref == "exports/film-s0/torchscript@1" and result.verification.ok
+    meta = result.metadata
+    assert [s["name"] for s in meta["inputs"]] == ["history", "morphology"]
+    assert meta["baked_robot"] is None and list(meta["robots"]) == list_robots()
+    assert meta["format"] == "torchscript" and meta["onnx_opset"] is None
+    scripted = torch.jit.load(io.BytesIO((tmp_path / "ts" / "policy.pt").read_bytes()))
+    trained = load_trained(store, "runs/film-s0")
+    gen = torch.Generator().manual_seed(1)
+    history, morphology = torch.randn(9, 15, 48, generator=gen), torch.rand(9, 11, generator=gen) * 2 - 1
+    with torch.no_grad():
+        got = scripted(history, morphology).numpy()
+    assert np.abs(got - _actor_outputs(trained.actor, history.numpy(), morphology.numpy())).max() < 1e-5
+
+
+def test_ppo_actor_without_morphology_exports_history_only(tmp_path):
+    from morfic_cli.rl.config import smoke_preset
+    from morfic_cli.rl.runner import new_run
+
+    store = Store(tmp_path / "ppo")
+    run = new_run(store, smoke_preset("ppo", seed=0), "ppo-s0")
+    run.train()
+    run.env.close()
+    result = export_policy(store, "runs/ppo-s0", ExportCfg(fmt="torchscript"))
+    assert [s["name"] for s in result.metadata["inputs"]] == ["history"]
+    assert result.verification.ok and result.verification.max_abs_diff < 1e-5
+
+
+def test_metadata_joint_order_gains_and_limits_match_every_robot_model(store):
+    trained = load_trained(store, "runs/film-s0")
+    _, meta = plan_export(trained, None, False)
+    for name in list_robots():
+        spec = load_robot(name)
+        model = build_model(spec, floor=False)
+        assert [model.actuator(i).name for i in range(model.nu)] == meta["joint_names"]
+        assert model_mismatches(meta, name, model) == []
+        section = meta["robots"][name]
+        assert section["kp"] == [spec.kp] * 12 and section["descriptor"] == spec.descriptor.tolist()
+    broken = json.loads(json.dumps(meta))
+    broken["robots"]["go1"]["kd"][4] = 0.7
+    broken["joint_names"] = broken["joint_names"][3:] + broken["joint_names"][:3]
+    assert model_mismatches(broken, "go1", build_model(load_robot("go1"), floor=False))  # order is checked
+    broken["joint_names"] = meta["joint_names"]
+    assert "kd" in " ".join(model_mismatches(broken, "go1", build_model(load_robot("go1"), floor=False)))
+
+
+def test_metadata_observation_layout_and_control_are_the_envs(store):
+    from morfic_cli.envs import observations as O
+
+    trained = load_trained(store, "runs/film-s0")
+    _, meta = plan_export(trained, "go1", True)
+    obs = meta["observation"]
+    assert [(t["name"], t["start"], t["stop"]) for t in obs["terms"]] == list(O.POLICY_LAYOUT)
+    scales = np.concatenate([np.asarray(t["scale"], dtype=np.float32) for t in obs["terms"]])
+    assert np.array_equal(scales, O.obs_scales(trained.cfg.env.obs).numpy())
+    assert obs["size"] == 48 and obs["history_len"] == 15 and obs["clip"] == 100.0
+    assert meta["control"] == {
+        **meta["control"],
+        "dt": 0.02,
+        "physics_dt": 0.005,
+        "decimation": 4,
+        "action_scale": 0.25,
+    }
+    assert meta["descriptor"]["names"][0] == "thigh_mass" and len(meta["descriptor"]["train_min"]) == 11
+
+
+def test_check_reverifies_a_stored_export_and_an_out_directory(run_cli, store, tmp_path):
+    code, out, err = run_cli("export", "exports/film-s0/go1-onnx", "--check")
+    assert code == 0, err
+    assert json.loads(out)["ok"] is True and "check: onnxruntime" in err
+    code, out, err = run_cli("export", str(tmp_path / "out"), "--check", "--samples", "16")
+    assert code == 0, err
+    assert json.loads(out)["verification"]["samples"] == 16
+
+
+def test_check_catches_edited_metadata_and_a_swapped_model(run_cli, store, tmp_path):
+    out = tmp_path / "out"
+    meta = json.loads((out / "policy.json").read_text())
+    meta["observation"]["terms"][5]["scale"] = [0.1] * 12
+    (out / "policy.json").write_text(json.dumps(meta))
+    code, stdout, err = run_cli("export", str(out), "--check")
+    assert code == 1 and "Error: " in err and "observation" in err
+    assert json.loads(stdout)["ok"] is False
+
+    meta["observation"]["terms"][5]["scale"] = [0.05] * 12
+    (out / "policy.json").write_text(json.dumps(meta))
+    assert run_cli("export", str(out), "--check")[0] == 0
+    trained = load_trained(store, "runs/film-s0")
+    module, plan = plan_export(trained, "go1", True)
+    with torch.no_grad():
+        module.policy.core.mlp[0].bias.add_(0.1)  # another policy behind the same metadata
+    (out / "policy.onnx").write_bytes(serialise(module, plan, "onnx"))
+    code, _, err = run_cli("export", str(out), "--check")
+    assert code == 1 and "model_sha256" in err
+
+
+def test_failed_verification_stores_nothing(store):
+    from morfic_cli.errors import MorficError
+
+    with pytest.raises(MorficError, match="verification failed"):
+        export_policy(store, "runs/film-s0", ExportCfg(fmt="torchscript", tolerance=1e-12))
+    assert not store.has_ref("exports/film-s0/torchscript")
+
+
+def test_missing_onnx_packages_name_the_extra(run_cli, store, monkeypatch):
+    monkeypatch.setitem(sys.modules, "onnxruntime", None)  # import onnxruntime -> ImportError
+    code, out, err = run_cli("export", "runs/film-s0", "--robot", "go1")
+    assert code == 1 and out == ""
+    assert err.startswith("Error: ") and "pip install 'morfic[export]'" in err and "onnxruntime" in err
+    assert len(store.ref_history("exports/film-s0/go1-onnx")) == 1  # the fixture's export only
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["runs/film-s0", "--targets"], "--targets needs --robot"),
+        (["runs/film-s0", "--robot", "spot"], "unknown robot 'spot'"),
+        (["runs/film-s0", "--format", "tflite"], "unknown format 'tflite'"),
+        (["runs/nope"], "runs/nope"),
+        (["exports/film-s0/go1-onnx"], "not a training checkpoint"),
+        (["runs/film-s0", "--check"], "--check takes an export"),
+    ],
+)
+def test_bad_input_is_an_error_line(run_cli, store, argv, needle):
+    code, out, err = run_cli("export", *argv)
+    assert code == 1, out
+    assert err.startswith("Error: ") and needle in err and "Traceback" not in err
+
+
+def test_check_needs_the_checkpoint_in_the_store(run_cli, smoke_store, tmp_path):
+    code, _, err = run_cli("export", str(smoke_store / "out"), "--check", "--store", str(tmp_path / "empty"))
+    assert code == 1 and "not in" in err and "morfic store import" in err
+
+
+def test_check_result_object(store):
+    result = check_export(store, "exports/film-s0/go1-onnx", samples=8)
+    assert result.ok and result.problems == [] and result.verification.samples == 8
