@@ -25,13 +25,15 @@ class SimCfg:
     """Physics backend settings (SPEC section 3)."""
 
     backend: str = "cpu"
-    """"cpu" (MuJoCo C, one MjModel per env, all cores) or "gpu" (mujoco_warp, a later release)."""
+    """"cpu" (MuJoCo C, one MjModel per env, all cores) or "warp" (MuJoCo Warp, per-world model fields, on
+    ``device``; alias "gpu"). ``--device cuda`` selects "warp" on the GPU."""
     num_threads: int = field(default_factory=_default_threads)
     """Worker threads of the CPU backend (default: every core)."""
     physics_dt: float = 0.005
     """Physics time step (s)."""
     device: str = "cpu"
-    """Torch device of the tensors the backend returns."""
+    """Torch device of the tensors the backend returns ("cpu", "cuda", "cuda:N"); the warp backend also
+    simulates on it."""
 
 
 def to_dict(cfg: object) -> dict:
@@ -164,9 +166,15 @@ def _gait_cfg() -> GaitCfg:
 
 
 def eval_env_cfg(cfg: EnvCfg) -> EnvCfg:
-    """The evaluation variant of an env config: no pushes, no randomisation, no sensor noise (SPEC 5)."""
+    """The evaluation variant of an env config: no pushes, no randomisation, no sensor noise (SPEC 5).
+
+    Evaluation simulates on the CPU backend whatever the run trained on (a run trained with
+    ``--device cuda`` stores the warp backend on a GPU), so its numbers and rollout logs come from
+    one simulator and the machine evaluating needs no GPU.
+    """
     return dataclasses.replace(
         cfg,
         rand=dataclasses.replace(cfg.rand, enabled=False, pushes=False, max_latency_steps=0),
         obs=dataclasses.replace(cfg.obs, noise=False),
+        sim=dataclasses.replace(cfg.sim, backend="cpu", device="cpu"),
     )

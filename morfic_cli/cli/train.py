@@ -53,6 +53,9 @@ def train(
     checkpoint of a run (on CPU, bit-identical to an uninterrupted run); --set max_iterations=N extends it.
     Prints the last checkpoint (ref, id, iteration, env steps, wall time) on stdout.
 
+    --device cuda simulates with MuJoCo Warp on the GPU (pip install 'morfic[gpu]'); several GPUs:
+    torchrun --nproc_per_node=G -m morfic_cli train --device cuda ... (docs/gpu.md).
+
     Example: morfic train --variant film --preset cpu --seed 0
     """
     from morfic_cli.rl.config import apply_overrides, preset_cfg
@@ -70,10 +73,13 @@ def train(
         run = new_run(st, cfg, name or f"{cfg.variant}-s{cfg.seed}", device.value)
 
     cfg = run.cfg
+    quiet = quiet or run.dist.rank != 0  # torchrun: one progress bar, rank 0's
     if not quiet:
         info(f"train: runs/{run.name} variant={cfg.variant} preset={cfg.preset} seed={cfg.seed} "
              f"envs={cfg.env.num_envs} iterations {run.iteration}->{cfg.max_iterations} "
-             f"({cfg.env.num_envs * cfg.num_steps_per_env:,} transitions each)")
+             f"({cfg.env.num_envs * cfg.num_steps_per_env:,} transitions each) "
+             f"sim={cfg.env.sim.backend} on {cfg.env.sim.device}"
+             + (f" x {run.dist.world_size} processes" if run.dist.world_size > 1 else ""))
 
     def on_sigint(signum, frame):  # noqa: ARG001
         if run.stop_requested:
@@ -88,6 +94,8 @@ def train(
     finally:
         signal.signal(signal.SIGINT, previous)
         run.env.close()
+    if run.dist.rank != 0:  # torchrun: rank 0 wrote the checkpoints and reports them
+        return
     if last is None:
         info(f"runs/{run.name} is already at iteration {run.iteration} of {cfg.max_iterations}; nothing to do "
              "(extend it with --set max_iterations=N).")

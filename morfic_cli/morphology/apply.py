@@ -122,12 +122,54 @@ def reset_morphology(model: mujoco.MjModel, base: TemplateInfo) -> None:
     model.actuator_ctrlrange[:] = base.ctrlrange
 
 
-def _set_mass(model: mujoco.MjModel, base: TemplateInfo, bodies: np.ndarray, mass: float) -> None:
-    """Set body masses and scale their nominal inertia by new/nominal mass (zero nominal -> zero inertia)."""
-    nominal = base.body_mass[bodies]
-    scale = np.divide(mass, nominal, out=np.zeros_like(nominal), where=nominal > 0)
-    model.body_mass[bodies] = mass
-    model.body_inertia[bodies] = base.body_inertia[bodies] * scale[:, None]
+@dataclass(frozen=True)
+class DescriptorFields:
+    """The model fields a batch of k descriptors sets, whole arrays per model (what :func:`apply_descriptor` writes).
+
+    Backends that keep one array per field for all envs (mujoco_warp's per-world fields) write these
+    rows directly; derived constants still have to be recomputed afterwards (``mj_setConst`` /
+    ``mujoco_warp.set_const``).
+
+    Attributes:
+        body_mass: Body masses (kg). Shape: (k, nbody).
+        body_inertia: Principal inertias, nominal scaled by new/nominal mass (kg m^2). Shape: (k, nbody, 3).
+        jnt_range: Joint ranges (rad). Shape: (k, njnt, 2).
+        ctrlrange: Actuator control ranges (rad). Shape: (k, nu, 2).
+    """
+
+    body_mass: np.ndarray
+    body_inertia: np.ndarray
+    jnt_range: np.ndarray
+    ctrlrange: np.ndarray
+
+
+def descriptor_fields(descriptors: np.ndarray, base: TemplateInfo) -> DescriptorFields:
+    """The model fields of k validated descriptors, starting from the nominal template (module docstring).
+
+    Args:
+        descriptors: Validated raw descriptors (kg, rad). Shape: (k, 11).
+        base: The template's ids and nominal values.
+
+    Returns:
+        The fields, float64.
+    """
+    m = np.asarray(descriptors, dtype=np.float64).reshape(-1, 11)
+    k = m.shape[0]
+    mass = np.tile(base.body_mass, (k, 1))
+    for li, link in enumerate(LINKS):
+        mass[:, base.link_bodies[:, li]] = m[:, DESCRIPTOR_MASS_INDEX[link], None]
+    mass[:, base.base_body] = m[:, DESCRIPTOR_MASS_INDEX["base"]]
+    # inertia scales with mass (radius of gyration kept); a zero nominal mass keeps zero inertia
+    changed = np.append(base.link_bodies.reshape(-1), base.base_body)
+    nominal = np.broadcast_to(base.body_mass[changed], (k, changed.size))
+    scale = np.ones_like(mass)
+    scale[:, changed] = np.divide(mass[:, changed], nominal, out=np.zeros((k, changed.size)), where=nominal > 0)
+    ranges = np.tile(m[:, [list(pair) for pair in LIMIT_PAIRS]], (1, len(LEGS), 1))  # (k, 12, 2)
+    jnt_range = np.tile(base.jnt_range, (k, 1, 1))
+    jnt_range[:, base.joint_ids.reshape(-1)] = ranges
+    ctrlrange = np.tile(base.ctrlrange, (k, 1, 1))
+    ctrlrange[:, base.actuator_ids] = ranges
+    return DescriptorFields(mass, base.body_inertia[None] * scale[..., None], jnt_range, ctrlrange)
 
 
 def apply_descriptor(model: mujoco.MjModel, data: mujoco.MjData, descriptor: np.ndarray,
@@ -147,13 +189,11 @@ def apply_descriptor(model: mujoco.MjModel, data: mujoco.MjData, descriptor: np.
         DescriptorError: wrong shape, non-finite, implausible values or a min limit above its max.
     """
     m = as_descriptor(descriptor)
-    reset_morphology(model, base)
-    for li, link in enumerate(LINKS):
-        _set_mass(model, base, base.link_bodies[:, li], m[DESCRIPTOR_MASS_INDEX[link]])
-    _set_mass(model, base, np.array([base.base_body]), m[DESCRIPTOR_MASS_INDEX["base"]])
-    ranges = joint_ranges(m)
-    model.jnt_range[base.joint_ids.reshape(-1)] = ranges
-    model.actuator_ctrlrange[base.actuator_ids] = ranges
+    fields = descriptor_fields(m[None], base)
+    model.body_mass[:] = fields.body_mass[0]
+    model.body_inertia[:] = fields.body_inertia[0]
+    model.jnt_range[:] = fields.jnt_range[0]
+    model.actuator_ctrlrange[:] = fields.ctrlrange[0]
     mujoco.mj_setConst(model, data)
     return m
 

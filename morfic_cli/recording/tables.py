@@ -61,7 +61,7 @@ def write_distance_table(
 
 
 BENCH_ENV_COLUMNS: tuple[str, ...] = (
-    "num_envs", "steps", "backend", "threads", "env_steps_per_s", "physics_floor_steps_per_s",
+    "num_envs", "steps", "backend", "device", "threads", "env_steps_per_s", "physics_floor_steps_per_s",
     "floor_env_steps_per_s", "ratio", "cpu_model", "cores",
 )
 """Columns of the env benchmark table (``morfic bench env``)."""
@@ -83,9 +83,9 @@ def write_bench_table(store_root: Path, rows: Sequence[dict]) -> WrittenArtifact
 
 
 BENCH_TRAIN_COLUMNS: tuple[str, ...] = (
-    "preset", "variant", "num_envs", "iterations", "transitions", "s_per_iteration", "collect_s_per_iteration",
-    "learn_s_per_iteration", "train_steps_per_s", "floor_env_steps_per_s", "fraction_of_floor", "torch_threads",
-    "cpu_model", "cores",
+    "preset", "variant", "backend", "device", "num_envs", "iterations", "transitions", "s_per_iteration",
+    "collect_s_per_iteration", "learn_s_per_iteration", "train_steps_per_s", "floor_env_steps_per_s",
+    "fraction_of_floor", "torch_threads", "cpu_model", "cores",
 )
 """Columns of the training benchmark table (``morfic bench train``)."""
 

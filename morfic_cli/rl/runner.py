@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
+import os
 import subprocess
 from collections import deque
 from collections.abc import Callable
@@ -227,15 +228,20 @@ class TrainingRun:
     def __init__(self, store: Store, cfg: TrainCfg, name: str, device: str = "cpu") -> None:
         from morfic_cli.envs.locomotion import LocomotionEnv
 
-        self.store, self.cfg, self.name, self.device = store, cfg, name, device
+        self.dist = distributed_info()
+        cfg = for_device(cfg, device)
+        self.store, self.cfg, self.name, self.device = store, cfg, name, torch_device(device)
         torch.manual_seed(cfg.seed)
-        self.env = LocomotionEnv(cfg.env, mode="train", seed=cfg.seed)
+        # under torchrun every rank simulates its own envs: seed + rank (rank 0 = a single-process run)
+        self.env = LocomotionEnv(cfg.env, mode="train", seed=cfg.seed + self.dist.rank)
         with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the models on stdout
-            self.runner = _StoreRunner(self.env, rsl_rl_cfg(cfg), log_dir=None, device=device)
+            self.runner = _StoreRunner(self.env, rsl_rl_cfg(cfg), log_dir=None, device=self.device)
         old = self.runner.logger
         self.runner.logger = CurveLogger(
-            log_dir="", cfg=old.cfg, env_cfg=old.env_cfg, num_envs=old.num_envs, is_distributed=False,
-            gpu_world_size=1, gpu_global_rank=0, device=old.device, dt=self.env.dt, on_iteration=self._on_iteration,
+            log_dir="", cfg=old.cfg, env_cfg=old.env_cfg, num_envs=old.num_envs,
+            is_distributed=self.runner.is_distributed, gpu_world_size=self.runner.gpu_world_size,
+            gpu_global_rank=self.runner.gpu_global_rank, device=old.device, dt=self.env.dt,
+            on_iteration=self._on_iteration,
         )
         self.rows: list[dict[str, float]] = []
         self.iteration = 0
@@ -266,8 +272,8 @@ class TrainingRun:
             self.progress(row)
         last = self.iteration >= self.cfg.max_iterations
         stop = self.stop_requested and not last  # read once: a Ctrl-C during the save counts for the next iteration
-        if stop or last or self.iteration % self.cfg.save_interval == 0:
-            self.save_checkpoint(finished=last, interrupted=stop)
+        if self.dist.rank == 0 and (stop or last or self.iteration % self.cfg.save_interval == 0):
+            self.save_checkpoint(finished=last, interrupted=stop)  # the other ranks hold the same weights
         if stop:
             self.interrupted = True
             raise _Stop
@@ -335,16 +341,66 @@ def _to_bytes(obj: Any) -> bytes:
 
 
 def check_device(device: str) -> None:
-    """Raise MorficError when ``device`` cannot train here."""
+    """Raise MorficError when ``device`` cannot train here.
+
+    ``cuda`` needs a CUDA build of torch that sees a GPU and the optional warp backend
+    (``pip install 'morfic[gpu]'``); under torchrun with more than one process it is the only choice
+    (rsl-rl's distributed training uses NCCL).
+    """
+    dist = distributed_info()
     if device == "cpu":
+        if dist.world_size > 1:
+            raise MorficError(f"distributed training (torchrun, WORLD_SIZE={dist.world_size}) needs --device cuda: "
+                              "rsl-rl reduces gradients with NCCL; run a single process for --device cpu.")
         return
     if device == "cuda":
         if not torch.cuda.is_available():
             raise MorficError("--device cuda: no CUDA device is available on this machine (or torch is a CPU "
-                              "build); train with --device cpu, or on a GPU machine.")
-        raise MorficError("--device cuda: the GPU simulation backend is not part of this release; "
-                          "train with --device cpu.")
+                              "build); train with --device cpu, or on a GPU machine with a CUDA build of torch and "
+                              "`pip install 'morfic[gpu]'`.")
+        from morfic_cli.sim.warp import import_warp
+
+        import_warp()  # MorficError with the install hint when mujoco_warp is missing
+        return
     raise MorficError(f"unknown device '{device}'; valid devices are: cpu, cuda.")
+
+
+@dataclasses.dataclass(frozen=True)
+class DistributedInfo:
+    """This process's place in a torchrun job (world size 1, rank 0 outside torchrun).
+
+    Attributes:
+        world_size: Processes in the job (``WORLD_SIZE``).
+        rank: Global rank (``RANK``); only rank 0 writes to the store.
+        local_rank: Rank on this node (``LOCAL_RANK``); the GPU ``cuda:LOCAL_RANK`` is this process's.
+    """
+
+    world_size: int
+    rank: int
+    local_rank: int
+
+
+def distributed_info() -> DistributedInfo:
+    """Read torchrun's environment variables (the ones rsl-rl's OnPolicyRunner reads too)."""
+    return DistributedInfo(int(os.environ.get("WORLD_SIZE", "1")), int(os.environ.get("RANK", "0")),
+                           int(os.environ.get("LOCAL_RANK", "0")))
+
+
+def torch_device(device: str) -> str:
+    """The torch device of this process: ``cuda`` becomes ``cuda:LOCAL_RANK`` (what rsl-rl expects under torchrun)."""
+    return f"cuda:{distributed_info().local_rank}" if device == "cuda" else device
+
+
+def for_device(cfg: TrainCfg, device: str) -> TrainCfg:
+    """Place the simulation on ``device``.
+
+    ``cuda`` selects the warp backend (MuJoCo Warp) on this process's GPU, so that simulation,
+    observations and the policy share the device; ``cpu`` keeps the configured backend and puts its
+    tensors on the CPU (``--set env.sim.backend=warp`` runs MuJoCo Warp on warp's CPU device).
+    """
+    if device == "cuda":
+        return apply_overrides(cfg, ["env.sim.backend=warp", f"env.sim.device={torch_device(device)}"])
+    return apply_overrides(cfg, ["env.sim.device=cpu"])
 
 
 def new_run(store: Store, cfg: TrainCfg, name: str, device: str = "cpu") -> TrainingRun:

@@ -1,8 +1,9 @@
 """The protocol every simulation backend implements, and the factory that picks one.
 
-The environment (``envs/``) talks only to this protocol, so a GPU backend (mujoco_warp) can replace
-the CPU one without touching env code. Everything crossing the boundary is a batched torch tensor on
-``backend.device``; the first dimension is always ``num_envs`` (N). Leg order is FL, FR, RL, RR;
+The environment (``envs/``) talks only to this protocol, so the warp backend (mujoco_warp, on a GPU
+or on warp's CPU device) replaces the CPU one without touching env code. Everything crossing the
+boundary is a batched torch tensor on ``backend.device``; the first dimension is always
+``num_envs`` (N). Leg order is FL, FR, RL, RR;
 joint order is hip, thigh, calf per leg (12 joints, the builder's model order).
 """
 
@@ -16,6 +17,10 @@ if TYPE_CHECKING:
 
     from morfic_cli.config import SimCfg
     from morfic_cli.morphology.robots import RobotSpec
+
+#: Simulation backends: ``cpu`` (MuJoCo C) and ``warp`` (MuJoCo Warp on ``SimCfg.device``); ``gpu`` is an alias of
+#: ``warp``.
+BACKENDS: tuple[str, ...] = ("cpu", "warp", "gpu")
 
 #: Bodies whose ground contact ``SimFrame.body_contact_force`` reports, in this order.
 CONTACT_BODIES: tuple[str, ...] = (
@@ -197,7 +202,8 @@ def make_backend(cfg: SimCfg, robot: RobotSpec, num_envs: int, *, template: bool
     """Create the backend named by ``cfg.backend``.
 
     Args:
-        cfg: Simulation config (backend name, threads, physics dt, device).
+        cfg: Simulation config (backend name, threads, physics dt, device). ``warp`` (alias ``gpu``)
+            runs MuJoCo Warp on ``cfg.device`` ("cpu" or "cuda").
         robot: The robot to build: the Go2 template (training and ``descriptor`` mode) or the
             target's own spec (``full`` mode).
         num_envs: Number of parallel envs N.
@@ -212,6 +218,8 @@ def make_backend(cfg: SimCfg, robot: RobotSpec, num_envs: int, *, template: bool
         from morfic_cli.sim.cpu import CpuBackend
 
         return CpuBackend(cfg, robot, num_envs, template=template)
-    if cfg.backend == "gpu":
-        raise MorficError("the gpu backend (mujoco_warp) is not available in this release; use --set sim.backend=cpu.")
-    raise MorficError(f"unknown simulation backend '{cfg.backend}'; valid backends are: cpu, gpu.")
+    if cfg.backend in ("warp", "gpu"):
+        from morfic_cli.sim.warp import WarpBackend
+
+        return WarpBackend(cfg, robot, num_envs, template=template)
+    raise MorficError(f"unknown simulation backend '{cfg.backend}'; valid backends are: {', '.join(BACKENDS)}.")

@@ -5,6 +5,9 @@ from __future__ import annotations
 import json
 import os
 
+import pytest
+import torch
+
 
 def test_bench_env_json_has_the_required_keys_and_is_stored(run_cli):
     code, out, err = run_cli("bench", "env", "--envs", "8", "--steps", "3", "--format", "json")
@@ -28,3 +31,27 @@ def test_bench_bad_input_is_an_error(run_cli):
     assert code == 1 and err.startswith("Error: ") and "--envs" in err
     code, _, err = run_cli("bench", "physics")
     assert code == 1 and "valid benchmarks" in err
+
+
+def test_bench_backend_and_device_errors(run_cli):
+    code, _, err = run_cli("bench", "env", "--envs", "8", "--backend", "physx")
+    assert code == 1 and err.startswith("Error: ") and "valid backends are: cpu, warp" in err
+    code, _, err = run_cli("bench", "env", "--envs", "8", "--backend", "cpu", "--device", "cuda")
+    assert code == 1 and "--backend warp" in err
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the message on a machine without CUDA")
+def test_bench_on_cuda_without_cuda_is_an_error(run_cli):
+    for argv in (("env", "--backend", "warp"), ("train", "--preset", "smoke")):
+        code, out, err = run_cli("bench", *argv, "--device", "cuda")
+        assert code == 1 and err.startswith("Error: ") and "no CUDA device" in err and out == ""
+
+
+def test_bench_env_on_warp_cpu_is_stored_with_its_device(run_cli):
+    pytest.importorskip("mujoco_warp", reason="mujoco_warp is not installed (pip install 'morfic[gpu]')")
+    code, out, err = run_cli("bench", "env", "--backend", "warp", "--device", "cpu", "--envs", "4", "--steps", "2",
+                             "--format", "json")
+    assert code == 0, err
+    row = json.loads(out)
+    assert (row["backend"], row["device"]) == ("warp", "cpu")
+    assert row["env_steps_per_s"] > 0 and row["physics_floor_steps_per_s"] > 0
