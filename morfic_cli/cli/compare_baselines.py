@@ -1,4 +1,4 @@
-"""``morfic compare-baselines``: tables over variants and seeds (built by the reports issue)."""
+"""``morfic compare-baselines``: variants side by side, mean ± std over seeds, optionally beside the paper."""
 
 from __future__ import annotations
 
@@ -6,18 +6,100 @@ from typing import Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, StoreOpt
-from morfic_cli.errors import NotImplementedYetError
+from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, QuietOpt, StoreOpt
+from morfic_cli.cli._render import Column, emit_rows, info
+
+_TITLES = {
+    "transfer": "zero-shot transfer (mean over seeds; σ over envs pooled)",
+    "calibration": "critic calibration (mean over seeds)",
+    "fixed_rollout": "fixed-rollout diagnostic (critic variants on one frozen actor's rollouts)",
+    "compute": "training compute",
+}
+
+
+def _n(v, d: int = 3) -> str:
+    return "-" if v is None or v != v else f"{v:.{d}f}"
+
+
+def _pm(key: str, d: int = 3):
+    return Column(key, key, fmt=lambda v: _n(v, d), justify="right")
+
+
+def _columns(table: str, with_paper: bool) -> list[Column]:
+    head = [Column("preset", "preset"), Column("variant", "variant")]
+    if table == "transfer":
+        cols = [*head, Column("robot", "robot"), Column("mode", "mode"),
+                Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:g}", justify="right"),
+                Column("n_seeds", "seeds", justify="right"), Column("cell", "v_x ± σ / S", justify="right"),
+                Column("vx_seed_std", "σ seeds", fmt=lambda v: _n(v, 2), justify="right"),
+                Column("vx_max", "v_x^max", fmt=lambda v: _n(v, 2), justify="right")]
+        if with_paper:
+            cols += [Column("paper_vx", "paper v_x", fmt=lambda v: _n(v, 2), justify="right"),
+                     Column("paper_vx_max", "paper v_x^max", fmt=lambda v: _n(v, 3), justify="right"),
+                     Column("paper_survival", "paper S", fmt=lambda v: _n(v, 3), justify="right")]
+        return cols
+    if table == "calibration":
+        cols = [*head, Column("robot", "robot"), Column("n_seeds", "seeds", justify="right"), _pm("ev"),
+                Column("cell", "|NVB|/NVE/ASA", justify="right"), _pm("flip"), _pm("cos_grad")]
+        if with_paper:
+            cols += [Column("paper_abs_nvb", "paper |NVB|", fmt=_n, justify="right"),
+                     Column("paper_nve", "paper NVE", fmt=_n, justify="right"),
+                     Column("paper_asa", "paper ASA", fmt=_n, justify="right")]
+        return cols
+    if table == "fixed_rollout":
+        cols = [*head, Column("robot", "robot"), Column("n_seeds", "critics", justify="right"), _pm("flip"),
+                _pm("cos_grad")]
+        if with_paper:
+            cols += [Column("paper_flip", "paper Flip", fmt=_n, justify="right"),
+                     Column("paper_cos_grad", "paper Cos.", fmt=_n, justify="right")]
+        return cols
+    cols = [*head, Column("n_seeds", "seeds", justify="right"),
+            Column("transitions", "transitions", fmt=lambda v: f"{v:,.0f}", justify="right"),
+            Column("iterations", "iters", fmt=lambda v: f"{v:,.0f}", justify="right"),
+            Column("s_per_iteration", "s/iter", fmt=lambda v: _n(v, 2), justify="right"),
+            Column("device_hours", "device-h", fmt=lambda v: _n(v, 4), justify="right"),
+            Column("device_hours_400m", "h@400M", fmt=lambda v: _n(v, 1), justify="right"), Column("device")]
+    if with_paper:
+        cols += [Column("paper_s_per_iteration", "paper s/iter"), Column("paper_gpu_hours_400m", "paper GPU-h@400M")]
+    return cols
 
 
 def compare_baselines(
-    runs: Annotated[list[str] | None, typer.Argument(help="Run refs or ids to compare.")] = None,
-    with_paper: Annotated[bool, typer.Option("--with-paper", help="Add the paper's published numbers.")] = False,
+    runs: Annotated[list[str] | None, typer.Argument(help="Run refs (runs/film-s0) or checkpoint ids; none: every "
+                                                    "run in the store.")] = None,
+    with_paper: Annotated[bool, typer.Option("--with-paper", help="Add the paper's published numbers in "
+                                             "paper_* columns.")] = False,
     fmt: FormatOpt = OutputFormat.table,
+    quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Side-by-side tables over variants and seeds (mean ± std over seeds).
+    """Side-by-side tables over variants and seeds (mean ± std over seeds), from the store only.
 
-    Example: morfic compare-baselines runs/film-s0 runs/ppo-s0 --with-paper
+    Runs are grouped by preset and variant; for each robot the stored evaluations (zero-shot transfer), critic
+    diagnoses and fixed-rollout diagnoses of their checkpoints are aggregated over seeds, plus training compute.
+    --with-paper adds the paper's numbers for the same variant and robot (paper_* columns; empty where the paper
+    prints none). json/csv print every table's rows in one list, with a "table" column. The comparison is stored
+    as a table artifact (ref tables/compare-baselines).
+
+    Example: morfic compare-baselines runs/film-s0 runs/ppo-s0 --with-paper --format csv
     """
-    raise NotImplementedYetError("compare-baselines")
+    from morfic_cli.report.compare import TABLE_ORDER, compare_tables, flat_rows, store_comparison
+    from morfic_cli.report.gather import gather, resolve_runs
+    from morfic_cli.store import Store
+
+    st = Store(store)
+    found = resolve_runs(st, runs)
+    data = gather(st, found, curves=False)
+    tables = compare_tables(data, with_paper=with_paper)
+    written, reused = store_comparison(st, data, tables, with_paper)
+    if not quiet:
+        info(f"{'found' if reused else 'stored'} {written.ref}@{written.version} ({written.id[:12]}): "
+             f"{len(found)} runs, {', '.join(f'{k} {len(v)}' for k, v in tables.items()) or 'no results yet'}")
+    if fmt != OutputFormat.table:
+        emit_rows(flat_rows(tables), fmt)
+        return
+    if not tables:
+        info("no evaluations or diagnoses of these runs in the store yet; run `morfic eval` / `morfic diagnose`.")
+    for name in TABLE_ORDER:
+        if name in tables:
+            emit_rows(tables[name], fmt, columns=_columns(name, with_paper), title=_TITLES[name])

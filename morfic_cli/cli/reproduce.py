@@ -1,14 +1,186 @@
-"""``morfic reproduce``: the whole pipeline in one command (built by the reports issue)."""
+"""``morfic reproduce``: the whole pipeline in one command, idempotent through the store."""
 
 from __future__ import annotations
 
-from morfic_cli.cli._options import DEFAULT_STORE, Preset, PresetOpt, StoreOpt
-from morfic_cli.errors import NotImplementedYetError
+import signal
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from morfic_cli.cli._options import (
+    DEFAULT_STORE,
+    Device,
+    DeviceOpt,
+    FormatOpt,
+    OutputFormat,
+    Preset,
+    QuietOpt,
+    StoreOpt,
+)
+from morfic_cli.cli._render import emit_object, info
+
+_MARKS = {"done": "[green]done[/]", "resumed": "[green]resumed[/]", "skipped": "[dim]skipped (in the store)[/]",
+          "interrupted": "[yellow]interrupted[/]"}
 
 
-def reproduce(preset: PresetOpt = Preset.smoke, store: StoreOpt = DEFAULT_STORE) -> None:
-    """Train all variants, evaluate, diagnose, compare and report.
+def reproduce(
+    preset: Annotated[Preset, typer.Option("--preset", help="Budget: smoke (minutes on 2 cores; exercises the "
+                                           "pipeline), cpu (~10 h per seed on 2 cores), paper (GPU).")] = Preset.smoke,
+    seeds: Annotated[int, typer.Option("--seeds", help="Seeds per variant (0..N-1).")] = 1,
+    variants: Annotated[
+        str, typer.Option("--variants", help="Comma-separated variants to train, or 'all' (ppo, actor-only, concat, "
+                          "film, film-scaled, hyper, adaln).")
+    ] = "all",
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Folder for the report's files (default "
+                                  "<store>/reports/<preset>).")
+    ] = None,
+    overrides: Annotated[
+        list[str] | None, typer.Option("--set", help="Training config override key=value for every run "
+                                       "(as `morfic train --set`), e.g. max_iterations=1.")
+    ] = None,
+    device: DeviceOpt = Device.cpu,
+    fmt: FormatOpt = OutputFormat.table,
+    quiet: QuietOpt = False,
+    store: StoreOpt = DEFAULT_STORE,
+) -> None:
+    """Train all variants, evaluate, diagnose, compare and report: the paper's pipeline in one command.
+
+    For each variant and seed: train (ref runs/<variant>-<preset>-s<seed>), evaluate on every robot at 2.0 and
+    2.5 m/s in both modes, diagnose the critic; then the fixed-rollout analysis on aliengo and mini_cheetah (the
+    film actor frozen, every critic scored), the comparison tables and the report (LaTeX + PDF where pdflatex is
+    installed, Markdown, figures, the paper's tables beside ours). Idempotent: a step whose inputs and config
+    already have a result in the store is skipped, so a second run does nothing and a run after Ctrl-C (training
+    checkpoints first) continues where it stopped. The smoke preset takes minutes on 2 cores and only exercises
+    the pipeline; cpu is sized for a 2-core machine (hours per variant), paper for a GPU.
 
     Example: morfic reproduce --preset smoke
     """
-    raise NotImplementedYetError("reproduce")
+    from morfic_cli.report.pipeline import PIPELINE_VARIANTS, Pipeline, reproduce_cfg
+    from morfic_cli.rl.runner import check_device
+    from morfic_cli.store import Store
+
+    names = PIPELINE_VARIANTS if variants.strip().lower() == "all" else tuple(
+        v.strip() for v in variants.split(",") if v.strip())
+    cfg = reproduce_cfg(preset.value, seeds=seeds, variants=names, device=device.value)
+    if overrides:
+        import dataclasses
+
+        from morfic_cli.rl.config import apply_overrides, preset_cfg
+
+        apply_overrides(preset_cfg(cfg.preset), list(overrides))  # unknown keys fail before anything runs
+        cfg = dataclasses.replace(cfg, train_overrides=tuple(overrides))
+    check_device(cfg.device)
+    st = Store(store)
+    out_dir = out if out is not None else st.root / "reports" / cfg.preset
+    view = _View(quiet)
+    pipeline = Pipeline(st, cfg, out=out_dir, progress=view)
+    view.total = len(pipeline.plan())
+    if not quiet:
+        info(f"reproduce: preset {cfg.preset}, {len(cfg.variants)} variants x {cfg.seeds} seed(s), "
+             f"{len(pipeline.plan())} steps, store {st.root}")
+
+    def on_sigint(signum, frame):  # noqa: ARG001
+        if pipeline.interrupt():
+            info("Ctrl-C: finishing this training iteration and checkpointing; run the same command again to "
+                 "continue (Ctrl-C again to abort at once).")
+            return
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        with view:
+            result = pipeline.run()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if result.interrupted:
+        info("stopped after Ctrl-C; the checkpoint is in the store. Run the same `morfic reproduce` command again "
+             "to continue where it stopped.")
+        sys.exit(130)
+    rep = result.report
+    done = result.work_done
+    if not quiet:
+        info(f"reproduce: {done} step(s) did work, {len(result.steps) - done} skipped, {result.seconds:.1f} s")
+        if rep is not None:
+            main = next((p for p in rep.out_files if p.name == "report.pdf"),
+                        next((p for p in rep.out_files if p.name == "report.md"), out_dir))
+            info(f"[bold]report:[/] {main}  (folder {out_dir}; store ref {rep.ref}, id {rep.id[:12]})")
+            if rep.pdf_error:
+                info(f"note: no PDF: {rep.pdf_error.splitlines()[0]}")
+    emit_object({
+        "report": rep.ref if rep else None, "id": rep.id if rep else None, "out": str(out_dir),
+        "files": [str(p) for p in rep.out_files] if rep else [], "steps": len(result.steps), "work_done": done,
+        "skipped": len(result.steps) - done, "wall_time_s": round(result.seconds, 1),
+    }, fmt)
+
+
+class _View:
+    """One rich progress view on stderr: the overall steps and the current step's work; plain lines in a log."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.bar = None
+        self.overall = None
+        self.current = None
+        self.console = None
+        self.done = 0
+        self.total: int | None = None
+        self.live = False
+
+    def __enter__(self) -> _View:
+        if self.quiet:
+            return self
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.console = Console(stderr=True)
+        self.live = self.console.is_terminal
+        if self.live:
+            self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                                TextColumn("{task.fields[detail]}"), TimeElapsedColumn(), console=self.console)
+            self.bar.__enter__()
+            self.overall = self.bar.add_task("[bold]reproduce[/]", total=self.total, detail="steps")
+        return self
+
+    def step_start(self, index: int, total: int, label: str, units: int, unit: str) -> None:
+        if self.bar is None:
+            return
+        self.bar.update(self.overall, total=total, completed=self.done)
+        if self.current is not None:
+            self.bar.remove_task(self.current)
+        self.current = self.bar.add_task(f"  {label}", total=units, detail=unit)
+
+    def step_advance(self, completed: int | None = None, advance: int = 0, detail: str = "") -> None:
+        if self.bar is None or self.current is None:
+            return
+        kwargs = {"detail": detail} if detail else {}
+        if completed is not None:
+            self.bar.update(self.current, completed=completed, **kwargs)
+        else:
+            self.bar.update(self.current, advance=advance, **kwargs)
+
+    def step_end(self, result) -> None:
+        self.done += 1
+        if self.quiet:
+            return
+        line = f"{result.kind} {result.label}: {_MARKS.get(result.status, result.status)}"
+        if result.status != "skipped":
+            line += f" in {result.seconds:.1f} s"
+        if result.detail:
+            line += f" ({result.detail})"
+        if result.id:
+            line += f" [dim]{result.id[:12]}[/]"
+        if self.bar is not None:
+            if self.current is not None:
+                self.bar.remove_task(self.current)
+                self.current = None
+            self.bar.update(self.overall, completed=self.done)
+            self.bar.console.print(line)
+        else:
+            self.console.print(line, highlight=False)
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)

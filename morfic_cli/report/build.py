@@ -1,0 +1,301 @@
+"""``morfic report``: the paper's tables and figures from what the store holds, as a ``report`` artifact.
+
+The report reads only the store (:func:`~morfic_cli.report.gather.gather`): runs, their evaluations and diagnoses,
+the morphology-support table; it stores the comparison it builds on (``tables/compare-baselines``) and then itself
+(ref ``reports/<name>``), with every artifact it read as an input and listed in its Provenance section. Files of the
+report artifact: ``report.json`` (every table with values and bold marks, and the provenance) and
+``provenance.csv`` always; ``report.md`` with ``markdown``; ``report.tex`` (standalone, booktabs) and, where
+pdflatex is installed, ``report.pdf`` with ``latex``; ``figures/*.png|pdf`` with ``figures``.
+
+The same runs, results and options give the same inputs and config: the stored report is then found and reused
+instead of being built again.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from morfic_cli import __version__
+from morfic_cli.report import paper
+from morfic_cli.report import tables as T
+from morfic_cli.report.compare import COMPARE_REF, compare_tables, store_comparison
+from morfic_cli.report.gather import Provenance, StoreData, find_manifest, gather, read_csv_rows, resolve_runs
+from morfic_cli.report.model import Table
+from morfic_cli.store import Store
+
+REPORTS_PREFIX = "reports/"
+
+FIGURES: dict[str, str] = {
+    "ev": "Explained variance of each variant's critic per robot (higher is better, 1 = perfect).",
+    "distance": "Forward velocity at 2.0 m/s against the normalised morphology distance to Go2.",
+    "compute": "Training hours against transitions.",
+    "curves": "Training curves: mean episode return and the critic's explained variance.",
+}
+
+
+@dataclass(frozen=True)
+class ReportCfg:
+    """What a report contains.
+
+    Attributes:
+        runs: Run specs (``runs/film-s0``); empty = every run in the store.
+        latex: Write ``report.tex`` (and ``report.pdf`` where pdflatex is installed).
+        markdown: Write ``report.md``.
+        figures: Draw the figures.
+        with_paper: Put the paper's published tables after ours.
+        name: The report's ref is ``reports/<name>``.
+        title: Document title.
+    """
+
+    runs: tuple[str, ...] = ()
+    latex: bool = False
+    markdown: bool = True
+    figures: bool = False
+    with_paper: bool = False
+    name: str = "latest"
+    title: str = "MorFiC reproduction report"
+
+
+@dataclass
+class ReportResult:
+    """A stored report: id, ref, version, its file names, whether it was reused, where --out files went."""
+
+    id: str
+    ref: str
+    version: int
+    files: list[str]
+    reused: bool
+    tables: int
+    provenance: list[Provenance]
+    out_files: list[Path] = field(default_factory=list)
+    pdf_error: str | None = None
+
+
+@dataclass
+class _Section:
+    heading: str
+    tables: list[Table] = field(default_factory=list)
+    text: str = ""
+
+
+def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support: list[dict[str, Any]],
+              with_paper: bool) -> list[_Section]:
+    transfer, calib = tables.get("transfer", []), tables.get("calibration", [])
+    fixed, compute = tables.get("fixed_rollout", []), tables.get("compute", [])
+    P = (lambda *ts: [T.paper_table(t) for t in ts]) if with_paper else (lambda *ts: [])  # noqa: E731
+    out: list[_Section] = []
+
+    main = T.transfer_table(transfer, key="zero_shot_transfer", title="Zero-shot cross-morphology transfer",
+                            command_vx=2.0, mode="descriptor", variants=T.MAIN_VARIANTS)
+    sec = _Section("Zero-shot transfer", [t for t in [main] if t] + P(paper.ZERO_SHOT_TRANSFER,
+                                                                       paper.CROSS_EMBODIMENT_BASELINES))
+    if not main:
+        sec.text = ("No descriptor-mode evaluation at 2.0 m/s of ppo / actor-only / concat / film runs in the store "
+                    "(`morfic eval RUN --command-vx 2.0`).")
+    out.append(sec)
+
+    has_ablation = any(r["variant"] in T.ABLATION_VARIANTS[1:] for r in transfer)
+    abl = T.transfer_table(transfer, key="critic_conditioning_ablation", title="Ablation: multiplicative critics",
+                           command_vx=2.0, mode="descriptor", variants=T.ABLATION_VARIANTS) if has_ablation else None
+    sec = _Section("Ablation", [t for t in [abl] if t] + P(paper.CRITIC_CONDITIONING_ABLATION,
+                                                            paper.FILM_MORPH_RANGE_ABLATION))
+    if not abl:
+        sec.text = "No evaluated film-scaled / hyper / adaln runs in the store."
+    out.append(sec)
+
+    fast = T.transfer_table(transfer, key="transfer_25", title="Transfer at a higher commanded speed",
+                            command_vx=2.5, mode="descriptor", use_max=True)
+    out.append(_Section("Transfer at 2.5 m/s", [t for t in [fast] if t] + P(paper.CROSS_EMBODIMENT_BASELINES_25),
+                        "" if fast else "No descriptor-mode evaluation at 2.5 m/s in the store."))
+
+    full = [t for t in (T.transfer_table(transfer, key=f"transfer_full_{v:g}".replace(".", "_"),
+                                         title=f"Transfer with the targets' own models at {v:g} m/s", command_vx=v,
+                                         mode="full") for v in (2.0, 2.5)) if t]
+    if full:
+        out.append(_Section("Transfer with the targets' own models (morfic extension)", full,
+                            "The paper applies each target's 11-D descriptor to the Go2 template (descriptor mode); "
+                            "here the policy runs on the target's own MJCF model (full mode)."))
+
+    crit = [t for t in (T.ev_table(calib), T.critic_table(calib)) if t]
+    out.append(_Section("Critic diagnostics", crit + P(paper.CRITIC_METRICS_VARIANTS, paper.CRITIC_METRICS_EXTERNAL),
+                        "" if crit else "No calibration diagnoses of these runs in the store (`morfic diagnose`)."))
+    fx = T.fixed_rollout_table(fixed)
+    out.append(_Section("Fixed-rollout diagnostic", [t for t in [fx] if t] + P(paper.CAUSAL_ADV_ALL),
+                        "" if fx else "No fixed-rollout diagnoses with these runs' critics in the store "
+                                      "(`morfic diagnose --fixed-rollout aliengo`)."))
+    comp = T.compute_table(compute)
+    out.append(_Section("Training compute", [t for t in [comp] if t] + ([T.paper_compute_table()] if with_paper
+                                                                        else [])))
+    sup = T.support_table(support)
+    out.append(_Section("Morphology support", [t for t in [sup] if t] + P(paper.MORPHOLOGY_SUPPORT)))
+    return out
+
+
+def _intro(data: StoreData, with_paper: bool) -> str:
+    presets = sorted({r.preset for r in data.runs})
+    unfinished = [r.name for r in data.runs if not r.finished]
+    text = (f"Built by morfic {__version__} from {len(data.runs)} training run(s) ({', '.join(presets)} preset) and "
+            f"the results stored for them; every number traces to an artifact id listed under Provenance "
+            f"(`morfic store show ID`). Variant names follow the paper: PPO = ppo, Actor-only = actor-only, "
+            f"Actor+Critic = concat, MorFiC-F = film, MorFiC-F(Scaled) = film-scaled, MorFiC-H = hyper, "
+            f"MorFiC-A = adaln.")
+    if "smoke" in presets:
+        text += (" The smoke preset trains for seconds to exercise the pipeline: its numbers are not results.")
+    if unfinished:
+        text += f" Runs not trained to the end: {', '.join(unfinished)}."
+    if with_paper:
+        text += " Tables marked (paper) are the paper's published numbers, with its bold marks."
+    return text
+
+
+def _provenance_rows(prov: list[Provenance]) -> list[dict[str, Any]]:
+    return [{"kind": p.kind, "ref": p.ref or "", "id": p.id, "role": p.role} for p in prov]
+
+
+def _paper_title(t: Table) -> Table:
+    from dataclasses import replace
+
+    return replace(t, title=f"{t.title} (paper)") if t.source == "paper" else t
+
+
+def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list[Provenance],
+           figures: dict[str, tuple[bytes, bytes]]) -> dict[str, bytes]:
+    """The report's files (name -> bytes), see the module docstring."""
+    from morfic_cli.recording.tables import rows_to_csv
+
+    prov_rows = _provenance_rows(prov)
+    files: dict[str, bytes] = {}
+    doc = {"title": cfg.title, "morfic_version": __version__, "runs": [asdict(r) for r in data.runs],
+           "sections": [{"heading": s.heading, "text": s.text, "tables": [t.to_dict() for t in s.tables]}
+                        for s in sections],
+           "figures": sorted(figures), "provenance": prov_rows}
+    files["report.json"] = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False, default=str).encode()
+    files["provenance.csv"] = rows_to_csv(prov_rows, ("kind", "ref", "id", "role"))
+    for name, (png, pdf) in figures.items():
+        files[f"figures/{name}.png"] = png
+        files[f"figures/{name}.pdf"] = pdf
+    intro = _intro(data, cfg.with_paper)
+    if cfg.markdown:
+        from morfic_cli.report.markdown import document_markdown, table_markdown
+
+        md = []
+        for s in sections:
+            body = "\n\n".join(x for x in [s.text, *(table_markdown(_paper_title(t)) for t in s.tables)] if x)
+            md.append((s.heading, body))
+        if figures:
+            md.append(("Figures", "\n".join(f"![{FIGURES[n]}](figures/{n}.png)\n\n*{FIGURES[n]}*\n"
+                                            for n in figures)))
+        table = ["| kind | ref | id | role |", "|---|---|---|---|"]
+        table += [f"| {p['kind']} | {p['ref'] or '-'} | `{p['id']}` | {p['role']} |" for p in prov_rows]
+        md.append(("Provenance", "Every artifact this report was built from:\n\n" + "\n".join(table)))
+        files["report.md"] = document_markdown(cfg.title, md, intro=intro).encode()
+    if cfg.latex:
+        from morfic_cli.report.latex import document_latex, escape, figure_latex, longtable_latex, table_latex
+
+        tex = []
+        for s in sections:
+            body = "\n\n".join(x for x in [escape(s.text) if s.text else "",
+                                            *(table_latex(_paper_title(t)) for t in s.tables)] if x)
+            tex.append((s.heading, body or escape("Nothing in the store for this section.")))
+        if figures:
+            tex.append(("Figures", "\n\n".join(figure_latex(f"figures/{n}.pdf", FIGURES[n]) for n in figures)))
+        tex.append(("Provenance", escape("Every artifact this report was built from (`morfic store show ID`):")
+                    + "\n\n" + longtable_latex(("kind", "ref", "id", "role"),
+                                               [(p["kind"], p["ref"] or "-", p["id"], p["role"]) for p in prov_rows],
+                                               "llp{0.5\\linewidth}l")))
+        files["report.tex"] = document_latex(cfg.title, tex, preamble_note=intro).encode()
+    return files
+
+
+def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:
+    """The config of a stored report: options and runs (not the name of its ref)."""
+    doc = asdict(cfg)
+    doc.pop("name")
+    doc["runs"] = sorted(r.spec for r in data.runs)
+    return json.loads(json.dumps({"report": "morfic", **doc}))
+
+
+def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
+                 on_stage: Callable[[str], None] | None = None) -> ReportResult:
+    """Build (or find) the report of ``cfg`` and store it; with ``out``, also write its files there.
+
+    Raises:
+        MorficError: No runs in the store, or a spec that is not a run.
+    """
+    from morfic_cli.report.support import SUPPORT_REF, ensure_support_table
+
+    stage = on_stage or (lambda _s: None)
+    runs = resolve_runs(store, cfg.runs)  # bad specs fail before any message
+    stage(f"reading the results of {len(runs)} runs")
+    data = gather(store, runs)
+    support_id, _ = ensure_support_table(store)
+    tables = compare_tables(data, with_paper=cfg.with_paper)
+    compare, _ = store_comparison(store, data, tables, with_paper=cfg.with_paper)
+    prov = [*data.provenance, Provenance(support_id, "table", SUPPORT_REF, "table/morphology-support"),
+            Provenance(compare.id, "table", COMPARE_REF, "table/compare-baselines")]
+    config = report_config(cfg, data)
+    inputs = {p.role: p.id for p in prov}
+    ref = REPORTS_PREFIX + cfg.name
+    existing = find_manifest(store, "report", config, inputs)
+    pdf_error = None
+    if existing is None:
+        support = read_csv_rows(store.read_file(support_id, "support.csv"))
+        sections = _sections(data, tables, support, cfg.with_paper)
+        figures = {}
+        if cfg.figures:
+            stage("drawing figures")
+            from morfic_cli.report import figures as F
+
+            figures = {
+                "ev": F.ev_figure(tables.get("calibration", [])),
+                "distance": F.distance_figure(tables.get("transfer", []), with_paper=cfg.with_paper),
+                "compute": F.compute_figure(tables.get("compute", []), with_paper=cfg.with_paper),
+                "curves": F.curves_figure(data.curves, {r.name: r.variant for r in runs}),
+            }
+        stage("writing the report")
+        files = render(cfg, data, sections, prov, figures)
+        if cfg.latex:
+            from morfic_cli.report.latex import compile_pdf, pdflatex
+
+            if pdflatex() is not None:
+                stage("compiling the PDF")
+                try:
+                    files["report.pdf"] = compile_pdf(files["report.tex"].decode(),
+                                                      {k: v for k, v in files.items() if k.startswith("figures/")})
+                except RuntimeError as exc:
+                    pdf_error = str(exc)
+            else:
+                pdf_error = "pdflatex is not installed; report.tex is written, report.pdf is not"
+        n_tables = sum(len(s.tables) for s in sections)
+        with store.writing():
+            existing = store.put_manifest("report", config=config, inputs=inputs, files=files,
+                                          meta={"tables": n_tables, "runs": [r.name for r in runs],
+                                                "pdf_error": pdf_error})
+            version = store.set_ref(ref, existing)
+        reused = False
+    else:
+        with store.writing():
+            version = store.set_ref(ref, existing)
+        reused = True
+    manifest = store.read_manifest(existing)
+    result = ReportResult(existing, ref, version, sorted(manifest.files), reused,
+                          int(manifest.meta.get("tables", 0)), prov, pdf_error=manifest.meta.get("pdf_error"))
+    if out is not None:
+        result.out_files = write_out(store, existing, out)
+    return result
+
+
+def write_out(store: Store, report_id: str, out: Path) -> list[Path]:
+    """Copy every file of a stored report into the folder ``out`` (created); returns the paths written."""
+    manifest = store.read_manifest(report_id)
+    paths = []
+    for name in sorted(manifest.files):
+        path = Path(out) / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(store.read_file(report_id, name))
+        paths.append(path)
+    return paths

@@ -1,0 +1,277 @@
+"""``compare-baselines``: variants side by side, mean ± std over seeds, optionally beside the paper's numbers.
+
+Runs are grouped by (preset, variant); each group's seeds are aggregated per robot. Four tables, each a list of
+flat rows with a ``table`` key (so the CSV of all of them is one file):
+
+- ``transfer``: per (preset, variant, robot, mode, command): ``vx`` = mean over seeds of the per-run v_x,
+  ``vx_std`` = σ over envs pooled over seeds (the paper's σ; with one seed exactly the run's),
+  ``vx_seed_std`` = std of the per-run v_x over seeds (sample std, empty with one seed); the same for
+  ``vx_max``; ``survival`` (mean over seeds) and ``survival_seed_std``; ``cell`` = "v ± σ / S".
+- ``calibration``: per (preset, variant, robot): EV, |NVB|, NVE, ASA, Flip, CosGrad, each mean and ``_seed_std``.
+- ``fixed_rollout``: per (preset, robot, critic variant): Flip and Cos. over the critics (seeds) and actors.
+- ``compute``: per (preset, variant): transitions, iterations, s/iter, device-hours, hours per 400M transitions.
+
+``--with-paper`` adds ``paper_*`` columns (and ``paper_table``, the paper table they come from) taken from
+:mod:`morfic_cli.report.paper`; the paper's numbers are in the descriptor mode of the protocol, so only
+descriptor-mode transfer rows get them. A number the paper does not print stays empty.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+from collections.abc import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any
+
+from morfic_cli.report import paper
+from morfic_cli.report.gather import StoreData
+
+if TYPE_CHECKING:
+    from morfic_cli.recording.tables import WrittenArtifact
+    from morfic_cli.store import Store
+
+TABLE_ORDER: tuple[str, ...] = ("transfer", "calibration", "fixed_rollout", "compute")
+TRANSITIONS_400M = 400e6
+"""The paper normalises compute to 400M transitions (Table "Training compute")."""
+
+CALIBRATION_METRICS: tuple[str, ...] = ("ev", "abs_nvb", "nve", "asa", "flip", "cos_grad")
+
+
+def variant_order(variant: str) -> int:
+    """Sort key: the paper's variant order, then anything else."""
+    from morfic_cli.rl.models import VARIANTS
+
+    return VARIANTS.index(variant) if variant in VARIANTS else len(VARIANTS)
+
+
+def robot_order(robot: str) -> int:
+    """Sort key: the paper's robot order, then anything else."""
+    return paper.ROBOTS.index(robot) if robot in paper.ROBOTS else len(paper.ROBOTS)
+
+
+def _finite(values: Iterable[Any]) -> list[float]:
+    out = []
+    for v in values:
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            continue
+        if math.isfinite(f):
+            out.append(f)
+    return out
+
+
+def mean(values: Iterable[Any]) -> float | None:
+    """Mean of the finite values, None when there are none."""
+    v = _finite(values)
+    return sum(v) / len(v) if v else None
+
+
+def seed_std(values: Iterable[Any]) -> float | None:
+    """Sample standard deviation over seeds (ddof 1); None with fewer than two finite values."""
+    v = _finite(values)
+    return statistics.stdev(v) if len(v) >= 2 else None
+
+
+def pooled_std(means: Sequence[Any], stds: Sequence[Any]) -> float | None:
+    """σ over the envs of all seeds pooled (equal envs per seed): sqrt(mean(σ_i²) + var_pop(μ_i)).
+
+    With one seed it is that seed's σ over envs, the paper's ± term.
+    """
+    pairs = [(float(m), float(s)) for m, s in zip(means, stds, strict=True)
+             if m is not None and s is not None and math.isfinite(float(m)) and math.isfinite(float(s))]
+    if not pairs:
+        return None
+    mu = sum(m for m, _ in pairs) / len(pairs)
+    var = sum(s * s for _, s in pairs) / len(pairs) + sum((m - mu) ** 2 for m, _ in pairs) / len(pairs)
+    return math.sqrt(var)
+
+
+def _group(rows: Iterable[dict[str, Any]], key: Callable[[dict[str, Any]], tuple]) -> dict[tuple, list[dict]]:
+    groups: dict[tuple, list[dict]] = {}
+    for row in rows:
+        groups.setdefault(key(row), []).append(row)
+    return groups
+
+
+def _num(value: float | None, decimals: int) -> str:
+    return "-" if value is None else f"{value:.{decimals}f}"
+
+
+def transfer_rows(data: StoreData) -> list[dict[str, Any]]:
+    """The ``transfer`` table (see the module docstring)."""
+    groups = _group(data.evals, lambda r: (r["preset"], r["variant"], r["robot"], r["mode"], float(r["command_vx"])))
+    out = []
+    for (preset, variant, robot, mode, vx_cmd), rows in groups.items():
+        vx, vx_max, s = mean(r["vx_mean"] for r in rows), mean(r["vx_max_mean"] for r in rows), \
+            mean(r["survival"] for r in rows)
+        vx_std = pooled_std([r["vx_mean"] for r in rows], [r["vx_std"] for r in rows])
+        vx_max_std = pooled_std([r["vx_max_mean"] for r in rows], [r["vx_max_std"] for r in rows])
+        out.append({
+            "table": "transfer", "preset": preset, "variant": variant, "robot": robot, "mode": mode,
+            "command_vx": vx_cmd, "d": rows[0].get("d"), "n_seeds": len(rows),
+            "runs": ";".join(sorted(r["run"] for r in rows)),
+            "vx": vx, "vx_std": vx_std, "vx_seed_std": seed_std(r["vx_mean"] for r in rows),
+            "vx_max": vx_max, "vx_max_std": vx_max_std, "vx_max_seed_std": seed_std(r["vx_max_mean"] for r in rows),
+            "survival": s, "survival_seed_std": seed_std(r["survival"] for r in rows),
+            "tracking_ratio": mean(r["tracking_ratio"] for r in rows),
+            "valid_fraction": mean(r["valid_fraction"] for r in rows),
+            "cell": f"{_num(vx, 2)} ± {_num(vx_std, 2)} / {_num(s, 3)}",
+        })
+    out.sort(key=lambda r: (r["preset"], r["mode"], r["command_vx"], variant_order(r["variant"]),
+                            robot_order(r["robot"])))
+    return out
+
+
+def calibration_rows(data: StoreData) -> list[dict[str, Any]]:
+    """The ``calibration`` table: critic metrics per (preset, variant, robot), mean and std over seeds."""
+    groups = _group(data.calibration, lambda r: (r["preset"], r["variant"], r["robot"], r["mode"]))
+    out = []
+    for (preset, variant, robot, mode), rows in groups.items():
+        row: dict[str, Any] = {"table": "calibration", "preset": preset, "variant": variant, "robot": robot,
+                               "mode": mode, "d": rows[0].get("d"), "n_seeds": len(rows),
+                               "runs": ";".join(sorted(r["run"] for r in rows))}
+        for m in CALIBRATION_METRICS:
+            row[m] = mean(r[m] for r in rows)
+            row[f"{m}_seed_std"] = seed_std(r[m] for r in rows)
+        row["cell"] = "/".join(_num(row[m], 3) for m in ("abs_nvb", "nve", "asa"))
+        out.append(row)
+    out.sort(key=lambda r: (r["preset"], r["mode"], variant_order(r["variant"]), robot_order(r["robot"])))
+    return out
+
+
+def fixed_rollout_rows(data: StoreData) -> list[dict[str, Any]]:
+    """The ``fixed_rollout`` table: Flip and Cos. per (preset, robot, critic variant); ``mc`` is the reference."""
+    preset_of = {r.checkpoint: r.preset for r in data.runs}
+    groups = _group(data.fixed, lambda r: (preset_of.get(r["actor_checkpoint"], r.get("preset") or "?"),
+                                           r["robot"], r["variant"]))
+    out = []
+    for (preset, robot, variant), rows in groups.items():
+        row: dict[str, Any] = {"table": "fixed_rollout", "preset": preset, "variant": variant, "robot": robot,
+                               "mode": rows[0].get("mode"), "n_seeds": len(rows),
+                               "runs": ";".join(sorted(str(r["run"]) for r in rows)),
+                               "actors": ";".join(sorted({str(r["actor"]) for r in rows}))}
+        for m in ("flip", "cos_grad", "asa", "ev"):
+            row[m] = mean(r[m] for r in rows)
+            row[f"{m}_seed_std"] = seed_std(r[m] for r in rows)
+        out.append(row)
+    out.sort(key=lambda r: (r["preset"], robot_order(r["robot"]), -1 if r["variant"] == "mc"
+                            else variant_order(r["variant"])))
+    return out
+
+
+def compute_rows(data: StoreData) -> list[dict[str, Any]]:
+    """The ``compute`` table: the paper's Table "Training compute" for our runs (device-hours, not GPU-hours)."""
+    groups = _group([r.__dict__ for r in data.runs], lambda r: (r["preset"], r["variant"]))
+    out = []
+    for (preset, variant), rows in groups.items():
+        transitions = mean(r["env_steps"] for r in rows)
+        iterations = mean(r["iteration"] for r in rows)
+        wall = mean(r["wall_time_s"] for r in rows)
+        hours = None if wall is None else wall / 3600.0
+        out.append({
+            "table": "compute", "preset": preset, "variant": variant, "n_seeds": len(rows),
+            "runs": ";".join(sorted(r["name"] for r in rows)),
+            "device": ",".join(sorted({r["device"] for r in rows})),
+            "transitions": transitions, "iterations": iterations,
+            "s_per_iteration": None if not iterations or wall is None else wall / iterations,
+            "s_per_iteration_seed_std": seed_std(r["wall_time_s"] / r["iteration"] for r in rows if r["iteration"]),
+            "device_hours": hours,
+            "device_hours_400m": None if not transitions or hours is None else hours * TRANSITIONS_400M / transitions,
+            "finished": all(r["finished"] for r in rows),
+        })
+    out.sort(key=lambda r: (r["preset"], variant_order(r["variant"])))
+    return out
+
+
+def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Each row with the paper's numbers for the same variant, robot (and command) in ``paper_*`` columns."""
+    out = []
+    for row in rows:
+        extra: dict[str, Any] = {}
+        table = row["table"]
+        if table == "transfer":
+            src = paper.transfer_source(row["variant"], row["command_vx"]) if row["mode"] == "descriptor" else None
+            values = paper.transfer_values(row["variant"], row["robot"], row["command_vx"]) if src else {}
+            extra = {f"paper_{k}": values.get(k) for k in ("vx", "vx_std", "vx_max", "vx_max_std", "survival")}
+            extra["paper_table"] = src.label if src and row["robot"] in src.rows else None
+        elif table == "calibration":
+            values = paper.critic_values(row["variant"], row["robot"])
+            extra = {f"paper_{k}": v for k, v in values.items()}
+            extra["paper_table"] = paper.CRITIC_METRICS_VARIANTS.label if any(
+                v is not None for v in values.values()) else None
+        elif table == "fixed_rollout":
+            values = paper.fixed_rollout_values(row["variant"], row["robot"])
+            extra = {f"paper_{k}": v for k, v in values.items()}
+            extra["paper_table"] = paper.CAUSAL_ADV_ALL.label if any(v is not None for v in values.values()) else None
+        elif table == "compute":
+            ref = paper.compute_row(row["variant"]) if row["variant"] == "film" else None
+            extra = {
+                "paper_transitions": ref.transitions if ref else None,
+                "paper_iterations": ref.iterations if ref else None,
+                "paper_s_per_iteration": ref.sec_per_iter_text.replace("--", "-") if ref else None,
+                "paper_gpu_hours": ref.gpu_hours_text.replace("--", "-") if ref else None,
+                "paper_gpu_hours_400m": ref.gpu_hours_400m_text.replace("--", "-") if ref else None,
+                "paper_table": "tab:training_compute" if ref else None,
+            }
+        out.append({**row, **extra})
+    return out
+
+
+def compare_tables(data: StoreData, *, with_paper: bool = False) -> dict[str, list[dict[str, Any]]]:
+    """Table name -> rows, for every table that has rows (:data:`TABLE_ORDER`)."""
+    tables = {
+        "transfer": transfer_rows(data),
+        "calibration": calibration_rows(data),
+        "fixed_rollout": fixed_rollout_rows(data),
+        "compute": compute_rows(data),
+    }
+    if with_paper:
+        tables = {k: add_paper_columns(v) for k, v in tables.items()}
+    return {k: v for k, v in tables.items() if v}
+
+
+def flat_rows(tables: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """All tables' rows in one list with the union of their columns (first-seen order), for CSV and JSON."""
+    columns: dict[str, None] = {}
+    rows = [row for name in TABLE_ORDER for row in tables.get(name, [])]
+    for row in rows:
+        columns.update(dict.fromkeys(row))
+    return [{c: row.get(c) for c in columns} for row in rows]
+
+
+def compare_config(data: StoreData, with_paper: bool) -> dict[str, Any]:
+    """The config of a stored comparison: which runs, and whether the paper's columns are in."""
+    return json.loads(json.dumps({"table": "compare-baselines", "runs": sorted(r.spec for r in data.runs),
+                                  "with_paper": with_paper}))
+
+
+COMPARE_REF = "tables/compare-baselines"
+
+
+def store_comparison(store: Store, data: StoreData, tables: dict[str, list[dict[str, Any]]],
+                     with_paper: bool) -> tuple[WrittenArtifact, bool]:
+    """Store the comparison as a ``table`` manifest (a CSV per table), or find the identical one already stored.
+
+    Inputs are every artifact the rows came from (:attr:`StoreData.provenance`), so the same runs and results
+    give the same comparison and nothing new is written. Advances ref ``tables/compare-baselines``.
+
+    Returns:
+        ``(WrittenArtifact, reused)``.
+    """
+    from morfic_cli.recording.tables import WrittenArtifact, rows_to_csv
+    from morfic_cli.report.gather import find_manifest
+
+    config = compare_config(data, with_paper)
+    inputs = data.input_ids()
+    with store.writing():
+        mid = find_manifest(store, "table", config, inputs)
+        reused = mid is not None
+        if mid is None:
+            files = {f"{name}.csv": rows_to_csv(rows, list(flat_rows({name: rows})[0])) for name, rows in
+                     tables.items()}
+            mid = store.put_manifest("table", config=config, inputs=inputs, files=files,
+                                     meta={"tables": list(tables), "runs": [r.name for r in data.runs]})
+        version = store.set_ref(COMPARE_REF, mid)
+    return WrittenArtifact(mid, COMPARE_REF, version), reused

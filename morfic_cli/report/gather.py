@@ -1,0 +1,276 @@
+"""Read what the store holds for a set of runs: checkpoints, evaluations, diagnoses, curves; with provenance.
+
+Nothing here trains or simulates. A run is a ref ``runs/NAME`` (or a checkpoint id) and stands for its checkpoint;
+the results of that checkpoint are found by content, not by name: every ``eval`` manifest whose input
+``checkpoint`` is it, every ``diagnosis`` whose ``calibration.csv`` rows or fixed-rollout critics name it. Where
+several artifacts hold the same row (the same robot, mode and command of a checkpoint), the one measured on the
+most samples (envs x steps) wins, and among equals the newest: a quick ``morfic eval --envs 2`` never hides the
+protocol's 64 x 500. Each artifact a row came from is recorded in :attr:`StoreData.provenance`.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from morfic_cli.errors import MorficError
+from morfic_cli.store import Store
+
+RUNS_PREFIX = "runs/"
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """A training run as the store records it (the checkpoint manifest's meta and config).
+
+    Attributes:
+        spec: How it was named (``runs/film-s0``, or an id).
+        name: Run name (``film-s0``).
+        checkpoint: Checkpoint manifest id.
+        variant: Conditioning variant.
+        seed: Training seed.
+        preset: Budget preset.
+        iteration: PPO iterations done.
+        max_iterations: Iterations asked for.
+        env_steps: Transitions collected.
+        wall_time_s: Training wall time (s).
+        device: cpu or cuda.
+        finished: Reached max_iterations.
+        created: Manifest creation time.
+    """
+
+    spec: str
+    name: str
+    checkpoint: str
+    variant: str
+    seed: int
+    preset: str
+    iteration: int
+    max_iterations: int
+    env_steps: int
+    wall_time_s: float
+    device: str
+    finished: bool
+    created: str
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """One artifact a report or table was built from: id, kind, a ref naming it (if any) and what it gave."""
+
+    id: str
+    kind: str
+    ref: str | None
+    role: str
+
+
+@dataclass
+class StoreData:
+    """Everything a comparison or report reads, for a set of runs.
+
+    Attributes:
+        runs: The runs, in the order given (or by name).
+        evals: eval.csv rows (+ ``run``, ``variant``, ``seed``, ``preset``, ``checkpoint``, ``artifact``).
+        calibration: calibration.csv rows (+ the same keys).
+        fixed: fixed_rollout.csv rows of critics among the runs and their MC reference rows (+ ``artifact``).
+        curves: Run name -> training-curve rows of its checkpoint.
+        provenance: Every artifact used.
+    """
+
+    runs: list[RunInfo]
+    evals: list[dict[str, Any]] = field(default_factory=list)
+    calibration: list[dict[str, Any]] = field(default_factory=list)
+    fixed: list[dict[str, Any]] = field(default_factory=list)
+    curves: dict[str, list[dict[str, float]]] = field(default_factory=dict)
+    provenance: list[Provenance] = field(default_factory=list)
+
+    def input_ids(self) -> dict[str, str]:
+        """Provenance as manifest ``inputs``: role -> id."""
+        return {p.role: p.id for p in self.provenance}
+
+
+def run_info(store: Store, spec: str) -> RunInfo:
+    """The run a spec names (``runs/NAME`` = its current checkpoint; ``NAME`` alone is tried as ``runs/NAME``).
+
+    Raises:
+        ArtifactNotFoundError: Nothing by that name.
+        MorficError: It is not a training checkpoint.
+    """
+    if not spec.startswith(RUNS_PREFIX) and "@" not in spec and store.has_ref(RUNS_PREFIX + spec):
+        spec = RUNS_PREFIX + spec
+    manifest = store.read_manifest(spec)
+    if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
+        raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training run; pass run refs such as "
+                          "runs/film-s0 (see `morfic store ls --kind checkpoint`).")
+    meta, cfg = manifest.meta, manifest.config
+    name = meta.get("run") or spec.split("@")[0].removeprefix(RUNS_PREFIX)
+    return RunInfo(
+        spec=spec, name=str(name), checkpoint=manifest.id, variant=str(meta.get("variant") or cfg.get("variant")),
+        seed=int(meta.get("seed", cfg.get("seed", 0))), preset=str(meta.get("preset") or cfg.get("preset") or "?"),
+        iteration=int(meta.get("iteration", 0)), max_iterations=int(meta.get("max_iterations", 0)),
+        env_steps=int(meta.get("env_steps", 0)), wall_time_s=float(meta.get("wall_time_s", 0.0)),
+        device=str(meta.get("device", "cpu")), finished=bool(meta.get("finished", False)), created=manifest.created,
+    )
+
+
+def all_runs(store: Store) -> list[str]:
+    """Every ``runs/NAME`` ref whose current version is a training checkpoint, sorted."""
+    out = []
+    for name in store.list_refs():
+        if not name.startswith(RUNS_PREFIX):
+            continue
+        manifest = store.read_manifest(name)
+        if manifest.kind == "checkpoint" and "model.pt" in manifest.files:
+            out.append(name)
+    return out
+
+
+def resolve_runs(store: Store, specs: Sequence[str] | None) -> list[RunInfo]:
+    """The runs named (none: every run in the store), each checkpoint once.
+
+    Raises:
+        MorficError: No runs at all, or a spec that is not a run.
+    """
+    names = list(specs) if specs else all_runs(store)
+    if not names:
+        raise MorficError(f"no training runs in store {store.root}; train some (`morfic train`, or `morfic reproduce "
+                          "--preset smoke`) or pass --store.")
+    runs, seen = [], set()
+    for spec in names:
+        info = run_info(store, spec)
+        if info.checkpoint not in seen:
+            seen.add(info.checkpoint)
+            runs.append(info)
+    return runs
+
+
+def read_csv_rows(data: bytes) -> list[dict[str, Any]]:
+    """CSV bytes -> rows (pandas; empty cells become None)."""
+    import pandas as pd
+
+    if not data.strip():
+        return []
+    frame = pd.read_csv(io.BytesIO(data))
+    rows = frame.to_dict("records")
+    return [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()} for r in rows]
+
+
+def ref_labels(store: Store) -> dict[str, str]:
+    """Manifest id -> a ref naming it, for provenance listings: a current ref first, else ``name@N``."""
+    current: dict[str, str] = {}
+    old: dict[str, str] = {}
+    for name in store.list_refs():
+        try:
+            history = store.ref_history(name)
+        except MorficError:
+            continue
+        if history:
+            current.setdefault(history[-1].id, name)
+        for entry in reversed(history[:-1]):
+            old.setdefault(entry.id, f"{name}@{entry.version}")
+    return {**old, **current}
+
+
+def _keep(table: dict[tuple, dict[str, Any]], key: tuple, row: dict[str, Any]) -> None:
+    """Put ``row`` under ``key`` unless a row measured on more samples is there (rows come oldest first)."""
+    def size(r: dict[str, Any]) -> float:
+        try:
+            return float(r.get("num_envs") or 0) * float(r.get("steps") or 0)
+        except (TypeError, ValueError):
+            return 0.0
+
+    if key not in table or size(row) >= size(table[key]):
+        table[key] = row
+
+
+def _run_keys(run: RunInfo) -> dict[str, Any]:
+    return {"run": run.name, "variant": run.variant, "seed": run.seed, "preset": run.preset,
+            "checkpoint": run.checkpoint}
+
+
+def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> StoreData:
+    """Collect every stored result of ``runs`` (see the module docstring for the rules)."""
+    data = StoreData(runs=list(runs))
+    by_ckpt = {r.checkpoint: r for r in runs}
+    labels = ref_labels(store)
+    used: dict[str, Provenance] = {}
+
+    def use(oid: str, kind: str, role: str) -> None:
+        used.setdefault(oid, Provenance(oid, kind, labels.get(oid), role))
+
+    for run in runs:
+        use(run.checkpoint, "checkpoint", f"checkpoint/{run.name}")
+
+    evals: dict[tuple, dict[str, Any]] = {}
+    calib: dict[tuple, dict[str, Any]] = {}
+    fixed: dict[tuple, dict[str, Any]] = {}
+    for kind in ("eval", "diagnosis"):
+        for item in store.ls(kind):  # oldest first: newer rows overwrite older ones
+            manifest = store.read_manifest(item["id"])
+            if kind == "eval" and "eval.csv" in manifest.files:
+                run = by_ckpt.get(manifest.inputs.get("checkpoint", ""))
+                if run is None:
+                    continue
+                for row in read_csv_rows(store.read_file(manifest.id, "eval.csv")):
+                    key = (run.checkpoint, row["robot"], row["mode"], float(row["command_vx"]))
+                    _keep(evals, key, {**row, **_run_keys(run), "artifact": manifest.id})
+            elif kind == "diagnosis" and "calibration.csv" in manifest.files:
+                for row in read_csv_rows(store.read_file(manifest.id, "calibration.csv")):
+                    run = by_ckpt.get(str(row.get("checkpoint")))
+                    if run is None:
+                        continue
+                    key = (run.checkpoint, row["robot"], row["mode"], float(row["command_vx"]))
+                    _keep(calib, key, {**row, **_run_keys(run), "artifact": manifest.id})
+            elif kind == "diagnosis" and "fixed_rollout.csv" in manifest.files:
+                rows = read_csv_rows(store.read_file(manifest.id, "fixed_rollout.csv"))
+                actor = manifest.inputs.get("actor")
+                mine = [r for r in rows if str(r.get("checkpoint")) in by_ckpt]
+                if not mine and actor not in by_ckpt:
+                    continue
+                for row in rows:
+                    critic = str(row.get("checkpoint")) if row.get("checkpoint") else "mc"
+                    if critic != "mc" and critic not in by_ckpt:
+                        continue
+                    key = (row["robot"], actor, critic, row["mode"])
+                    extra = _run_keys(by_ckpt[critic]) if critic != "mc" else {"run": "MC", "variant": "mc"}
+                    _keep(fixed, key, {**row, **extra, "actor_checkpoint": actor, "artifact": manifest.id})
+
+    for rows, kind, role in ((evals, "eval", "eval"), (calib, "diagnosis", "calibration"),
+                             (fixed, "diagnosis", "fixed-rollout")):
+        for row in rows.values():
+            use(row["artifact"], kind, f"{role}/{row['artifact'][:12]}")
+    data.evals = list(evals.values())
+    data.calibration = list(calib.values())
+    data.fixed = list(fixed.values())
+    if curves:
+        from morfic_cli.recording.curves import read_curve_csv
+
+        for run in runs:
+            manifest = store.read_manifest(run.checkpoint)
+            if "curve.csv" in manifest.files:
+                data.curves[run.name] = read_curve_csv(store.read_file(run.checkpoint, "curve.csv"))
+    data.provenance = list(used.values())
+    return data
+
+
+def find_manifest(store: Store, kind: str, config: dict[str, Any], inputs: dict[str, str] | None = None,
+                  *, inputs_subset: dict[str, str] | None = None, files: Iterable[str] = ()) -> str | None:
+    """The newest manifest of ``kind`` with exactly this config (and inputs, or at least ``inputs_subset``).
+
+    This is how a step knows the store already holds its result: same config and inputs give the same result.
+    """
+    found = None
+    want_files = set(files)
+    for item in store.ls(kind):
+        manifest = store.read_manifest(item["id"])
+        if manifest.config != config or not want_files <= set(manifest.files):
+            continue
+        if inputs is not None and manifest.inputs != inputs:
+            continue
+        if inputs_subset is not None and any(manifest.inputs.get(k) != v for k, v in inputs_subset.items()):
+            continue
+        found = manifest.id
+    return found

@@ -1,0 +1,172 @@
+r"""LaTeX output: booktabs tables in the paper's cell style and a standalone document that pdflatex compiles.
+
+A result cell is set as the paper sets it, in math mode with bold parts: ``$\mathbf{2.04{\pm}0.37}/0.984$``.
+The document needs only packages of a basic TeX Live (``texlive-latex-base`` + ``texlive-latex-recommended``):
+geometry, booktabs, graphicx, longtable, array.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from morfic_cli.report.model import Part, Table, number_text
+
+_ESCAPES = {
+    "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{",
+    "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "±": r"$\pm$", "σ": r"$\sigma$",
+    "↑": r"$\uparrow$", "↓": r"$\downarrow$", "≥": r"$\geq$", "≤": r"$\leq$", "×": r"$\times$", "–": "--",
+    "—": "---", "|": r"$|$",
+}
+
+
+def escape(text: str) -> str:
+    """Plain text made safe for LaTeX (special characters escaped, a few symbols as math, `code` as typewriter)."""
+    chunks = text.split("`")
+    if len(chunks) % 2 == 0:  # an unpaired backtick stays a quote mark
+        chunks = ["'".join(chunks)]
+    out = []
+    for i, chunk in enumerate(chunks):
+        body = "".join(_ESCAPES.get(ch, ch) for ch in chunk)
+        out.append(rf"\texttt{{{body}}}" if i % 2 else body)
+    return "".join(out)
+
+
+def part_latex(part: Part, math: bool) -> str:
+    r"""One part: ``2.04{\pm}0.37`` in math mode (bold: ``\mathbf{...}``), or text mode with ``\textbf``."""
+    if part.text is not None:
+        body = escape(part.text)
+        return rf"\textbf{{{body}}}" if part.bold else body
+    body = number_text(part.value, part.decimals)
+    if part.std is not None and body != "-":
+        body += (r"{\pm}" if math else r"$\pm$") + number_text(part.std, part.decimals)
+    if part.bold and body != "-":
+        body = rf"\mathbf{{{body}}}" if math else rf"\textbf{{{body}}}"
+    if part.mark:
+        arrow = r"\uparrow" if part.mark == "up" else r"\downarrow"
+        body += arrow if math else f"${arrow}$"
+    return body
+
+
+def cell_latex(cell: Sequence[Part], math: bool) -> str:
+    """A cell: its parts joined by ``/``, wrapped in ``$...$`` in math mode."""
+    body = "/".join(part_latex(p, math) for p in cell)
+    return f"${body}$" if math else body
+
+
+def table_latex(table: Table, *, float_env: bool = True) -> str:
+    """A booktabs ``table`` (caption, label, ``tabular``); wide tables are scaled to the line width."""
+    n = len(table.columns)
+    lines = [r"\begin{tabular}{l" + "c" * n + "}", r"\toprule"]
+    if table.groups:
+        heads, rules, col = [""], [], 2
+        for label, span in table.groups:
+            heads.append(rf"\multicolumn{{{span}}}{{c}}{{\textbf{{{escape(label)}}}}}")
+            rules.append(rf"\cmidrule(lr){{{col}-{col + span - 1}}}")
+            col += span
+        lines.append(" & ".join(heads) + r" \\")
+        lines.append("".join(rules))
+    header = [rf"\textbf{{{escape(table.corner)}}}"] + [rf"\textbf{{{escape(c)}}}" for c in table.columns]
+    lines.append(" & ".join(header) + r" \\")
+    lines.append(r"\midrule")
+    for row in table.rows:
+        if not row.cells:
+            lines.append(r"\midrule")
+            lines.append(rf"\multicolumn{{{n + 1}}}{{l}}{{\textit{{{escape(row.label)}}}}} \\")
+            continue
+        cells = [escape(row.label)] + [cell_latex(c, table.math) for c in row.cells]
+        lines.append(" & ".join(cells) + r" \\")
+    lines += [r"\bottomrule", r"\end{tabular}"]
+    body = "\n".join(lines)
+    if n >= 5:
+        body = "\\resizebox{\\linewidth}{!}{%\n" + body + "}"
+    if not float_env:
+        return body
+    label = f"tab:paper-{table.key}" if table.source == "paper" else f"tab:{table.key}"
+    caption = rf"\textbf{{{escape(table.title)}.}} {_caption_text(table.caption)}"
+    notes = "".join(rf"\\[2pt]{{\footnotesize {escape(n)}}}" for n in table.notes)
+    return "\n".join([r"\begin{table}[htbp]", r"\centering", r"\small", rf"\caption{{{caption}}}",
+                      rf"\label{{{label}}}", body + notes, r"\end{table}"])
+
+
+def _caption_text(caption: str) -> str:
+    """Captions may carry inline math (``$...$``) written for LaTeX: escape only the text between."""
+    out = []
+    for i, chunk in enumerate(caption.split("$")):
+        out.append(f"${chunk}$" if i % 2 else escape(chunk))
+    return "".join(out)
+
+
+def document_latex(title: str, sections: Sequence[tuple[str, str]], *, preamble_note: str = "") -> str:
+    """A standalone article: ``sections`` are (heading, LaTeX body) pairs."""
+    parts = [
+        r"\documentclass[10pt]{article}",
+        r"\usepackage[margin=1.8cm]{geometry}",
+        r"\usepackage[T1]{fontenc}",
+        r"\usepackage{booktabs}",
+        r"\usepackage{graphicx}",
+        r"\usepackage{longtable}",
+        r"\usepackage{array}",
+        r"\setlength{\tabcolsep}{4pt}",
+        rf"\title{{{escape(title)}}}",
+        r"\date{}",
+        r"\begin{document}",
+        r"\maketitle",
+    ]
+    if preamble_note:
+        parts.append(escape(preamble_note))
+    for heading, body in sections:
+        parts.append(rf"\section*{{{escape(heading)}}}")
+        parts.append(body)
+    parts.append(r"\end{document}")
+    return "\n\n".join(parts) + "\n"
+
+
+def figure_latex(path: str, caption: str) -> str:
+    """A figure float including ``path`` (relative to the .tex)."""
+    return "\n".join([r"\begin{figure}[htbp]", r"\centering",
+                      rf"\includegraphics[width=0.9\linewidth,height=0.4\textheight,keepaspectratio]{{{path}}}",
+                      rf"\caption{{{escape(caption)}}}", r"\end{figure}"])
+
+
+def longtable_latex(header: Sequence[str], rows: Sequence[Sequence[str]], spec: str) -> str:
+    """A ``longtable`` (breaks across pages) of plain-text cells, e.g. the provenance list."""
+    head = " & ".join(rf"\textbf{{{escape(h)}}}" for h in header) + r" \\"
+    lines = [rf"{{\scriptsize\begin{{longtable}}{{{spec}}}", r"\toprule", head, r"\midrule", r"\endhead"]
+    lines += [" & ".join(escape(str(c)) for c in row) + r" \\" for row in rows]
+    lines += [r"\bottomrule", r"\end{longtable}}"]
+    return "\n".join(lines)
+
+
+def pdflatex() -> str | None:
+    """Path of ``pdflatex``, or None when it is not installed."""
+    return shutil.which("pdflatex")
+
+
+def compile_pdf(tex: str, files: Mapping[str, bytes] | None = None, *, timeout_s: float = 120.0) -> bytes:
+    """Compile a standalone .tex with pdflatex in a temporary folder (``files``: name -> bytes beside it).
+
+    Runs pdflatex twice (longtable widths settle on the second run).
+
+    Raises:
+        RuntimeError: pdflatex is missing or fails; the message ends with the log's last lines.
+    """
+    exe = pdflatex()
+    if exe is None:
+        raise RuntimeError("pdflatex is not installed (apt-get install texlive-latex-base texlive-latex-recommended)")
+    with tempfile.TemporaryDirectory(prefix="morfic-tex-") as tmp:
+        root = Path(tmp)
+        for name, data in (files or {}).items():
+            (root / name).parent.mkdir(parents=True, exist_ok=True)
+            (root / name).write_bytes(data)
+        (root / "report.tex").write_text(tex, encoding="utf-8")
+        for _ in range(2):
+            proc = subprocess.run([exe, "-interaction=nonstopmode", "-halt-on-error", "report.tex"], cwd=root,
+                                  capture_output=True, text=True, timeout=timeout_s, check=False)
+            if proc.returncode != 0:
+                tail = "\n".join(proc.stdout.splitlines()[-25:])
+                raise RuntimeError(f"pdflatex failed (exit {proc.returncode}):\n{tail}")
+        return (root / "report.pdf").read_bytes()

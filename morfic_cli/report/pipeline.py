@@ -1,0 +1,407 @@
+"""``morfic reproduce``: train every variant (x seeds) -> evaluate -> diagnose -> fixed-rollout -> compare -> report.
+
+Every step is idempotent through the store: before it runs, it looks for a result of the same inputs and config
+(:func:`~morfic_cli.report.gather.find_manifest`) and, when there is one, is skipped. Training is keyed by its run
+ref ``runs/<variant>-<preset>-s<seed>``: a finished run is skipped, an interrupted one (Ctrl-C) is resumed from its
+last checkpoint, a run of that name trained with another config is an error. So a second ``reproduce`` does no
+work, and one after a Ctrl-C continues where the first stopped.
+
+The pipeline reports progress through a :class:`Progress` (the CLI draws it with rich); it never prints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+from morfic_cli.errors import MorficError
+from morfic_cli.report.build import ReportCfg, ReportResult, build_report
+from morfic_cli.report.gather import find_manifest
+from morfic_cli.report.paper import ROBOTS
+from morfic_cli.store import Store
+
+PIPELINE_VARIANTS: tuple[str, ...] = ("ppo", "actor-only", "concat", "film", "film-scaled", "hyper", "adaln")
+"""Every conditioning variant, in the paper's table order."""
+
+
+@dataclass(frozen=True)
+class ReproduceCfg:
+    """The whole pipeline (defaults: the paper's protocol; :func:`reproduce_cfg` sizes it per preset).
+
+    Attributes:
+        preset: Training budget (smoke, cpu, paper).
+        variants: Conditioning variants to train.
+        seeds: Seeds per variant (0 .. seeds-1).
+        train_overrides: ``--set key=value`` items applied to every training config.
+        robots: Evaluation and diagnosis targets.
+        command_vx: Evaluation commands (m/s).
+        modes: Evaluation modes.
+        eval_envs: Envs per evaluation rollout.
+        eval_steps: Policy steps per evaluation rollout.
+        diagnose_envs: Envs per diagnostic rollout.
+        diagnose_steps: Policy steps per diagnostic rollout (must exceed H_eps).
+        trunc_eps: eps of I_eps.
+        fixed_rollout_robots: Targets of the fixed-rollout analysis.
+        actor_variant: Variant whose seed-0 actor is frozen for the fixed-rollout analysis.
+        device: Training device.
+        torch_threads: torch intra-op threads while the pipeline runs (None: leave torch's default). The smoke
+            preset's batches of 2-8 envs run several times faster on one thread than on two that contend.
+    """
+
+    preset: str = "smoke"
+    variants: tuple[str, ...] = PIPELINE_VARIANTS
+    seeds: int = 1
+    train_overrides: tuple[str, ...] = ()
+    robots: tuple[str, ...] = ROBOTS
+    command_vx: tuple[float, ...] = (2.0, 2.5)
+    modes: tuple[str, ...] = ("descriptor", "full")
+    eval_envs: int = 64
+    eval_steps: int = 500
+    diagnose_envs: int = 64
+    diagnose_steps: int = 800
+    trunc_eps: float = 0.05
+    fixed_rollout_robots: tuple[str, ...] = ("aliengo", "mini_cheetah")
+    actor_variant: str = "film"
+    device: str = "cpu"
+    torch_threads: int | None = None
+
+
+def reproduce_cfg(preset: str, *, seeds: int = 1, variants: tuple[str, ...] | None = None,
+                  device: str = "cpu") -> ReproduceCfg:
+    """The pipeline of a preset.
+
+    ``smoke`` exercises every stage in minutes on 2 cores: 2 envs x 25 steps per evaluation rollout, 2 envs x 80
+    steps per diagnostic rollout with eps = 0.5 (H_eps = 69 steps instead of 299). Its numbers are not results.
+    ``cpu`` and ``paper`` use the paper's protocol: 64 envs x 500 steps, diagnostics 64 envs x 800 steps, eps 0.05.
+
+    Raises:
+        UnknownNameError: Unknown preset or variant.
+        MorficError: Fewer than one seed.
+    """
+    from morfic_cli.errors import UnknownNameError
+    from morfic_cli.rl.config import PRESETS
+
+    if preset not in PRESETS:
+        raise UnknownNameError("preset", preset, PRESETS)
+    for v in variants or ():
+        if v not in PIPELINE_VARIANTS:
+            raise UnknownNameError("variant", v, PIPELINE_VARIANTS)
+    if seeds < 1:
+        raise MorficError(f"--seeds must be at least 1, got {seeds}.")
+    base = ReproduceCfg(preset=preset, seeds=seeds, variants=tuple(variants or PIPELINE_VARIANTS), device=device)
+    if preset == "smoke":
+        return dataclasses.replace(base, eval_envs=2, eval_steps=25, diagnose_envs=2, diagnose_steps=80,
+                                   trunc_eps=0.5, torch_threads=1)
+    return base
+
+
+class Progress(Protocol):
+    """What the pipeline tells its user: steps starting, advancing and ending."""
+
+    def step_start(self, index: int, total: int, label: str, units: int, unit: str) -> None:
+        """Step ``index`` of ``total`` starts; it has ``units`` units of work (iterations, policy steps)."""
+
+    def step_advance(self, completed: int | None = None, advance: int = 0, detail: str = "") -> None:
+        """The current step reached ``completed`` units (or moved ``advance`` more)."""
+
+    def step_end(self, result: StepResult) -> None:
+        """The current step ended (done, resumed, skipped)."""
+
+
+class _Silent:
+    def step_start(self, index: int, total: int, label: str, units: int, unit: str) -> None:  # noqa: D102
+        pass
+
+    def step_advance(self, completed: int | None = None, advance: int = 0, detail: str = "") -> None:  # noqa: D102
+        pass
+
+    def step_end(self, result: StepResult) -> None:  # noqa: D102
+        pass
+
+
+@dataclass
+class StepResult:
+    """What one step did.
+
+    ``status`` is done, resumed (a run continued), skipped (the store had the result) or interrupted (training
+    stopped at a checkpoint after Ctrl-C).
+    """
+
+    kind: str
+    label: str
+    status: str
+    id: str | None = None
+    ref: str | None = None
+    seconds: float = 0.0
+    detail: str = ""
+
+
+@dataclass
+class ReproduceResult:
+    """Every step's result and the report."""
+
+    steps: list[StepResult] = field(default_factory=list)
+    report: ReportResult | None = None
+    interrupted: bool = False
+    seconds: float = 0.0
+
+    @property
+    def work_done(self) -> int:
+        """Steps that did work (not skipped)."""
+        return sum(s.status != "skipped" for s in self.steps)
+
+
+def _json(doc: Any) -> Any:
+    return json.loads(json.dumps(doc))
+
+
+#: Config fields that say where a run executed, not what it is; a finished run trained elsewhere still counts.
+EXECUTION_FIELDS: tuple[str, ...] = ("env.sim.num_threads", "env.sim.device", "env.sim.backend")
+
+
+def experiment_config(doc: dict[str, Any]) -> dict[str, Any]:
+    """A resolved training config without :data:`EXECUTION_FIELDS` (threads default to the machine's cores)."""
+    out = json.loads(json.dumps(doc))
+    for dotted in EXECUTION_FIELDS:
+        *parents, leaf = dotted.split(".")
+        node = out
+        for key in parents:
+            node = node.get(key, {}) if isinstance(node, dict) else {}
+        if isinstance(node, dict):
+            node.pop(leaf, None)
+    return out
+
+
+def run_name(variant: str, preset: str, seed: int) -> str:
+    """The run of a variant and seed in a preset's pipeline: ``<variant>-<preset>-s<seed>``."""
+    return f"{variant}-{preset}-s{seed}"
+
+
+class Pipeline:
+    """The steps of one ``reproduce`` over a store. Use :meth:`run`; :meth:`interrupt` handles a Ctrl-C.
+
+    Args:
+        store: Artifact store.
+        cfg: What to run.
+        out: Folder the report's files are written to.
+        progress: Progress sink (default: silent).
+    """
+
+    def __init__(self, store: Store, cfg: ReproduceCfg, out: Path | None = None,
+                 progress: Progress | None = None) -> None:
+        self.store, self.cfg, self.out = store, cfg, out
+        self.progress = progress or _Silent()
+        self._training = None
+        self._stop = False
+        self.report_result: ReportResult | None = None
+
+    # ------------------------------------------------------------------ plan
+    def run_specs(self) -> list[tuple[str, int, str]]:
+        """(variant, seed, ``runs/NAME``) of every training run, variant-major."""
+        return [(v, s, f"runs/{run_name(v, self.cfg.preset, s)}") for v in self.cfg.variants
+                for s in range(self.cfg.seeds)]
+
+    def plan(self) -> list[tuple[str, str, Callable[[], StepResult]]]:
+        """Every step as (kind, label, function), in order."""
+        runs = self.run_specs()
+        steps: list[tuple[str, str, Callable[[], StepResult]]] = []
+        for v, s, spec in runs:
+            steps.append(("train", spec, lambda v=v, s=s, spec=spec: self.train(v, s, spec)))
+        for _, _, spec in runs:
+            steps.append(("eval", spec, lambda spec=spec: self.evaluate(spec)))
+        for _, _, spec in runs:
+            steps.append(("diagnose", spec, lambda spec=spec: self.diagnose(spec)))
+        for robot in self.cfg.fixed_rollout_robots:
+            steps.append(("fixed-rollout", robot, lambda robot=robot: self.fixed_rollout(robot)))
+        steps.append(("compare", "compare-baselines", self.compare))
+        steps.append(("report", f"reports/{self.cfg.preset}", self.report))
+        return steps
+
+    # ------------------------------------------------------------------ run
+    def run(self) -> ReproduceResult:
+        """Run (or skip) every step in order; after a Ctrl-C (:meth:`interrupt`) stop once training checkpointed.
+
+        Returns:
+            Every step's result; ``interrupted`` when it stopped early (run it again to continue).
+        """
+        import torch
+
+        result = ReproduceResult()
+        start = time.perf_counter()
+        threads = torch.get_num_threads()
+        if self.cfg.torch_threads:
+            torch.set_num_threads(self.cfg.torch_threads)
+        try:
+            for _kind, _label, fn in self.plan():
+                t0 = time.perf_counter()
+                step = fn()
+                step.seconds = time.perf_counter() - t0
+                result.steps.append(step)
+                self.progress.step_end(step)
+                if self._stop:
+                    result.interrupted = True
+                    break
+        finally:
+            torch.set_num_threads(threads)
+        result.report = self.report_result
+        result.seconds = time.perf_counter() - start
+        return result
+
+    def interrupt(self) -> bool:
+        """Handle a Ctrl-C; True when it is handled gracefully.
+
+        A training step finishes its iteration, checkpoints and the pipeline stops after it (True); any other step
+        cannot stop cleanly mid-way (False: the caller aborts, the store stays consistent).
+        """
+        if self._training is not None and not self._training.stop_requested:
+            self._training.stop_requested = True
+            self._stop = True
+            return True
+        return False
+
+    def _start(self, kind: str, label: str, units: int, unit: str) -> None:
+        keys = [(k, lab) for k, lab, _ in self.plan()]
+        self.progress.step_start(keys.index((kind, label)), len(keys), f"{kind} {label}", units, unit)
+
+    # ------------------------------------------------------------------ steps
+    def train_cfg(self, variant: str, seed: int):
+        """The training config of a run (preset, variant, seed, then the overrides)."""
+        from morfic_cli.rl.config import apply_overrides, preset_cfg
+
+        return apply_overrides(preset_cfg(self.cfg.preset, variant, seed), list(self.cfg.train_overrides))
+
+    def train(self, variant: str, seed: int, spec: str) -> StepResult:
+        """Train ``spec`` (skip when finished, resume when interrupted)."""
+        from morfic_cli.rl.config import train_cfg_to_dict
+        from morfic_cli.rl.runner import new_run, resume_run
+
+        cfg = self.train_cfg(variant, seed)
+        name = spec.removeprefix("runs/")
+        self._start("train", spec, cfg.max_iterations, "it")
+        status = "done"
+        if self.store.has_ref(spec):
+            manifest = self.store.read_manifest(spec)
+            if experiment_config(manifest.config) != experiment_config(train_cfg_to_dict(cfg)):
+                raise MorficError(
+                    f"{spec} exists in {self.store.root} but was trained with another config than this "
+                    f"reproduce asks for; use another --store, or move it aside (it stays in the store's history).")
+            if manifest.meta.get("finished"):
+                return StepResult("train", spec, "skipped", manifest.id, spec,
+                                  detail=f"finished at iteration {manifest.meta.get('iteration')}")
+            run = resume_run(self.store, spec, device=self.cfg.device)
+            status = "resumed"
+        else:
+            run = new_run(self.store, cfg, name, self.cfg.device)
+        start_it = run.iteration
+        run.progress = lambda row: self.progress.step_advance(completed=int(row["iteration"]))
+        self.progress.step_advance(completed=start_it)
+        self._training = run
+        try:
+            last = run.train()
+        finally:
+            self._training = None
+            run.env.close()
+        if last is None:  # nothing left to train: mark as skipped
+            return StepResult("train", spec, "skipped", self.store.resolve(spec), spec)
+        if run.interrupted:
+            status = "interrupted"
+        detail = f"iterations {start_it}->{last.iteration}"
+        return StepResult("train", spec, status, last.id, f"{spec}@{last.version}", detail=detail)
+
+    def eval_cfg(self):
+        """The evaluation config of every run."""
+        from morfic_cli.evaluation.protocol import EvalCfg
+
+        c = self.cfg
+        return EvalCfg(robots=c.robots, modes=c.modes, command_vx=c.command_vx, num_envs=c.eval_envs,
+                       steps=c.eval_steps, seed=0)
+
+    def evaluate(self, spec: str) -> StepResult:
+        """Evaluate a run's checkpoint on every robot, mode and command (skip when stored)."""
+        from morfic_cli.evaluation.protocol import evaluate
+
+        cfg = self.eval_cfg()
+        ckpt = self.store.resolve(spec)
+        config = _json({"spec": spec, **dataclasses.asdict(cfg)})
+        found = find_manifest(self.store, "eval", config, inputs_subset={"checkpoint": ckpt}, files=("eval.csv",))
+        if found:
+            return StepResult("eval", spec, "skipped", found)
+        units = len(cfg.robots) * len(cfg.modes) * len(cfg.command_vx) * cfg.steps
+        self._start("eval", spec, units, "steps")
+        res = evaluate(self.store, spec, cfg,
+                       on_rollout_start=lambda r, m, v: self.progress.step_advance(detail=f"{r} {m} {v:g}"),
+                       on_step=lambda _t: self.progress.step_advance(advance=1))
+        return StepResult("eval", spec, "done", res.id, f"{res.ref}@{res.version}")
+
+    def diagnose_cfg(self, robots: tuple[str, ...]):
+        """The diagnosis config (the paper's: descriptor mode, 2.0 m/s)."""
+        from morfic_cli.diagnostics.samples import DiagnoseCfg
+
+        c = self.cfg
+        return DiagnoseCfg(robots=robots, mode="descriptor", command_vx=2.0, num_envs=c.diagnose_envs,
+                           steps=c.diagnose_steps, seed=0, trunc_eps=c.trunc_eps)
+
+    def diagnose(self, spec: str) -> StepResult:
+        """Critic calibration of a run on every robot (skip when stored)."""
+        from morfic_cli.diagnostics.calibration import diagnose_runs
+
+        cfg = self.diagnose_cfg(self.cfg.robots)
+        ckpt = self.store.resolve(spec)
+        config = _json({"specs": [spec], **dataclasses.asdict(cfg)})
+        found = find_manifest(self.store, "diagnosis", config, inputs_subset={f"checkpoint/{spec}": ckpt},
+                              files=("calibration.csv",))
+        if found:
+            return StepResult("diagnose", spec, "skipped", found)
+        self._start("diagnose", spec, len(cfg.robots) * cfg.steps, "steps")
+        res = diagnose_runs(self.store, [spec], cfg,
+                            on_rollout_start=lambda _r, robot: self.progress.step_advance(detail=robot),
+                            on_step=lambda _t: self.progress.step_advance(advance=1))
+        return StepResult("diagnose", spec, "done", res.id, f"{res.ref}@{res.version}")
+
+    def fixed_rollout(self, robot: str) -> StepResult:
+        """One frozen actor (the seed-0 run of ``actor_variant``), every run's critic, on ``robot``."""
+        from morfic_cli.diagnostics.fixed_rollout import fixed_rollout, load_models
+
+        runs = self.run_specs()
+        actor = next((spec for v, s, spec in runs if v == self.cfg.actor_variant and s == 0), runs[0][2])
+        critics = [spec for _, _, spec in runs]
+        cfg = self.diagnose_cfg((robot,))
+        config = {"robot": robot, "actor": actor, "critics": critics, **dataclasses.asdict(cfg)}
+        config.pop("robots")
+        subset = {"actor": self.store.resolve(actor), **{f"critic/{c}": self.store.resolve(c) for c in critics}}
+        found = find_manifest(self.store, "diagnosis", _json(config), inputs_subset=subset,
+                              files=("fixed_rollout.csv",))
+        if found:
+            return StepResult("fixed-rollout", robot, "skipped", found)
+        self._start("fixed-rollout", robot, cfg.steps, "steps")
+        models = load_models(self.store, actor, critics, cfg)
+        res = fixed_rollout(self.store, robot, models, cfg, on_step=lambda _t: self.progress.step_advance(advance=1))
+        return StepResult("fixed-rollout", robot, "done", res.id, f"{res.ref}@{res.version}")
+
+    def compare(self) -> StepResult:
+        """The comparison tables with the paper's columns (skip when the same one is stored)."""
+        from morfic_cli.report.compare import compare_tables, store_comparison
+        from morfic_cli.report.gather import gather, resolve_runs
+
+        specs = [spec for _, _, spec in self.run_specs()]
+        self._start("compare", "compare-baselines", 1, "table")
+        data = gather(self.store, resolve_runs(self.store, specs), curves=False)
+        written, reused = store_comparison(self.store, data, compare_tables(data, with_paper=True), True)
+        return StepResult("compare", "compare-baselines", "skipped" if reused else "done", written.id,
+                          f"{written.ref}@{written.version}")
+
+    def report(self) -> StepResult:
+        """The report (LaTeX, Markdown, figures, the paper's tables beside ours), copied to ``out``."""
+        specs = tuple(spec for _, _, spec in self.run_specs())
+        cfg = ReportCfg(runs=specs, latex=True, markdown=True, figures=True, with_paper=True, name=self.cfg.preset,
+                        title=f"MorFiC reproduction report ({self.cfg.preset} preset)")
+        self._start("report", f"reports/{self.cfg.preset}", 1, "report")
+        res = build_report(self.store, cfg, out=self.out,
+                           on_stage=lambda s: self.progress.step_advance(detail=s))
+        self.report_result = res
+        return StepResult("report", res.ref, "skipped" if res.reused else "done", res.id, f"{res.ref}@{res.version}")

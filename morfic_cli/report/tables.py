@@ -1,0 +1,257 @@
+"""The paper's tables built from comparison rows (:mod:`morfic_cli.report.compare`), and from the paper's data.
+
+Each builder returns a :class:`~morfic_cli.report.model.Table` laid out as the paper lays it out, with the best
+value of each row (or column) in bold as the paper does: transfer tables bold the best speed and the best survival
+of each robot independently; critic tables the lowest |NVB| and NVE and the highest ASA; the fixed-rollout table the
+best learned critic per robot and metric (the Monte-Carlo row is the reference, never bold); the compute table the
+cheapest entry per column. A builder returns None when the store has nothing for it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from morfic_cli.report import paper
+from morfic_cli.report.compare import robot_order, variant_order
+from morfic_cli.report.model import Part, Row, Table, bold_best
+
+MAIN_VARIANTS: tuple[str, ...] = ("ppo", "actor-only", "concat", "film")
+"""The zero-shot transfer table's variants (paper Table "Zero-shot cross-morphology transfer")."""
+ABLATION_VARIANTS: tuple[str, ...] = ("film", "film-scaled", "hyper", "adaln")
+"""The ablation table's variants (paper Table "Ablation")."""
+
+
+def method_label(variant: str, preset: str, multi_preset: bool) -> str:
+    """The paper's name of a variant (``MorFiC-F``), with the preset when several are compared."""
+    label = paper.METHOD_LABELS.get(variant, variant)
+    return f"{label} ({preset})" if multi_preset else label
+
+
+def robot_label(robot: str) -> str:
+    """The paper's name of a robot (``Cheetah`` for mini_cheetah)."""
+    return paper.ROBOT_LABELS.get(robot, robot)
+
+
+def _columns(rows: Sequence[dict[str, Any]], variants: Sequence[str] | None) -> list[tuple[str, str]]:
+    """(preset, variant) columns present in ``rows``: in the order of ``variants`` (the paper table's), else ours."""
+    pairs = {(r["preset"], r["variant"]) for r in rows if variants is None or r["variant"] in variants}
+    order = (lambda v: list(variants).index(v)) if variants is not None else variant_order  # noqa: E731
+    return sorted(pairs, key=lambda p: (p[0], order(p[1])))
+
+
+def _seed_note(rows: Sequence[dict[str, Any]], pooled: bool = False) -> str:
+    seeds = sorted({int(r["n_seeds"]) for r in rows})
+    what = f"{seeds[0]} seed" + ("s" if seeds[0] != 1 else "") if len(seeds) == 1 else \
+        f"{seeds[0]}-{seeds[-1]} seeds"
+    sigma = " (σ over envs, pooled over seeds)" if pooled else ""
+    return f"Mean over {what} per cell{sigma}; numbers from the artifacts listed under Provenance."
+
+
+def transfer_table(rows: Sequence[dict[str, Any]], *, key: str, title: str, command_vx: float, mode: str,
+                   variants: Sequence[str] | None = None, use_max: bool = False,
+                   min_columns: int = 1) -> Table | None:
+    """Robots x variants, cells ``v ± σ / S`` (or ``v_x^max ± σ / S``); bold best speed and survival per robot."""
+    sel = [r for r in rows if r["mode"] == mode and abs(r["command_vx"] - command_vx) < 1e-9]
+    cols = _columns(sel, variants)
+    if len(cols) < min_columns or not cols:
+        return None
+    multi = len({p for p, _ in cols}) > 1
+    by = {(r["robot"], r["preset"], r["variant"]): r for r in sel}
+    speed, std = ("vx_max", "vx_max_std") if use_max else ("vx", "vx_std")
+    out_rows = []
+    for robot in sorted({r["robot"] for r in sel}, key=robot_order):
+        cells = [by.get((robot, p, v)) for p, v in cols]
+        v_bold = bold_best([c[speed] if c else None for c in cells], True)
+        s_bold = bold_best([c["survival"] if c else None for c in cells], True)
+        out_rows.append(Row(robot_label(robot), tuple(
+            (Part(c[speed] if c else None, c[std] if c else None, 2, vb),
+             Part(c["survival"] if c else None, None, 3, sb))
+            for c, vb, sb in zip(cells, v_bold, s_bold, strict=True))))
+    quantity = r"$v_x^{\max} \pm \sigma / S$" if use_max else r"$\bar{v}_x \pm \sigma / S$"
+    caption = (f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s, "
+               f"{'the target descriptor on the Go2 template (the paper protocol)' if mode == 'descriptor' else 'the target robot model itself'}; "  # noqa: E501
+               "bold: best speed and best survival per robot.")
+    return Table(key, title, caption, "Target", tuple(method_label(v, p, multi) for p, v in cols),
+                 tuple(out_rows), notes=(_seed_note(sel, pooled=True),))
+
+
+def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor") -> Table | None:
+    """Robots x variants, cells ``|NVB|/NVE/ASA``; bold lowest |NVB| and NVE, highest ASA per robot."""
+    sel = [r for r in rows if r["mode"] == mode]
+    cols = _columns(sel, None)
+    if not cols:
+        return None
+    multi = len({p for p, _ in cols}) > 1
+    by = {(r["robot"], r["preset"], r["variant"]): r for r in sel}
+    out_rows = []
+    for robot in sorted({r["robot"] for r in sel}, key=robot_order):
+        cells = [by.get((robot, p, v)) for p, v in cols]
+        bolds = [bold_best([c[m] if c else None for c in cells], hib)
+                 for m, hib in (("abs_nvb", False), ("nve", False), ("asa", True))]
+        out_rows.append(Row(robot_label(robot), tuple(
+            tuple(Part(c[m] if c else None, None, 3, bolds[k][j])
+                  for k, m in enumerate(("abs_nvb", "nve", "asa")))
+            for j, c in enumerate(cells))))
+    caption = (r"Each cell is $|\mathrm{NVB}|$/NVE/ASA of the critic against Monte-Carlo returns on its own "
+               "actor's rollouts; "
+               r"lower $|\mathrm{NVB}|$ and NVE, higher ASA are better; bold: best per robot and metric.")
+    return Table("critic_metrics_variants", "Critic calibration diagnostics", caption, "Target",
+                 tuple(method_label(v, p, multi) for p, v in cols), tuple(out_rows), notes=(_seed_note(sel),))
+
+
+def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor") -> Table | None:
+    """Robots x variants, explained variance EV (higher is better; 1 is perfect)."""
+    sel = [r for r in rows if r["mode"] == mode]
+    cols = _columns(sel, None)
+    if not cols:
+        return None
+    multi = len({p for p, _ in cols}) > 1
+    by = {(r["robot"], r["preset"], r["variant"]): r for r in sel}
+    out_rows = []
+    for robot in sorted({r["robot"] for r in sel}, key=robot_order):
+        cells = [by.get((robot, p, v)) for p, v in cols]
+        bold = bold_best([c["ev"] if c else None for c in cells], True)
+        out_rows.append(Row(robot_label(robot), tuple(
+            (Part(c["ev"] if c else None, c["ev_seed_std"] if c else None, 3, b),) for c, b in zip(cells, bold,
+                                                                                                   strict=True))))
+    caption = (r"$\mathrm{EV} = 1 - \mathrm{Var}(G - V) / \mathrm{Var}(G)$ over $I_\epsilon$ (± std over seeds "
+               "where there are several); bold: best.")
+    return Table("critic_ev", "Explained variance of the critics", caption, "Target",
+                 tuple(method_label(v, p, multi) for p, v in cols), tuple(out_rows), notes=(_seed_note(sel),))
+
+
+def fixed_rollout_table(rows: Sequence[dict[str, Any]]) -> Table | None:
+    """Critic sources x (robot: Flip, Cos.); MC first; bold the best learned critic per robot and metric."""
+    if not rows:
+        return None
+    robots = sorted({r["robot"] for r in rows}, key=robot_order)
+    sources = sorted({(r["preset"], r["variant"]) for r in rows},
+                     key=lambda p: (p[1] != "mc", p[0], variant_order(p[1])))
+    multi = len({p for p, v in sources if v != "mc"}) > 1
+    by = {(r["preset"], r["variant"], r["robot"]): r for r in rows}
+    bold: dict[tuple, bool] = {}
+    for robot in robots:
+        for m, hib in (("flip", False), ("cos_grad", True)):
+            learned = [s for s in sources if s[1] != "mc"]
+            values = [by[(p, v, robot)][m] if (p, v, robot) in by else None for p, v in learned]
+            for s, b in zip(learned, bold_best(values, hib), strict=True):
+                bold[(s, robot, m)] = b
+    out_rows = []
+    for p, v in sources:
+        cells = []
+        for robot in robots:
+            r = by.get((p, v, robot))
+            for m in ("flip", "cos_grad"):
+                cells.append((Part(r[m] if r else None, None, 3, bold.get(((p, v), robot, m), False)),))
+        label = "MC" if v == "mc" else method_label(v, p, multi)
+        out_rows.append(Row(label, tuple(cells)))
+    caption = ("One frozen actor's rollout per robot; each critic scored on exactly those samples. Flip: sign-flip "
+               "rate vs. the MC advantage (lower is better); Cos.: actor-gradient cosine with the MC gradient "
+               "(higher is better); the MC row is the reference.")
+    actors = sorted({a for r in rows for a in str(r.get("actors", "")).split(";") if a and a != "None"})
+    return Table("causal_adv_all", "Fixed-rollout critic diagnostic", caption, "Src.", ("Flip", "Cos.") * len(robots),
+                 tuple(out_rows), groups=tuple((robot_label(r), 2) for r in robots), math=False,
+                 notes=(f"Frozen actor(s): {', '.join(actors) or '-'}.",))
+
+
+def _si(value: float | None) -> str:
+    if value is None:
+        return "-"
+    for div, suffix in ((1e9, "B"), (1e6, "M"), (1e3, "k")):
+        if abs(value) >= div:
+            return f"{value / div:.3g}{suffix}"
+    return f"{value:.0f}"
+
+
+def compute_table(rows: Sequence[dict[str, Any]]) -> Table | None:
+    """Variants x (transitions, iterations, s/iter, device-h, device-h@400M); bold the cheapest per column."""
+    if not rows:
+        return None
+    bolds = {m: bold_best([r[m] for r in rows], False)
+             for m in ("s_per_iteration", "device_hours", "device_hours_400m")}
+    out_rows = []
+    for i, r in enumerate(rows):
+        iters = r["iterations"]
+        out_rows.append(Row(f"{paper.METHOD_LABELS.get(r['variant'], r['variant'])} ({r['preset']})", (
+            (Part(None, text=_si(r["transitions"])),),
+            (Part(None, text=f"{iters:,.0f}" if iters is not None else "-"),),
+            (Part(r["s_per_iteration"], None, 2, bolds["s_per_iteration"][i]),),
+            (Part(r["device_hours"], None, 3, bolds["device_hours"][i]),),
+            (Part(r["device_hours_400m"], None, 1, bolds["device_hours_400m"][i]),),
+            (Part(None, text=r["device"]),),
+        )))
+    caption = ("Transitions and iterations as trained; s/iter = wall time / iterations; device-hours on the device "
+               "of the run (CPU threads or one GPU); hours normalised to 400M transitions as the paper does. Bold: "
+               "cheapest.")
+    return Table("training_compute", "Training compute", caption, "Method",
+                 ("Transitions", "Iters.", "Sec/iter", "Device-h", "Device-h@400M", "Device"), tuple(out_rows),
+                 math=False, notes=(_seed_note(rows),))
+
+
+def support_table(rows: Sequence[dict[str, Any]]) -> Table | None:
+    """Descriptor dimensions x (train min, train max, robots); out-of-support values bold with ↑ / ↓."""
+    if not rows:
+        return None
+    robots = sorted({r["robot"] for r in rows}, key=lambda n: paper.SUPPORT_COLUMNS.index(n)
+                    if n in paper.SUPPORT_COLUMNS else 99)
+    params = list(dict.fromkeys(r["parameter"] for r in rows))
+    by = {(r["parameter"], r["robot"]): r for r in rows}
+    out_rows = []
+    for name in params:
+        first = by[(name, robots[0])]
+        cells = [(Part(float(first["train_min"]), None, 3),), (Part(float(first["train_max"]), None, 3),)]
+        for robot in robots:
+            r = by.get((name, robot))
+            flag = int(r["support"]) if r else 0
+            cells.append((Part(float(r["value"]) if r else None, None, 3, flag != 0,
+                               {1: "up", -1: "down"}.get(flag, "")),))
+        out_rows.append(Row(f"{first['label']} ({first['unit']})", tuple(cells)))
+    caption = ("The 11-D morphology descriptor of each robot and the training support; values outside it in bold "
+               r"with $\uparrow$ (above) / $\downarrow$ (below).")
+    return Table("morphology_support", "Morphology support", caption, "Parameter",
+                 ("Train min", "Train max", *(robot_label(r) for r in robots)), tuple(out_rows), math=False)
+
+
+# ---------------------------------------------------------------------------- the paper's own tables
+def paper_table(t: paper.PaperTable) -> Table:
+    """A paper table in the report's model, as the paper prints it (its bold marks included).
+
+    Tables whose rows are methods and columns robots (the fixed-rollout diagnostic) get one column per part under
+    a header group per robot, as in the paper.
+    """
+    math_mode = t.key not in ("morphology_support", "causal_adv", "causal_adv_all")
+
+    def part(p: paper.PaperPart) -> Part:
+        return Part(p.value, p.std, p.decimals, p.bold, p.mark)
+
+    if t.key in ("causal_adv", "causal_adv_all"):
+        rows = tuple(Row(t.row_labels.get(r, r), tuple((part(p),) for c in t.columns for p in t.cells[(r, c)]))
+                     for r in t.rows)
+        columns = tuple(name for _ in t.columns for name in ("Flip", "Cos."))
+        groups = tuple((t.column_labels.get(c, c), len(t.parts)) for c in t.columns)
+        return Table(t.key, t.title, t.caption, "Src.", columns, rows, groups=groups, math=math_mode, source="paper")
+    rows = tuple(Row(t.row_labels.get(r, r), tuple(tuple(part(p) for p in t.cells[(r, c)]) for c in t.columns))
+                 for r in t.rows)
+    corner = "Parameter" if t.key == "morphology_support" else "Target"
+    return Table(t.key, t.title, t.caption, corner, tuple(t.column_labels.get(c, c) for c in t.columns), rows,
+                 math=math_mode, source="paper")
+
+
+def paper_compute_table() -> Table:
+    """The paper's training-compute table (ranges as printed, expert-pool methods in their own section)."""
+    def rng(text: str, bold: bool) -> Part:
+        return Part(None, text=text.replace("--", "–"), bold=bold)
+
+    rows: list[Row] = []
+    for i, r in enumerate(paper.TRAINING_COMPUTE):
+        if r.expert_pool and not paper.TRAINING_COMPUTE[i - 1].expert_pool:
+            rows.append(Row("Expert-pool / selected-expert methods"))
+        rows.append(Row(r.label, (
+            (Part(None, text=r.transitions_text),), (Part(None, text=r.iterations_text),),
+            (rng(r.sec_per_iter_text, "sec_per_iter" in r.bold),), (rng(r.gpu_hours_text, "gpu_hours" in r.bold),),
+            (rng(r.gpu_hours_400m_text, "gpu_hours_400m" in r.bold),), (Part(None, text=r.notes),))))
+    return Table("training_compute", paper.TRAINING_COMPUTE_TITLE,
+                 "Total transitions, PPO iterations, seconds per iteration, single-GPU hours and GPU-hours per 400M "
+                 "transitions.", "Method", ("Transitions", "Iters.", "Sec/iter", "GPU-h", "GPU-h@400M", "Notes"),
+                 tuple(rows), math=False, source="paper")

@@ -1,0 +1,140 @@
+"""Aggregation over seeds, bold marks, and the LaTeX / Markdown renderers, against hand-computed numbers."""
+
+from __future__ import annotations
+
+import math
+import statistics
+
+import pytest
+
+from morfic_cli.report import paper
+from morfic_cli.report.compare import add_paper_columns, compute_rows, pooled_std, transfer_rows
+from morfic_cli.report.gather import RunInfo, StoreData
+from morfic_cli.report.latex import cell_latex, document_latex, escape, table_latex
+from morfic_cli.report.markdown import table_markdown
+from morfic_cli.report.model import Part, Row, Table, bold_best, number_text
+from morfic_cli.report.tables import fixed_rollout_table, paper_table, transfer_table
+
+
+def _run(variant: str, seed: int, wall: float = 36.0, steps: int = 1000, iters: int = 10) -> RunInfo:
+    return RunInfo(spec=f"runs/{variant}-s{seed}", name=f"{variant}-s{seed}", checkpoint=f"{variant}{seed}" * 8,
+                   variant=variant, seed=seed, preset="cpu", iteration=iters, max_iterations=iters, env_steps=steps,
+                   wall_time_s=wall, device="cpu", finished=True, created="")
+
+
+def _eval(run: RunInfo, robot: str, vx: float, std: float, s: float) -> dict:
+    return {"run": run.name, "variant": run.variant, "seed": run.seed, "preset": run.preset,
+            "checkpoint": run.checkpoint, "robot": robot, "mode": "descriptor", "command_vx": 2.0, "d": 0.3,
+            "vx_mean": vx, "vx_std": std, "vx_max_mean": vx + 0.1, "vx_max_std": std, "survival": s,
+            "tracking_ratio": vx / 2, "valid_fraction": s, "num_envs": 64, "steps": 500}
+
+
+def test_mean_and_std_over_seeds_by_hand():
+    a, b = _run("film", 0), _run("film", 1)
+    data = StoreData(runs=[a, b], evals=[_eval(a, "aliengo", 1.0, 0.3, 0.5), _eval(b, "aliengo", 2.0, 0.4, 1.0)])
+    (row,) = transfer_rows(data)
+    assert row["n_seeds"] == 2 and row["runs"] == "film-s0;film-s1"
+    assert row["vx"] == pytest.approx(1.5)
+    assert row["vx_seed_std"] == pytest.approx(statistics.stdev([1.0, 2.0]))  # 0.7071
+    # pooled over envs: sqrt(mean(0.09, 0.16) + var_pop(1, 2)) = sqrt(0.125 + 0.25)
+    assert row["vx_std"] == pytest.approx(math.sqrt(0.375))
+    assert row["survival"] == pytest.approx(0.75)
+    assert row["cell"] == "1.50 ± 0.61 / 0.750"
+    one = transfer_rows(StoreData(runs=[a], evals=[_eval(a, "go1", 1.234, 0.2, 0.5)]))[0]
+    assert one["vx_seed_std"] is None and one["vx_std"] == pytest.approx(0.2)  # one seed: the paper's σ over envs
+    assert pooled_std([None], [None]) is None
+
+
+def test_paper_columns_and_compute_normalisation():
+    a = _run("film", 0, wall=7200.0, steps=100_000_000, iters=4000)
+    (c,) = compute_rows(StoreData(runs=[a]))
+    assert c["device_hours"] == pytest.approx(2.0) and c["s_per_iteration"] == pytest.approx(1.8)
+    assert c["device_hours_400m"] == pytest.approx(8.0)
+    (cp,) = add_paper_columns([c])
+    assert cp["paper_s_per_iteration"] == "1.98-2.70" and cp["paper_table"] == "tab:training_compute"
+    (t,) = add_paper_columns(transfer_rows(StoreData(runs=[a], evals=[_eval(a, "b1", 0.2, 0.1, 1.0)])))
+    assert t["paper_vx"] == 0.22 and t["paper_survival"] == 1.0 and t["paper_vx_max"] is None
+
+
+def test_bold_best_ties_and_missing():
+    assert bold_best([0.2, None, 0.5, 0.5], True) == [False, False, True, True]
+    assert bold_best([0.2, float("nan"), 0.1], False) == [False, False, True]
+    assert bold_best([None, None], True) == [False, False]
+
+
+def test_transfer_table_bolds_best_speed_and_survival_per_robot_independently():
+    a, b = _run("ppo", 0), _run("film", 0)
+    rows = transfer_rows(StoreData(runs=[a, b], evals=[_eval(a, "go1", 1.9, 0.3, 0.9), _eval(b, "go1", 2.1, 0.5, 0.5)]))
+    table = transfer_table(rows, key="k", title="t", command_vx=2.0, mode="descriptor")
+    assert table.columns == ("PPO", "MorFiC-F")
+    (row,) = table.rows
+    assert [[p.bold for p in cell] for cell in row.cells] == [[False, True], [True, False]]
+    assert cell_latex(row.cells[0], True) == r"$1.90{\pm}0.30/\mathbf{0.900}$"
+    assert cell_latex(row.cells[1], True) == r"$\mathbf{2.10{\pm}0.50}/0.500$"
+    assert transfer_table(rows, key="k", title="t", command_vx=2.5, mode="descriptor") is None
+
+
+def test_fixed_rollout_table_never_bolds_the_mc_reference():
+    rows = [{"preset": "cpu", "variant": v, "robot": "aliengo", "flip": f, "cos_grad": c, "actors": "film-s0"}
+            for v, f, c in (("mc", 0.0, 1.0), ("film", 0.25, 0.4), ("ppo", 0.3, -0.1))]
+    table = fixed_rollout_table(rows)
+    assert [r.label for r in table.rows] == ["MC", "PPO", "MorFiC-F"]
+    assert table.groups == (("AlienGo", 2),)
+    bold = {r.label: [c[0].bold for c in r.cells] for r in table.rows}
+    assert bold == {"MC": [False, False], "PPO": [False, False], "MorFiC-F": [True, True]}
+
+
+def test_renderers_on_a_paper_table_keep_its_bold_marks_and_missing_entries():
+    t = paper_table(paper.CROSS_EMBODIMENT_BASELINES)
+    md = table_markdown(t)
+    assert "| AlienGo | - / - | 0.30 ± 0.28 / 0.234 |" in md
+    assert "**1.98 ± 0.51** / **1.000**" in md
+    tex = table_latex(t)
+    assert r"\label{tab:paper-cross_embodiment_baselines}" in tex and r"\resizebox" in tex
+    assert r"$\mathbf{2.86{\pm}0.11}/0.969$" in tex
+    support = table_latex(paper_table(paper.MORPHOLOGY_SUPPORT))
+    assert r"\textbf{4.300}$\uparrow$" in support and r"\textbf{-0.720}$\uparrow$" in support
+    fixed = table_latex(paper_table(paper.CAUSAL_ADV_ALL))
+    assert r"\cmidrule(lr){2-3}" in fixed and r"\multicolumn{2}{c}{\textbf{AlienGo}}" in fixed
+
+
+def test_latex_escaping_and_document():
+    assert escape("mini_cheetah 50% & #1 ± σ") == r"mini\_cheetah 50\% \& \#1 $\pm$ $\sigma$"
+    assert escape("run `morfic store ls`") == r"run \texttt{morfic store ls}"
+    assert number_text(-0.0001, 2) == "0.00" and number_text(None, 2) == "-"
+    t = Table("k", "T", "c", "Target", ("A",), (Row("x_y", ((Part(1.0, None, 1, True),),)), Row("section")),
+              math=False)
+    doc = document_latex("Title", [("S", table_latex(t))])
+    assert r"\usepackage{booktabs}" in doc and r"x\_y & \textbf{1.0} \\" in doc
+    assert r"\multicolumn{2}{l}{\textit{section}}" in doc
+
+
+def test_several_presets_are_labelled_apart():
+    import dataclasses
+
+    a = _run("film", 0)
+    b = dataclasses.replace(_run("film", 0), preset="smoke", checkpoint="s" * 64, name="film-smoke-s0")
+    rows = transfer_rows(StoreData(runs=[a, b], evals=[_eval(a, "go2", 2.0, 0.3, 1.0), _eval(b, "go2", 0.1, 0.1, 0.0)]))
+    assert [(r["preset"], r["n_seeds"]) for r in rows] == [("cpu", 1), ("smoke", 1)]  # never averaged together
+    table = transfer_table(rows, key="k", title="t", command_vx=2.0, mode="descriptor")
+    assert table.columns == ("MorFiC-F (cpu)", "MorFiC-F (smoke)")
+
+
+def test_where_a_run_executed_is_not_part_of_its_identity():
+    from morfic_cli.report.pipeline import experiment_config
+    from morfic_cli.rl.config import apply_overrides, preset_cfg, train_cfg_to_dict
+
+    base = preset_cfg("smoke", "film")
+    moved = apply_overrides(base, ["env.sim.num_threads=16", "env.sim.device=cuda:0"])
+    other = apply_overrides(base, ["ppo.gamma=0.98"])
+    assert experiment_config(train_cfg_to_dict(moved)) == experiment_config(train_cfg_to_dict(base))
+    assert experiment_config(train_cfg_to_dict(other)) != experiment_config(train_cfg_to_dict(base))
+
+
+def test_ablation_columns_follow_the_papers_order():
+    from morfic_cli.report.tables import ABLATION_VARIANTS
+
+    runs = [_run(v, 0) for v in ("adaln", "hyper", "film-scaled", "film", "ppo")]
+    rows = transfer_rows(StoreData(runs=runs, evals=[_eval(r, "go2", 1.0, 0.1, 1.0) for r in runs]))
+    table = transfer_table(rows, key="k", title="t", command_vx=2.0, mode="descriptor", variants=ABLATION_VARIANTS)
+    assert table.columns == ("MorFiC-F", "MorFiC-F(Scaled)", "MorFiC-H", "MorFiC-A")
