@@ -148,11 +148,44 @@ def check_step_data(data: Mapping[str, Any], num_envs: int, num_terms: int) -> d
     return out
 
 
+def shortest_decimals(a: np.ndarray) -> np.ndarray:
+    """For each float32 value, the double nearest to the shortest decimal that reads back to it.
+
+    Vectorised: for k = 1..9 significant digits, round to k digits (m / 10^j, a correctly rounded division, so
+    ``repr`` of the double prints those k digits) and keep the first k whose float32 equals the value. 9 digits
+    always suffice for float32; anything left (non-finite values, rare rounding corners) keeps the exact double of
+    the float32, which also reads back exactly.
+
+    Args:
+        a: float32 array, any shape.
+
+    Returns:
+        float64 array of the same shape.
+    """
+    x = a.astype(np.float64)
+    out = x.copy()
+    todo = np.isfinite(x) & (x != 0.0)
+    if not todo.any():
+        return out
+    with np.errstate(all="ignore"):
+        exp10 = np.floor(np.log10(np.abs(np.where(todo, x, 1.0))))
+        for k in range(1, 10):
+            j = k - 1 - exp10  # decimal places of k significant digits
+            scale = 10.0 ** np.abs(j)
+            r = np.where(j >= 0, np.round(x * scale) / scale, np.round(x / scale) * scale)
+            ok = todo & (r.astype(np.float32) == a)
+            out[ok] = r[ok]
+            todo &= ~ok
+            if not todo.any():
+                break
+    return out
+
+
 def json_floats(a: np.ndarray) -> list:
     """A float32 array as nested lists of floats that JSON prints as the shortest decimal reading back to it.
 
-    Each element becomes the double nearest to the shortest decimal of its float32 value (so ``json.dumps``
-    writes e.g. ``0.1``, not ``0.10000000149011612``); non-finite values become None (JSON ``null``).
+    Each element becomes :func:`shortest_decimals`' double (so ``json.dumps`` writes e.g. ``0.1``, not
+    ``0.10000000149011612``); non-finite values become None (JSON ``null``).
 
     Args:
         a: float32 array, any shape.
@@ -160,10 +193,7 @@ def json_floats(a: np.ndarray) -> list:
     Returns:
         ``a.tolist()``-shaped nested lists.
     """
-    d = a.astype(str).astype(np.float64)
-    exact = d.astype(np.float32) == a
-    if not exact.all():  # NaN, or a double-rounding corner case: fall back to the exact double of the float32
-        d = np.where(exact, d, a.astype(np.float64))
+    d = shortest_decimals(a)
     finite = np.isfinite(a)
     return d.tolist() if finite.all() else np.where(finite, d, None).tolist()
 
