@@ -231,6 +231,7 @@ class TrainingRun:
         self.dist = distributed_info()
         cfg = for_device(cfg, device)
         self.store, self.cfg, self.name, self.device = store, cfg, name, torch_device(device)
+        self.git_commit = git_commit()  # the code this process runs (HEAD may move while it trains)
         torch.manual_seed(cfg.seed)
         # under torchrun every rank simulates its own envs: seed + rank (rank 0 = a single-process run)
         self.env = LocomotionEnv(cfg.env, mode="train", seed=cfg.seed + self.dist.rank)
@@ -299,7 +300,7 @@ class TrainingRun:
         meta = {
             "variant": self.cfg.variant, "seed": self.cfg.seed, "preset": self.cfg.preset, "iteration": self.iteration,
             "max_iterations": self.cfg.max_iterations, "env_steps": logger.tot_timesteps,
-            "wall_time_s": round(logger.wall_time_s, 3), "git_commit": git_commit(), "finished": finished,
+            "wall_time_s": round(logger.wall_time_s, 3), "git_commit": self.git_commit, "finished": finished,
             "interrupted": interrupted, "parent": self.parent, "device": self.device, "run": self.name,
             "vx_max": float(self.env.command_ranges.vx[1]),
         }
