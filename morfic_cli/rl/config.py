@@ -92,7 +92,8 @@ def cpu_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
     iteration (5 epochs: 5.5 s of 7.5 s at 512 envs), so fewer epochs buy more iterations per hour. Action
     latency is sampled in 0..2 policy steps instead of the paper's 0..6: with 3 % of the paper's transitions,
     up to 120 ms of latency is a third of a 3 Hz gait cycle, a hard start for a small budget (docs/training.md);
-    the evaluation protocol has no latency either way. Everything else (morphology support, pushes, friction) is the paper's.
+    the evaluation protocol has no latency either way. Everything else (morphology support, pushes, friction) is
+    the paper's.
     """
     env = EnvCfg(num_envs=512)
     env = dataclasses.replace(env, rand=dataclasses.replace(env.rand, max_latency_steps=2))
