@@ -9,5 +9,5 @@
 - :mod:`~morfic_cli.diagnostics.fixed_rollout`: ``morfic diagnose --fixed-rollout ROBOT`` (one actor, many critics).
 - :mod:`~morfic_cli.diagnostics.figures`: the EV figure.
 
-Importing this package imports nothing heavy; see docs/diagnostics.md for the equations and choices.
+Importing this package imports nothing heavy; see docs/metrics.md for the equations and choices.
 """

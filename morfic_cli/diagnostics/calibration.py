@@ -110,7 +110,7 @@ def check_horizon(gamma: float, cfg: DiagnoseCfg) -> int:
         raise MorficError(
             f"--steps {cfg.steps} is too short for Monte-Carlo returns: with gamma {gamma:g} and --trunc-eps "
             f"{cfg.trunc_eps:g} a sample counts only with at least {h} steps left before the rollout ends, so give "
-            f"--steps above {h} (e.g. {h + 500}) or a larger --trunc-eps (see docs/diagnostics.md)."
+            f"--steps above {h} (e.g. {h + 500}) or a larger --trunc-eps (see docs/metrics.md)."
         )
     return h
 

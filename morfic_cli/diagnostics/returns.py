@@ -7,7 +7,7 @@ ended its episode when ``done[t, i]`` (the env was reset, row t+1 starts a new e
 - by *truncation*: a time-out (``done`` and ``time_out``) or the end of the recording (row T-1 without ``done``).
   The rewards after the cut are unknown, so the recorded return misses a tail.
 
-The return of (t, i) is summed up to the end e of its episode, eq. (mc_return) in docs/diagnostics.md::
+The return of (t, i) is summed up to the end e of its episode, eq. (mc_return) in docs/metrics.md::
 
     G_hat[t, i] = sum_{k=t}^{e} gamma^(k-t) r[k, i]
 
