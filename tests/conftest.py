@@ -46,3 +46,14 @@ def gl_backend():
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("MUJOCO_GL", backend)
         yield backend
+
+
+@pytest.fixture
+def one_torch_thread():
+    """Torch on one thread for the test (tiny batches run faster than on threads contending for 2 cores)."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

@@ -17,6 +17,7 @@ from morfic_cli.cli._options import (
     SeedOpt,
     StoreOpt,
 )
+from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
 from morfic_cli.errors import MorficError
 
@@ -104,6 +105,7 @@ def diagnose(
     if not command_vx == command_vx:  # NaN
         raise MorficError("--command-vx must be a number in m/s, e.g. 2.0.")
     st = Store(store)
+    settings = dict(mode=mode, command_vx=command_vx, num_envs=envs, steps=steps, seed=seed, trunc_eps=trunc_eps)
     if fixed_rollout is None:
         if actor is not None or critics is not None:
             raise MorficError(
@@ -120,15 +122,7 @@ def diagnose(
         names = parse_robot_list(robots)
         if not names:
             raise MorficError("--robots is empty; give 'all' or names such as go1,a1 (see `morfic robots ls`).")
-        cfg = DiagnoseCfg(
-            robots=tuple(names),
-            mode=mode,
-            command_vx=command_vx,
-            num_envs=envs,
-            steps=steps,
-            seed=seed,
-            trunc_eps=trunc_eps,
-        )
+        cfg = DiagnoseCfg(robots=tuple(names), **settings)
         _calibration(st, list(runs), cfg, out, fmt, quiet)
     else:
         if runs:
@@ -143,15 +137,7 @@ def diagnose(
         critic_specs = [c.strip() for c in critics.split(",") if c.strip()] if critics is not None else None
         if critics is not None and not critic_specs:
             raise MorficError("--critics is empty; give runs such as runs/film-s0,runs/ppo-s0, or leave it out.")
-        cfg = DiagnoseCfg(
-            robots=(robot,),
-            mode=mode,
-            command_vx=command_vx,
-            num_envs=envs,
-            steps=steps,
-            seed=seed,
-            trunc_eps=trunc_eps,
-        )
+        cfg = DiagnoseCfg(robots=(robot,), **settings)
         _fixed(st, robot, actor, critic_specs, cfg, out, fmt, quiet)
 
 
@@ -162,8 +148,8 @@ def _calibration(st, specs: list[str], cfg, out: Path | None, fmt: OutputFormat,
     trained = [load_trained(st, s) for s in specs]  # bad refs fail here, before the progress bar starts
     for t in trained:
         check_horizon(t.cfg.ppo.gamma, cfg)
-    with _progress(len(specs) * len(cfg.robots) * cfg.steps, quiet) as progress:
-        result = diagnose_runs(st, specs, cfg, trained=trained, on_rollout_start=progress.start, on_step=progress.step)
+    with StepBar("diagnose", len(specs) * len(cfg.robots) * cfg.steps, quiet) as bar:
+        result = diagnose_runs(st, specs, cfg, trained=trained, on_rollout_start=_describe(bar), on_step=bar.step)
     _write_out(out, result.rows, CALIBRATION_COLUMNS)
     if not quiet:
         reused = sum(r["reused"] for r in result.rows)
@@ -196,8 +182,8 @@ def _fixed(
     from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS, fixed_rollout, load_models
 
     models = load_models(st, actor, critics, cfg)  # defaults, bad refs, incompatible critics fail here
-    with _progress(cfg.steps, quiet) as progress:
-        result = fixed_rollout(st, robot, models, cfg, on_rollout_start=progress.start, on_step=progress.step)
+    with StepBar("diagnose", cfg.steps, quiet) as bar:
+        result = fixed_rollout(st, robot, models, cfg, on_rollout_start=_describe(bar), on_step=bar.step)
     _write_out(out, result.rows, FIXED_ROLLOUT_COLUMNS)
     if not quiet:
         how = "reused" if result.rows[0]["reused"] else "collected"
@@ -231,38 +217,6 @@ def _write_out(out: Path | None, rows: list[dict], columns: tuple[str, ...]) -> 
     out.write_bytes(rows_to_csv(rows, columns))
 
 
-class _progress:
-    """A rich progress bar over the policy steps of the rollouts (stderr; nothing when quiet)."""
-
-    def __init__(self, total: int, quiet: bool) -> None:
-        self.total, self.quiet = total, quiet
-        self.bar = None
-        self.task = None
-
-    def __enter__(self) -> _progress:
-        if not self.quiet:
-            from rich.console import Console
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-            self.bar = Progress(
-                TextColumn("[bold]diagnose[/] {task.description}"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TimeRemainingColumn(),
-                console=Console(stderr=True),
-            )
-            self.bar.__enter__()
-            self.task = self.bar.add_task("", total=self.total)
-        return self
-
-    def start(self, run: str, robot: str) -> None:
-        if self.bar is not None:
-            self.bar.update(self.task, description=f"{run} on {robot}")
-
-    def step(self, t: int) -> None:  # noqa: ARG002
-        if self.bar is not None:
-            self.bar.advance(self.task)
-
-    def __exit__(self, *exc) -> None:
-        if self.bar is not None:
-            self.bar.__exit__(*exc)
+def _describe(bar: StepBar):
+    """on_rollout_start(run, robot) -> the bar's description."""
+    return lambda run, robot: bar.describe(f"{run} on {robot}")

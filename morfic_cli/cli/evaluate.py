@@ -17,6 +17,7 @@ from morfic_cli.cli._options import (
     SeedOpt,
     StoreOpt,
 )
+from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
 from morfic_cli.errors import MorficError
 
@@ -74,8 +75,9 @@ def evaluate(
 
     trained = load_trained(st, run)  # bad refs fail here, before the progress bar starts
 
-    with _progress(len(names) * len(modes) * len(commands) * steps, quiet) as progress:
-        result = run_eval(st, run, cfg, on_rollout_start=progress.start, on_step=progress.step,
+    with StepBar("eval", len(names) * len(modes) * len(commands) * steps, quiet) as bar:
+        result = run_eval(st, run, cfg, on_rollout_start=lambda r, m, vx: bar.describe(f"{r} {m} vx={vx:g}"),
+                          on_step=bar.step,
                           keep_models=4 if video else 0, trained=trained)
     if video:
         from morfic_cli.evaluation.media import store_videos
@@ -106,35 +108,3 @@ def evaluate(
         title=f"zero-shot transfer of {run}",
         caption="v_x: mean forward velocity over alive steps; S: survival; validity: moving, upright, no dragging",
     )
-
-
-class _progress:
-    """A rich progress bar over all policy steps of the evaluation (stderr; nothing when quiet)."""
-
-    def __init__(self, total: int, quiet: bool) -> None:
-        self.total, self.quiet = total, quiet
-        self.bar = None
-        self.task = None
-
-    def __enter__(self) -> _progress:
-        if not self.quiet:
-            from rich.console import Console
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-            self.bar = Progress(TextColumn("[bold]eval[/] {task.description}"), BarColumn(), MofNCompleteColumn(),
-                                TimeRemainingColumn(), console=Console(stderr=True))
-            self.bar.__enter__()
-            self.task = self.bar.add_task("", total=self.total)
-        return self
-
-    def start(self, robot: str, mode: str, vx: float) -> None:
-        if self.bar is not None:
-            self.bar.update(self.task, description=f"{robot} {mode} vx={vx:g}")
-
-    def step(self, t: int) -> None:  # noqa: ARG002
-        if self.bar is not None:
-            self.bar.advance(self.task)
-
-    def __exit__(self, *exc) -> None:
-        if self.bar is not None:
-            self.bar.__exit__(*exc)

@@ -48,10 +48,9 @@ from morfic_cli.errors import MorficError
 from morfic_cli.morphology.apply import TemplateInfo, apply_descriptor, clamp_to_limits, model_joint_ranges, summarize
 from morfic_cli.morphology.builder import build_model
 from morfic_cli.morphology.robots import JOINTS, LEGS, RobotSpec
+from morfic_cli.sim.args import NUM_JOINTS, dynamics_rows, env_index, env_rows
 from morfic_cli.sim.backend import CONTACT_BODIES, SimFrame, SimParams
 from morfic_cli.sim.floor import STATE_SPEC, BatchStepper
-
-NUM_JOINTS = len(LEGS) * len(JOINTS)
 
 
 def restitution_to_dampratio(e: np.ndarray) -> np.ndarray:
@@ -212,16 +211,9 @@ class CpuBackend:
             self._sensordata[env] = data.sensordata
 
     def _ids(self, env_ids: torch.Tensor | np.ndarray) -> np.ndarray:
-        ids = _numpy(env_ids).astype(np.int64).reshape(-1)
-        if ids.size and (ids.min() < 0 or ids.max() >= self.num_envs):
-            raise MorficError(f"env ids must be in [0, {self.num_envs}), got {ids.min()}..{ids.max()}.")
-        return ids
+        return env_index(env_ids, self.num_envs)
 
-    def _rows(self, value: torch.Tensor | np.ndarray, k: int, shape: tuple[int, ...], what: str) -> np.ndarray:
-        arr = _numpy(value).astype(np.float64)
-        if arr.shape != (k, *shape):
-            raise MorficError(f"{what}: expected shape {(k, *shape)}, got {tuple(arr.shape)}.")
-        return arr
+    _rows = staticmethod(env_rows)
 
     def _tensor(self, arr: np.ndarray, dtype: torch.dtype = torch.float32) -> torch.Tensor:
         return torch.as_tensor(np.ascontiguousarray(arr)).to(device=self.device, dtype=dtype)
@@ -383,14 +375,7 @@ class CpuBackend:
         """
         ids = self._ids(env_ids)
         k = ids.size
-        mu = self._rows(friction, k, (), "friction")
-        e = self._rows(restitution, k, (), "restitution")
-        com = self._rows(com_offset, k, (3,), "com_offset")
-        jf = self._rows(joint_friction, k, (NUM_JOINTS,), "joint_friction")
-        if np.any(~np.isfinite(mu) | (mu < 0)) or np.any(~np.isfinite(jf) | (jf < 0)):
-            raise MorficError("friction and joint_friction must be finite and >= 0.")
-        if np.any(~np.isfinite(e) | (e < 0) | (e >= 1)) or not np.all(np.isfinite(com)):
-            raise MorficError("restitution must be in [0, 1) and com_offset finite.")
+        mu, e, com, jf = dynamics_rows(k, friction, restitution, com_offset, joint_friction)
         zeta = restitution_to_dampratio(e)
         for j, env in enumerate(ids):
             model = self.models[env]
@@ -423,9 +408,3 @@ class CpuBackend:
         """Stop the thread pool and drop the models."""
         self._stepper.close()
         self.models = []
-
-
-def _numpy(value: torch.Tensor | np.ndarray | float) -> np.ndarray:
-    if isinstance(value, torch.Tensor):
-        return value.detach().cpu().numpy()
-    return np.asarray(value)

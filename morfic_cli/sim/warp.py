@@ -73,6 +73,7 @@ from morfic_cli.morphology.apply import (
 from morfic_cli.morphology.builder import build_model
 from morfic_cli.morphology.descriptor import as_descriptor
 from morfic_cli.morphology.robots import LEGS, RobotSpec
+from morfic_cli.sim.args import dynamics_rows, env_index, env_rows
 from morfic_cli.sim.backend import CONTACT_BODIES, SimFrame, SimParams
 from morfic_cli.sim.cpu import NUM_JOINTS, SensorLayout, restitution_to_dampratio
 from morfic_cli.sim.floor import STATE_SPEC
@@ -386,16 +387,9 @@ class WarpBackend:
         return torch.cat([self._time[:, None], self._qpos, self._qvel], dim=1).double()
 
     def _ids(self, env_ids: torch.Tensor | np.ndarray) -> np.ndarray:
-        ids = _numpy(env_ids).astype(np.int64).reshape(-1)
-        if ids.size and (ids.min() < 0 or ids.max() >= self.num_envs):
-            raise MorficError(f"env ids must be in [0, {self.num_envs}), got {ids.min()}..{ids.max()}.")
-        return ids
+        return env_index(env_ids, self.num_envs)
 
-    def _rows(self, value: torch.Tensor | np.ndarray, k: int, shape: tuple[int, ...], what: str) -> np.ndarray:
-        arr = _numpy(value).astype(np.float64)
-        if arr.shape != (k, *shape):
-            raise MorficError(f"{what}: expected shape {(k, *shape)}, got {tuple(arr.shape)}.")
-        return arr
+    _rows = staticmethod(env_rows)
 
     def _device_rows(self, value: torch.Tensor, k: int, shape: tuple[int, ...], what: str) -> torch.Tensor:
         if tuple(value.shape) != (k, *shape):
@@ -585,14 +579,7 @@ class WarpBackend:
         """
         ids = self._ids(env_ids)
         k = ids.size
-        mu = self._rows(friction, k, (), "friction")
-        e = self._rows(restitution, k, (), "restitution")
-        com = self._rows(com_offset, k, (3,), "com_offset")
-        jf = self._rows(joint_friction, k, (NUM_JOINTS,), "joint_friction")
-        if np.any(~np.isfinite(mu) | (mu < 0)) or np.any(~np.isfinite(jf) | (jf < 0)):
-            raise MorficError("friction and joint_friction must be finite and >= 0.")
-        if np.any(~np.isfinite(e) | (e < 0) | (e >= 1)) or not np.all(np.isfinite(com)):
-            raise MorficError("restitution must be in [0, 1) and com_offset finite.")
+        mu, e, com, jf = dynamics_rows(k, friction, restitution, com_offset, joint_friction)
         with self._on_stream():
             d_ids = torch.as_tensor(ids, device=self.device)
             f = self.fields
@@ -685,9 +672,3 @@ class WarpBackend:
             self._stream.synchronize()
         else:
             self._wp.synchronize_device(self._wp_device)
-
-
-def _numpy(value: torch.Tensor | np.ndarray | float) -> np.ndarray:
-    if isinstance(value, torch.Tensor):
-        return value.detach().cpu().numpy()
-    return np.asarray(value)

@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-import torch
+from smoke_runs import train_smoke_runs
 
 from morfic_cli.diagnostics.samples import DiagnoseCfg, collect_samples, load_samples
 from morfic_cli.store import Store
@@ -21,26 +21,14 @@ from morfic_cli.store import Store
 SMALL = ("--envs", "2", "--steps", "30", "--trunc-eps", "0.8")
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
 def smoke_store(tmp_path_factory):
     """Smoke-trained film and ppo checkpoints (ppo trained last: the newest run), shared by this module's tests."""
-    from morfic_cli.rl.config import smoke_preset
-    from morfic_cli.rl.runner import new_run
-
     root = tmp_path_factory.mktemp("smoke") / "store"
-    store = Store(root)
-    for variant in ("film", "ppo"):
-        run = new_run(store, smoke_preset(variant, seed=0), f"{variant}-s0")
-        run.train()
-        run.env.close()
+    train_smoke_runs(root, ("film", "ppo"))
     return root
 
 

@@ -9,13 +9,7 @@ import torch
 from morfic_cli.diagnostics.samples import OBS_GROUPS, decode_obs, encode_obs
 from morfic_cli.diagnostics.scoring import actor_gradients, batch_obs, critic_values
 
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

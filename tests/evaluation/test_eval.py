@@ -9,33 +9,20 @@ import os
 
 import numpy as np
 import pytest
-import torch
+from smoke_runs import train_smoke_runs
 
 from morfic_cli.evaluation.protocol import EvalCfg, evaluate, rollout_role
 from morfic_cli.morphology.robots import list_robots
 from morfic_cli.store import Store
 
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
 def smoke_store(tmp_path_factory):
     """One smoke-trained film checkpoint, shared by the tests of this module (copied per test)."""
-    from morfic_cli.rl.config import smoke_preset
-    from morfic_cli.rl.runner import new_run
-
     root = tmp_path_factory.mktemp("smoke") / "store"
-    store = Store(root)
-    cfg = smoke_preset("film", seed=0)
-    run = new_run(store, cfg, "film-s0")
-    run.train()
-    run.env.close()
+    train_smoke_runs(root)
     return root
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from smoke_runs import train_smoke_runs
 from tensordict import TensorDict
 
 from morfic_cli.evaluation.rollout import rollout_env_cfg, run_rollout
@@ -37,25 +38,14 @@ def example():
     sys.modules.pop("deploy_loop", None)
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
 def smoke(tmp_path_factory):
     """A smoke-trained film run, its go1 ONNX export (out/go1) and its descriptor-input export (out/any)."""
-    from morfic_cli.rl.config import smoke_preset
-    from morfic_cli.rl.runner import new_run
-
     base = tmp_path_factory.mktemp("deploy")
-    store = Store(base / "store")
-    run = new_run(store, smoke_preset("film", seed=0), "film-s0")
-    run.train()
-    run.env.close()
+    store = train_smoke_runs(base / "store")
     export_policy(store, "runs/film-s0", ExportCfg(robot="go1"), out=base / "go1")
     export_policy(store, "runs/film-s0", ExportCfg(), out=base / "any")
     return base

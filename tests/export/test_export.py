@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 import torch
+from smoke_runs import train_smoke_runs
 from tensordict import TensorDict
 
 from morfic_cli.export.artifact import ExportCfg, check_export, export_policy, plan_export, serialise
@@ -22,25 +23,14 @@ pytest.importorskip("onnxruntime")
 pytest.importorskip("onnxscript")
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
 def smoke_store(tmp_path_factory):
     """A smoke-trained film run and its go1 ONNX export (with joint targets, also written to out/)."""
-    from morfic_cli.rl.config import smoke_preset
-    from morfic_cli.rl.runner import new_run
-
     base = tmp_path_factory.mktemp("export")
-    store = Store(base / "store")
-    run = new_run(store, smoke_preset("film", seed=0), "film-s0")
-    run.train()
-    run.env.close()
+    store = train_smoke_runs(base / "store")
     export_policy(store, "runs/film-s0", ExportCfg(robot="go1", targets=True), out=base / "out")
     return base
 

@@ -9,19 +9,13 @@ import re
 import shutil
 
 import pytest
-import torch
 
 from morfic_cli.store import Store
 
 VARIANTS = "film,ppo"
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

@@ -22,12 +22,7 @@ from morfic_cli.store import Store
 TIMING = {"wall_time_s", "steps_per_s", "collect_s", "learn_s"}
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _store() -> Store:

@@ -1,0 +1,20 @@
+"""Smoke-trained runs shared by the tests that need a real checkpoint (eval, diagnose, export, deploy)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from morfic_cli.store import Store
+
+
+def train_smoke_runs(root: Path, variants: tuple[str, ...] = ("film",), seed: int = 0) -> Store:
+    """Train each variant with the smoke preset into the store at ``root`` as ``runs/<variant>-s<seed>``, in order."""
+    from morfic_cli.rl.config import smoke_preset
+    from morfic_cli.rl.runner import new_run
+
+    store = Store(root)
+    for variant in variants:
+        run = new_run(store, smoke_preset(variant, seed=seed), f"{variant}-s{seed}")
+        run.train()
+        run.env.close()
+    return store
