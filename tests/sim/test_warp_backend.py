@@ -1,6 +1,8 @@
 """The warp backend (MuJoCo Warp) on warp's CPU device: parity with the CPU backend, per-world model fields.
 
-Everything here runs without a GPU. The module is skipped, with the reason, where mujoco_warp is not
+Everything here runs without a GPU. ``MORFIC_WARP_TEST_DEVICE=cuda`` runs the same tests with the warp
+backend on the GPU (``scripts/gpu_check.sh`` does; docs/gpu.md); the CPU backend is the reference either way.
+The module is skipped, with the reason, where mujoco_warp is not
 installed (``pip install 'morfic[gpu]'``). The first test in a fresh warp kernel cache compiles
 MuJoCo Warp's kernels for the CPU (about 40 s on a 2-core machine; cached in ~/.cache/warp).
 
@@ -18,7 +20,10 @@ Parity (docs/gpu.md), the same model, state and joint targets on both backends:
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -59,12 +64,16 @@ RUN_TOL: dict[str, float] = {
 """Largest difference allowed over 25 free-running policy steps (0.5 s), per frame field (its units)."""
 
 CFG = SimCfg(num_threads=1, device="cpu")
+"""The CPU backend's config (the reference)."""
+DEVICE = os.environ.get("MORFIC_WARP_TEST_DEVICE", "cpu")
+"""Where the warp backend runs here: warp's CPU device (default, CI) or the GPU ("cuda", scripts/gpu_check.sh)."""
+WARP_CFG = dataclasses.replace(CFG, device=DEVICE)
 
 
 def _pair(robot: str, n: int, *, template: bool, seed: int = 0) -> tuple[WarpBackend, CpuBackend]:
     """Both backends with the same random morphology (template), dynamics and initial state."""
     spec = load_robot(robot)
-    warp, cpu = WarpBackend(CFG, spec, n, template=template), CpuBackend(CFG, spec, n, template=template)
+    warp, cpu = WarpBackend(WARP_CFG, spec, n, template=template), CpuBackend(CFG, spec, n, template=template)
     ids, gen = torch.arange(n), torch.Generator().manual_seed(seed)
     if template:
         lo, hi = torch.tensor(TRAIN_MIN, dtype=torch.float64), torch.tensor(TRAIN_MAX, dtype=torch.float64)
@@ -120,13 +129,18 @@ def _assert_parity(warp: WarpBackend, cpu: CpuBackend, policy_steps: int, *, res
     return worst
 
 
-def test_parity_with_the_cpu_backend_on_the_template():
+def _record(record_property, name: str, worst: dict[str, float]) -> None:
+    """The worst differences into the JUnit XML report (``pytest --junitxml``; scripts/gpu_check.py reads them)."""
+    record_property(name, json.dumps(worst))
+
+
+def test_parity_with_the_cpu_backend_on_the_template(record_property):
     """Go2 template, a different random morphology and randomised dynamics in each of 4 worlds."""
     warp, cpu = _pair("go2", 4, template=True)
     try:
-        assert torch.equal(warp.params().default_joint_pos, cpu.params().default_joint_pos)
-        _assert_parity(warp, cpu, 25, resync=False)
-        _assert_parity(warp, cpu, 50, resync=True)
+        assert torch.equal(warp.params().default_joint_pos.cpu(), cpu.params().default_joint_pos)
+        _record(record_property, "worst_free_run", _assert_parity(warp, cpu, 25, resync=False))
+        _record(record_property, "worst_one_step", _assert_parity(warp, cpu, 50, resync=True))
     finally:
         warp.close()
         cpu.close()
@@ -134,17 +148,18 @@ def test_parity_with_the_cpu_backend_on_the_template():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("robot", list_robots())
-def test_parity_with_the_cpu_backend_for_each_robot(robot):
+def test_parity_with_the_cpu_backend_for_each_robot(robot, record_property):
     """Each robot's own model (full mode) and, on the template, its descriptor in every world."""
     for template in (False, True):
+        mode = "descriptor" if template else "full"
         warp, cpu = _pair(robot, 3, template=template, seed=1)
         if template:
             desc = torch.as_tensor(load_robot(robot).descriptor, dtype=torch.float64).expand(3, -1).clone()
             for b in (warp, cpu):
                 b.set_morphology(torch.arange(3), desc)
         try:
-            _assert_parity(warp, cpu, 25, resync=False)
-            _assert_parity(warp, cpu, 50, resync=True)
+            _record(record_property, f"worst_free_run_{mode}", _assert_parity(warp, cpu, 25, resync=False))
+            _record(record_property, f"worst_one_step_{mode}", _assert_parity(warp, cpu, 50, resync=True))
         finally:
             warp.close()
             cpu.close()
@@ -167,12 +182,13 @@ def test_per_world_morphology_really_differs_and_matches_mj_setconst():
         hip = warp.info.joint_ids[0, 0]
         assert len({tuple(r) for r in warp.fields["jnt_range"][:, hip].tolist()}) == 3, "and its own hip limits"
         p = warp.params()
-        torch.testing.assert_close(masses.double(), p.base_mass, rtol=1e-6, atol=0)
-        torch.testing.assert_close(warp.fields["jnt_range"][:, torch.tensor(warp.info.joint_ids.reshape(-1))].double(),
-                                   p.joint_range, rtol=1e-6, atol=1e-7)
+        torch.testing.assert_close(masses.double().cpu(), p.base_mass.cpu(), rtol=1e-6, atol=0)
+        joints = torch.tensor(warp.info.joint_ids.reshape(-1))
+        torch.testing.assert_close(warp.fields["jnt_range"][:, joints].double().cpu(), p.joint_range.cpu(),
+                                   rtol=1e-6, atol=1e-7)
         for name in ("joint_range", "default_joint_pos", "total_mass", "base_mass", "nominal_height", "friction",
                      "restitution", "com_offset", "joint_friction", "descriptor"):
-            torch.testing.assert_close(getattr(p, name), getattr(cpu.params(), name), rtol=1e-12, atol=1e-12)
+            torch.testing.assert_close(getattr(p, name).cpu(), getattr(cpu.params(), name), rtol=1e-12, atol=1e-12)
     finally:
         warp.close()
         cpu.close()
@@ -180,7 +196,7 @@ def test_per_world_morphology_really_differs_and_matches_mj_setconst():
 
 def test_a_heavier_base_sinks_further_in_its_own_world_only():
     """Per-world masses act on the physics: the same world-0 state, a much heavier base in world 1."""
-    warp = WarpBackend(CFG, load_robot("go2"), 2, template=True)
+    warp = WarpBackend(WARP_CFG, load_robot("go2"), 2, template=True)
     try:
         desc = torch.as_tensor(load_robot("go2").descriptor, dtype=torch.float64).repeat(2, 1)
         desc[1, 4] *= 1.6
@@ -203,7 +219,7 @@ def test_state_dict_moves_between_backends():
         warp.load_state_dict(cpu.state_dict())
         fw, fc = warp.frame(), cpu.frame()
         for k in STEP_TOL:  # the same state, rounded to float32
-            torch.testing.assert_close(getattr(fw, k), getattr(fc, k), rtol=1e-5, atol=1e-5, msg=k)
+            torch.testing.assert_close(getattr(fw, k).cpu(), getattr(fc, k).cpu(), rtol=1e-5, atol=1e-5, msg=k)
         assert warp.state_dict()["state"].shape == cpu.state_dict()["state"].shape
         with pytest.raises(ValueError, match="shape"):
             warp.load_state_dict({"state": torch.zeros(3, 38), "sensordata": torch.zeros(3, 1)})
@@ -213,14 +229,14 @@ def test_state_dict_moves_between_backends():
 
 
 def test_a_nonfinite_env_is_flagged_and_restored_alone():
-    warp = WarpBackend(CFG, load_robot("go2"), 3, template=True)
+    warp = WarpBackend(WARP_CFG, load_robot("go2"), 3, template=True)
     try:
         q0 = warp.params().default_joint_pos
         warp.step(q0, DECIMATION)
         state = warp.state_dict()
         state["state"][1, 5] = float("nan")
         warp.load_state_dict(state)
-        reference = WarpBackend(CFG, load_robot("go2"), 3, template=True)
+        reference = WarpBackend(WARP_CFG, load_robot("go2"), 3, template=True)
         reference.step(q0, DECIMATION)
         frame, ref = warp.step(q0, DECIMATION), reference.step(q0, DECIMATION)
         assert frame.bad.tolist() == [False, True, False]
@@ -237,7 +253,7 @@ def test_a_nonfinite_env_is_flagged_and_restored_alone():
 
 
 def test_factory_full_mode_and_bad_input():
-    backend = make_backend(SimCfg(backend="warp", device="cpu"), load_robot("a1"), 2, template=False)
+    backend = make_backend(SimCfg(backend="warp", device=DEVICE), load_robot("a1"), 2, template=False)
     try:
         assert isinstance(backend, WarpBackend) and not backend.morphology_mutable
         with pytest.raises(MorficError, match="full mode"):
@@ -248,15 +264,15 @@ def test_factory_full_mode_and_bad_input():
             backend.push(torch.tensor([5]), torch.zeros(1, 2))
     finally:
         backend.close()
-    assert isinstance(make_backend(SimCfg(backend="gpu", device="cpu"), load_robot("go2"), 1, template=True),
+    assert isinstance(make_backend(SimCfg(backend="gpu", device=DEVICE), load_robot("go2"), 1, template=True),
                       WarpBackend)
 
 
 @pytest.mark.slow
 def test_the_env_is_the_same_code_on_both_backends():
     """LocomotionEnv on warp vs cpu: same seed, same random draws, observations within the parity tolerance."""
-    envs = [LocomotionEnv(EnvCfg(num_envs=4, sim=SimCfg(num_threads=1, backend=b)), mode="train", seed=0)
-            for b in ("warp", "cpu")]
+    envs = [LocomotionEnv(EnvCfg(num_envs=4, sim=SimCfg(num_threads=1, backend=b, device=d)), mode="train", seed=0)
+            for b, d in (("warp", DEVICE), ("cpu", "cpu"))]
     try:
         gen = torch.Generator().manual_seed(0)
         for _ in range(10):
