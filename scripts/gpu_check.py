@@ -4,7 +4,7 @@ Run by the shell script, one sub-command per step (``python3 scripts/gpu_check.p
 
 - ``info OUT.json``: Python, torch, warp, mujoco, the GPU, and whether every requirement of morfic and of
   the carried wheels is met by what is installed (the device machine mixes its own packages with carried ones).
-- ``warmup DEVICE``: import MuJoCo Warp and compile (or load from warp's kernel cache) all its modules for
+- ``warmup DEVICE OUT.json``: import MuJoCo Warp and compile (or load from warp's kernel cache) all its modules for
   DEVICE in parallel, so that the timed steps after it do not compile one module at a time.
 - ``parity JUNIT.xml OUT.json``: the parity tests' outcomes and worst differences (recorded by
   tests/sim/test_warp_backend.py through ``record_property``) from pytest's JUnit XML.
@@ -232,7 +232,7 @@ def cmd_info(out: Path) -> None:
     print(json.dumps(doc, indent=2))
 
 
-def cmd_warmup(device: str) -> None:
+def cmd_warmup(device: str, out: Path) -> None:
     """Compile (or load from the kernel cache) every MuJoCo Warp module for ``device``, in parallel."""
     import mujoco_warp  # noqa: F401  (imports its kernels' modules)
     import warp as wp
@@ -240,8 +240,10 @@ def cmd_warmup(device: str) -> None:
     wp.init()
     t0 = time.perf_counter()
     wp.force_load(device=device, max_workers=os.cpu_count() or 1)
-    print(json.dumps({"warmup_device": device, "warmup_s": round(time.perf_counter() - t0, 1),
-                      "warp": wp.config.version, "kernel_cache": wp.config.kernel_cache_dir}))
+    doc = {"device": device, "seconds": round(time.perf_counter() - t0, 1), "warp": wp.config.version,
+           "kernel_cache": wp.config.kernel_cache_dir}
+    _write_json(out, doc)
+    print(json.dumps(doc))
 
 
 def cmd_parity(junit: Path, out: Path) -> None:
@@ -291,20 +293,25 @@ def cmd_summary(tmp: Path, out_dir: Path) -> None:
         "figures": figures(bench_env, bench_train if isinstance(bench_train, dict) else None,
                            train if isinstance(train, dict) else None, paper.sec_per_iter, paper.gpu_hours,
                            paper.iterations),
-        "bundle": _read_json(tmp / "bundle.json"),
+        "bundle": None,
     }
+    bundle = out_dir / "checkpoint.tar"
+    if bundle.exists():
+        doc["bundle"] = {"file": bundle.name, "bytes": bundle.stat().st_size,
+                         "manifest": _read_json(tmp / "bundle.json")}
     _write_json(out_dir / "summary.json", doc)
     print(json.dumps(doc, indent=2))
 
 
 def main(argv: list[str]) -> None:
     """Dispatch a sub-command (see the module docstring)."""
-    commands = {"info": (cmd_info, 1), "warmup": (cmd_warmup, 1), "parity": (cmd_parity, 2),
+    commands = {"info": (cmd_info, 1), "warmup": (cmd_warmup, 2), "parity": (cmd_parity, 2),
                 "summary": (cmd_summary, 2)}
     if not argv or argv[0] not in commands or len(argv) - 1 != commands[argv[0]][1]:
         sys.exit(f"usage: gpu_check.py {{{'|'.join(commands)}}} ARGS (see the docstring)")
     fn, _ = commands[argv[0]]
-    fn(*(Path(a) if fn is not cmd_warmup else a for a in argv[1:]))
+    args = [Path(a) for a in argv[1:]]
+    fn(*([argv[1], *args[1:]] if fn is cmd_warmup else args))
 
 
 if __name__ == "__main__":
