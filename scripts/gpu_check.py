@@ -6,7 +6,7 @@ Run by the shell script, one sub-command per step (``python3 scripts/gpu_check.p
   the carried wheels is met by what is installed (the device machine mixes its own packages with carried ones).
 - ``warmup DEVICE OUT.json``: import MuJoCo Warp and compile (or load from warp's kernel cache) all its modules for
   DEVICE in parallel, so that the timed steps after it do not compile one module at a time.
-- ``parity JUNIT.xml OUT.json``: the parity tests' outcomes and worst differences (recorded by
+- ``parity OUT.json JUNIT.xml...``: the warp tests' outcomes and worst differences (recorded by
   tests/sim/test_warp_backend.py through ``record_property``) from pytest's JUnit XML.
 - ``summary TMPDIR OUT.json``: every step's status and time, the figures docs/gpu.md asks for (env steps/s
   per env count, s/iteration at the preset against the paper's, projected hours of a 400M-transition run).
@@ -246,15 +246,21 @@ def cmd_warmup(device: str, out: Path) -> None:
     print(json.dumps(doc))
 
 
-def cmd_parity(junit: Path, out: Path) -> None:
-    """The parity report from pytest's JUnit XML (a missing report counts as a failed step)."""
-    if not junit.exists():
-        doc: dict[str, Any] = {"passed": 0, "failed": 0, "skipped": 0, "ok": False, "tests": [],
-                               "error": f"no JUnit report at {junit} (pytest killed by its timeout?)"}
-    else:
-        doc = parity_from_junit(junit.read_text())
-        doc["worst_one_step"] = worst_over_tests(doc, "worst_one_step")
-        doc["worst_free_run"] = worst_over_tests(doc, "worst_free_run")
+def merge_reports(reports: list[dict[str, Any] | None]) -> dict[str, Any]:
+    """One report of several :func:`parity_from_junit` results; ``None`` (no XML: pytest was killed) fails it."""
+    tests = [t for r in reports if r for t in r["tests"]]
+    counts = {k: sum(t["outcome"] == k for t in tests) for k in ("passed", "failed", "skipped")}
+    ok = all(r is not None and r["ok"] for r in reports) and bool(reports)
+    doc = {**counts, "ok": ok, "tests": tests}
+    doc["worst_one_step"] = worst_over_tests(doc, "worst_one_step")
+    doc["worst_free_run"] = worst_over_tests(doc, "worst_free_run")
+    return doc
+
+
+def cmd_parity(out: Path, *junits: Path) -> None:
+    """The parity report from pytest's JUnit XML files (a missing one counts as a failure)."""
+    doc = merge_reports([parity_from_junit(j.read_text()) if j.exists() else None for j in junits])
+    doc["missing_reports"] = [str(j) for j in junits if not j.exists()]
     doc["device"] = os.environ.get("MORFIC_WARP_TEST_DEVICE", "cpu")
     _write_json(out, doc)
     print(f"parity on {doc['device']}: {doc['passed']} passed, {doc['failed']} failed, {doc['skipped']} skipped")
@@ -289,7 +295,7 @@ def cmd_summary(tmp: Path, out_dir: Path) -> None:
         "steps": _steps(tmp / "steps.jsonl"),
         "parity": None if parity is None else {k: parity.get(k) for k in
                                                ("ok", "passed", "failed", "skipped", "worst_one_step",
-                                                "worst_free_run")},
+                                                "worst_free_run", "missing_reports")},
         "figures": figures(bench_env, bench_train if isinstance(bench_train, dict) else None,
                            train if isinstance(train, dict) else None, paper.sec_per_iter, paper.gpu_hours,
                            paper.iterations),
@@ -305,9 +311,10 @@ def cmd_summary(tmp: Path, out_dir: Path) -> None:
 
 def main(argv: list[str]) -> None:
     """Dispatch a sub-command (see the module docstring)."""
-    commands = {"info": (cmd_info, 1), "warmup": (cmd_warmup, 2), "parity": (cmd_parity, 2),
-                "summary": (cmd_summary, 2)}
-    if not argv or argv[0] not in commands or len(argv) - 1 != commands[argv[0]][1]:
+    commands = {"info": (cmd_info, 1), "warmup": (cmd_warmup, 2), "parity": (cmd_parity, -2),
+                "summary": (cmd_summary, 2)}  # -2: at least 2
+    if not argv or argv[0] not in commands or not (
+            len(argv) - 1 == commands[argv[0]][1] or (commands[argv[0]][1] < 0 and len(argv) > -commands[argv[0]][1])):
         sys.exit(f"usage: gpu_check.py {{{'|'.join(commands)}}} ARGS (see the docstring)")
     fn, _ = commands[argv[0]]
     args = [Path(a) for a in argv[1:]]

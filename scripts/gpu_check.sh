@@ -25,7 +25,8 @@
 #   MORFIC_GPU_CHECK_ITERATIONS bench train timed iterations                                          [5]
 #   MORFIC_GPU_CHECK_TRAIN_S    seconds of training before SIGINT (less if the budget is short)     [300]
 #   MORFIC_GPU_CHECK_TRAIN_SET  extra --set overrides of the training run, space-separated     [save_interval=25]
-#   MORFIC_GPU_CHECK_PARITY_K   pytest -k expression for the parity step (empty: the whole file)        []
+#   MORFIC_GPU_CHECK_PARITY_K   pytest -k expression of the parity step                            [parity]
+#   MORFIC_GPU_CHECK_OTHER_K    pytest -k expression of the other warp tests (empty: skip them) [not parity]
 #   MORFIC_GPU_CHECK_WARMUP     1: compile MuJoCo Warp's modules in parallel before the timed steps     [1]
 #   MORFIC_GPU_CHECK_BUDGET_S   wall-time budget of the check; later steps shrink to fit           [560]
 #   MORFIC_GPU_CHECK_WORK       scratch folder (parts, wheels, site, store)                 [/tmp/morfic-gpu]
@@ -46,7 +47,8 @@ PRESET=${MORFIC_GPU_CHECK_PRESET:-paper}
 ITERATIONS=${MORFIC_GPU_CHECK_ITERATIONS:-5}
 TRAIN_S=${MORFIC_GPU_CHECK_TRAIN_S:-300}
 TRAIN_SET=${MORFIC_GPU_CHECK_TRAIN_SET:-save_interval=25}
-PARITY_K=${MORFIC_GPU_CHECK_PARITY_K:-}
+PARITY_K=${MORFIC_GPU_CHECK_PARITY_K:-parity}
+OTHER_K=${MORFIC_GPU_CHECK_OTHER_K-not parity}
 WARMUP=${MORFIC_GPU_CHECK_WARMUP:-1}
 BUDGET_S=${MORFIC_GPU_CHECK_BUDGET_S:-560}
 PIP_ARGS=${MORFIC_GPU_CHECK_PIP_ARGS:-}
@@ -138,7 +140,7 @@ step() {
 }
 
 check() {
-  rm -rf "$WORK/store" "$WORK/steps.jsonl" "$WORK/parity.xml" "$WORK/info.json" "$WORK/warmup.json"
+  rm -rf "$WORK/store" "$WORK/steps.jsonl" "$WORK"/*.xml "$WORK/info.json" "$WORK/warmup.json"
   rm -f "$OUT"/summary.json "$OUT"/parity.json "$OUT"/bench_*.json "$OUT"/train.json "$OUT"/checkpoint.tar
   say "device=$DEVICE envs=$ENVS preset=$PRESET train=${TRAIN_S}s budget=${BUDGET_S}s python=$("$PY" -V 2>&1)"
   step info 60 "$WORK/info.log" "$PY" scripts/gpu_check.py info "$WORK/info.json"
@@ -151,14 +153,23 @@ check() {
     step warmup 150 "$WORK/warmup.log" "$PY" scripts/gpu_check.py warmup "$warp_dev" "$WORK/warmup.json"
   fi
 
+  # the parity tests first, then the file's other tests in a second pytest: a timeout in the second (whose
+  # JUnit report pytest writes at its end only) loses nothing of the first
   local pytest_args=(tests/sim/test_warp_backend.py -m "slow or not slow" -p no:cacheprovider -q -rA
-                     -o junit_family=xunit1 --junitxml "$WORK/parity.xml")
-  [ -n "$PARITY_K" ] && pytest_args+=(-k "$PARITY_K")
+                     -o junit_family=xunit1)
   "$PY" -c "import pytest_timeout" 2>/dev/null && pytest_args+=(--timeout 120)
   export MORFIC_WARP_TEST_DEVICE=$DEVICE
-  step parity 200 "$WORK/parity.log" "$PY" -m pytest "${pytest_args[@]}"
+  step parity 150 "$WORK/parity.log" "$PY" -m pytest "${pytest_args[@]}" -k "$PARITY_K" \
+    --junitxml "$WORK/parity.xml"
   cat "$WORK/parity.log" >> "$LOG" 2>/dev/null
-  "$PY" scripts/gpu_check.py parity "$WORK/parity.xml" "$OUT/parity.json" | tee -a "$LOG"
+  local reports=("$WORK/parity.xml")
+  if [ -n "$OTHER_K" ]; then
+    step warp_tests 90 "$WORK/warp_tests.log" "$PY" -m pytest "${pytest_args[@]}" -k "$OTHER_K" \
+      --junitxml "$WORK/warp_tests.xml"
+    cat "$WORK/warp_tests.log" >> "$LOG" 2>/dev/null
+    reports+=("$WORK/warp_tests.xml")
+  fi
+  "$PY" scripts/gpu_check.py parity "$OUT/parity.json" "${reports[@]}" | tee -a "$LOG"
 
   step bench_env 120 "$OUT/bench_env.json" "$PY" -m morfic_cli bench env "${dev_args[@]}" --envs "$ENVS" \
     --steps "$STEPS" --format json

@@ -96,7 +96,7 @@ for part in "$G"/split/morfic-wheels.tar.*; do
   folders+=("$G/p$k")
 done
 rm -rf "$G/split"
-echo "  $k parts of at most $PART_SIZE bytes; working tree $(awk -v b="$TREE_BYTES" 'BEGIN {printf "%.1f", b / 1048576}') MiB"
+echo "  $k parts (split -b $PART_SIZE); working tree $(awk -v b="$TREE_BYTES" 'BEGIN {printf "%.1f", b / 1048576}') MiB"
 
 echo "== 4. the device calls (each within ~30 s of the last: the machine keeps the parts only while warm)"
 "$PY" scripts/gpu_wheels.py plan "$TREE_BYTES" "${folders[@]}" | tee "$G/PLAN.txt"

@@ -67,6 +67,10 @@ def test_parity_report_from_junit_counts_outcomes_and_takes_the_worst_per_field(
                                                  "trace</failure>", "").replace(
         '<skipped message="mujoco_warp is not installed"/>', ""))
     assert passing["ok"] and passing["passed"] == 4
+    merged = gc.merge_reports([passing, doc])
+    assert (merged["passed"], merged["failed"], merged["skipped"], merged["ok"]) == (6, 1, 1, False)
+    assert merged["worst_one_step"] == {"joint_pos": 4e-05, "joint_vel": 0.002}
+    assert gc.merge_reports([passing])["ok"] and not gc.merge_reports([passing, None])["ok"]
 
 
 def test_figures_compare_with_the_paper_and_project_the_400m_run():
@@ -191,7 +195,7 @@ def test_dry_run_on_warps_cpu_device_writes_every_json(tmp_path):
     env = {**os.environ, "MORFIC_GPU_CHECK_DEVICE": "cpu", "MORFIC_GPU_CHECK_ENVS": "8,16",
            "MORFIC_GPU_CHECK_STEPS": "3", "MORFIC_GPU_CHECK_PRESET": "smoke", "MORFIC_GPU_CHECK_ITERATIONS": "1",
            "MORFIC_GPU_CHECK_TRAIN_S": "40", "MORFIC_GPU_CHECK_TRAIN_SET": "max_iterations=1000 save_interval=1",
-           "MORFIC_GPU_CHECK_PARITY_K": "template", "MORFIC_GPU_CHECK_WARMUP": "0",
+           "MORFIC_GPU_CHECK_PARITY_K": "template", "MORFIC_GPU_CHECK_OTHER_K": "", "MORFIC_GPU_CHECK_WARMUP": "0",
            "MORFIC_GPU_CHECK_WORK": str(tmp_path / "work"), "OUT": str(out), "PYTHON": sys.executable}
     done = subprocess.run(["bash", str(SCRIPTS / "gpu_check.sh"), "check"], env=env, capture_output=True, text=True,
                           timeout=900, check=False)
