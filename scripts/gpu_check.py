@@ -29,6 +29,8 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:  # morfic_cli from this checkout (on the device machine it is not installed)
+    sys.path.append(str(ROOT))
 SCHEMA = "morfic-gpu-check/1"
 TRANSITIONS_400M = 400e6
 """The paper's transition budget (Training Compute Methodology: GPU-hours normalised to 400M transitions)."""

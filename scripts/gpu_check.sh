@@ -68,7 +68,7 @@ stash() {  # the parts carried in this call -> $WORK/parts (kept while the machi
   local found=0
   for d in "$CARRIED"/p*/; do
     [ -d "$d" ] || continue
-    cp -n "$d"* "$WORK/parts/" && found=1
+    cp -f "$d"* "$WORK/parts/" && found=1  # what a call carries replaces what an earlier attempt left
   done
   [ "$found" = 1 ] || say "no $CARRIED/p*/ folder in this call's working tree (nothing carried?)"
   say "parts on this machine: $(cd "$WORK/parts" && ls morfic-wheels.tar.* 2>/dev/null | tr '\n' ' ')"
@@ -192,7 +192,7 @@ check() {
       --out "$OUT/checkpoint.tar"; then
     step show 30 "$WORK/bundle.json" "$PY" -m morfic_cli store show runs/gpu-check --format json
   fi
-  "$PY" scripts/gpu_check.py summary "$WORK" "$OUT" > "$WORK/summary.log" 2>> "$LOG" \
+  MORFIC_GPU_CHECK_DEVICE=$DEVICE "$PY" scripts/gpu_check.py summary "$WORK" "$OUT" > "$WORK/summary.log" 2>> "$LOG" \
     || say "summary failed (see the log)"
   say "done in $(($(date +%s) - START))s; files under $OUT: $(cd "$OUT" && ls | tr '\n' ' ')"
   "$PY" - "$OUT/summary.json" <<'EOF'
