@@ -25,6 +25,11 @@ TAGS=(--only-binary=:all: --python-version 3.12 --implementation cp --abi cp312
       --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 --platform manylinux_2_17_x86_64
       --platform manylinux2014_x86_64 --platform manylinux1_x86_64)
 mkdir -p "$G/wheels" "$G/stubs"
+# .gpu/ must never travel as untracked files (a checkout without this repo's .gitignore yet): exclude it here
+if [ "${G#/}" = "$G" ] && ! git check-ignore -q "$G/wheels"; then
+  echo "/${G#./}/" >> "$(git rev-parse --git-path info/exclude)"
+  echo "added /${G#./}/ to $(git rev-parse --git-path info/exclude)"
+fi
 
 download() {
 echo "== 1. download (CPython 3.12, manylinux x86_64) into $G/wheels"
