@@ -2,7 +2,7 @@
 # The GPU check (docs/gpu.md, "Running the GPU check"): on a machine with CUDA, in one go and in under
 # 10 minutes of wall time, with a timeout on every step so that one hung step does not eat the budget:
 #
-#   1. warp-vs-cpu parity (tests/sim/test_warp_backend.py -k parity: the template, all seven robots) on CUDA;
+#   1. warp-vs-cpu parity on CUDA (tests/sim/test_warp_backend.py: the template, all seven robots, the env);
 #   2. morfic bench env --backend warp --device cuda --envs 1024,4096,8192;
 #   3. morfic bench train --preset paper --device cuda --iterations 5;
 #   4. up to 5 minutes of morfic train --preset paper --device cuda (what the budget leaves, less 50 s),
@@ -25,8 +25,8 @@
 #   MORFIC_GPU_CHECK_ITERATIONS bench train timed iterations                                          [5]
 #   MORFIC_GPU_CHECK_TRAIN_S    seconds of training before SIGINT (less if the budget is short)     [300]
 #   MORFIC_GPU_CHECK_TRAIN_SET  extra --set overrides of the training run, space-separated     [save_interval=25]
-#   MORFIC_GPU_CHECK_PARITY_K   pytest -k expression of the parity step                            [parity]
-#   MORFIC_GPU_CHECK_OTHER_K    pytest -k expression of more warp tests, e.g. "not parity" (empty: none)  []
+#   MORFIC_GPU_CHECK_PARITY_K   pytest -k expression of the parity step           [parity or same_code]
+#   MORFIC_GPU_CHECK_OTHER_K    pytest -k expression of more warp tests, e.g. "not parity and not same_code" (empty: none) []
 #   MORFIC_GPU_CHECK_WARMUP     1: compile MuJoCo Warp's modules in parallel before the timed steps     [1]
 #   MORFIC_GPU_CHECK_BUDGET_S   wall-time budget of the check, install included; later steps shrink  [575]
 #   MORFIC_GPU_CHECK_WORK       scratch folder (parts, wheels, site, store)                 [/tmp/morfic-gpu]
@@ -48,7 +48,7 @@ PRESET=${MORFIC_GPU_CHECK_PRESET:-paper}
 ITERATIONS=${MORFIC_GPU_CHECK_ITERATIONS:-5}
 TRAIN_S=${MORFIC_GPU_CHECK_TRAIN_S:-300}
 TRAIN_SET=${MORFIC_GPU_CHECK_TRAIN_SET:-save_interval=25}
-PARITY_K=${MORFIC_GPU_CHECK_PARITY_K:-parity}
+PARITY_K=${MORFIC_GPU_CHECK_PARITY_K:-parity or same_code}
 OTHER_K=${MORFIC_GPU_CHECK_OTHER_K:-}
 WARMUP=${MORFIC_GPU_CHECK_WARMUP:-1}
 BUDGET_S=${MORFIC_GPU_CHECK_BUDGET_S:-575}

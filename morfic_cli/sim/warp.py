@@ -397,7 +397,8 @@ class WarpBackend:
         return torch.as_tensor(value, device=self.device).to(torch.float32)
 
     def _tensor(self, arr: np.ndarray, dtype: torch.dtype = torch.float64) -> torch.Tensor:
-        return torch.as_tensor(np.ascontiguousarray(arr)).to(device=self.device, dtype=dtype)
+        """A host tensor (the CPU backend's convention): the env computes with :meth:`params` on the CPU."""
+        return torch.as_tensor(np.ascontiguousarray(arr)).to(dtype=dtype)
 
     def _nominal_height_of(self, q0: np.ndarray) -> float:
         """Base height above the feet at pose q0 (kinematics only: geometry is the same in every world)."""
@@ -486,7 +487,11 @@ class WarpBackend:
         )
 
     def params(self) -> SimParams:
-        """The per-env physical parameters now in effect, as exact float64 tensors (frames are float32)."""
+        """The per-env physical parameters now in effect, as exact float64 tensors (frames are float32).
+
+        On the host whatever the device, as the CPU backend's: ``LocomotionEnv`` computes on CPU tensors
+        (it moves each frame to the CPU), and device parameters would meet host buffers in its step.
+        """
         return SimParams(
             joint_range=self._tensor(self._joint_range),
             default_joint_pos=self._tensor(self._default_qpos),
