@@ -47,7 +47,8 @@ class EpisodeStats:
         n: Envs.
         time_out_fraction: Envs whose first episode ended by the time-out (survived the whole episode).
         fall_fraction: Envs whose first episode ended by a fall (termination).
-        survival_5s: Envs still in their first episode after 5 s (as ``morfic eval --steps 250`` counts S).
+        survival_5s: Envs whose first episode did not end in a fall within its first 5 s (S as ``morfic eval
+            --steps 250`` counts it; an episode shorter than 5 s that timed out counts as survived).
     """
 
     length_s: float
@@ -78,7 +79,7 @@ def episode_stats(done: np.ndarray, time_out: np.ndarray, dt: float) -> EpisodeS
         n=n,
         time_out_fraction=float(by_time_out.mean()) if n else math.nan,
         fall_fraction=float((ended & ~by_time_out).mean()) if n else math.nan,
-        survival_5s=float((length > round(5.0 / dt)).mean()) if n else math.nan,
+        survival_5s=float((~(ended & ~by_time_out & (length <= round(5.0 / dt)))).mean()) if n else math.nan,
     )
 
 

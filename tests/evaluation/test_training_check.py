@@ -38,7 +38,13 @@ def test_first_episode_lengths_and_stats_by_hand():
     # lengths 2, 6, 4 s: mean 4, population std sqrt(8/3), se = sqrt(8/3) / sqrt(3) = sqrt(8) / 3
     assert s.length_s == pytest.approx(4.0) and s.length_se_s == pytest.approx(math.sqrt(8) / 3)
     assert s.n == 3 and s.time_out_fraction == pytest.approx(1 / 3) and s.fall_fraction == pytest.approx(2 / 3)
-    assert s.survival_5s == pytest.approx(1 / 3)  # only env 1 is past 5 steps (5 s)
+    assert s.survival_5s == pytest.approx(1 / 3)  # envs 0 and 2 fell within 5 s; env 1 did not
+    # a time-out before 5 s (a short episode) is not a fall: env 1 times out at 3 s instead
+    done2, time_out2 = done.copy(), time_out.copy()
+    done2[5, 1] = time_out2[5, 1] = False
+    done2[2, 1] = time_out2[2, 1] = True
+    s2 = episode_stats(done2, time_out2, dt=1.0)
+    assert s2.survival_5s == pytest.approx(1 / 3) and s2.time_out_fraction == pytest.approx(1 / 3)
     # an env whose first episode has not ended counts T steps and neither as a fall nor as a time-out
     length, ended = first_episode_lengths(np.zeros((4, 1), dtype=bool))
     assert length.tolist() == [4] and ended.tolist() == [F]
