@@ -60,7 +60,7 @@ def per_env_mean(x: np.ndarray, alive: np.ndarray) -> np.ndarray:
 
 
 def per_env_max_moving_average(vx: np.ndarray, alive: np.ndarray, window: int) -> np.ndarray:
-    """v_x^max: max over each env's alive span of the ``window``-step moving average. (T, N) -> (N,).
+    """The 1 s peak: max over each env's alive span of the ``window``-step moving average. (T, N) -> (N,).
 
     Alive steps form a prefix of the rollout (see :func:`alive_mask`); with fewer than ``window`` alive
     steps the window is the whole alive span. NaN for an env with no alive step.
