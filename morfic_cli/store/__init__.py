@@ -39,6 +39,7 @@ from morfic_cli.store.manifest import (
     canonical_json,
     check_file_name,
     check_kind,
+    manifest_problem,
     parse_manifest,
     utc_now,
 )
@@ -176,6 +177,9 @@ class Store:
                        for name, value in (files or {}).items()}
             doc = build_manifest(kind, created=utc_now(), morfic_version=__version__, config=config,
                                  inputs=input_ids, files=entries, meta=meta)
+            problem = manifest_problem(doc)
+            if problem is not None:
+                raise StoreError(f"cannot store this {kind} manifest: {problem}.")
             oid = self.objects.put_bytes(canonical_json(doc))
             self.index.add(oid)
         return oid
@@ -184,9 +188,13 @@ class Store:
         if not isinstance(spec, str):
             raise StoreError(f"manifest input '{role}' must be an artifact id or ref, not {type(spec).__name__}.")
         try:
-            return self.resolve(spec)
+            oid = self.resolve(spec)
         except ArtifactNotFoundError as exc:
             raise StoreError(f"manifest input '{role}': {exc}") from exc
+        if not self.index.has(oid):
+            raise StoreError(f"manifest input '{role}' must be a manifest, but {oid} is a plain object; give the "
+                             "id or ref of a manifest (see `morfic store ls`).")
+        return oid
 
     def _put_entry(self, name: str, value: bytes | Path) -> FileEntry:
         if isinstance(value, bytes | bytearray | memoryview):
