@@ -26,8 +26,6 @@ from morfic_cli.store import Store
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-REPO = Path(__file__).resolve().parents[2]
-
 
 class _Payload:
     """Unpickling this creates ``marker`` (standing in for any code a crafted pickle could run)."""
@@ -109,15 +107,6 @@ def test_a_pickle_payload_in_a_bundle_never_runs(trained, tmp_path, run_cli, lay
         assert err.startswith("Error: ") and "Traceback" not in err
         assert "cannot be loaded as tensors" in err and "never pickled objects" in err
         assert not marker.exists()
-
-
-def test_the_shipped_bundle_has_no_trainer_state_and_says_so(tmp_path, run_cli):
-    """artifacts/bundles/film-cpu.tar (weights only, made before trainer states travelled) is not resumable."""
-    store = tmp_path / "s"
-    assert run_cli("store", "import", str(REPO / "artifacts/bundles/film-cpu.tar"), "--store", str(store))[0] == 0
-    code, _, err = run_cli("train", "--resume", "runs/film-cpu", "--store", str(store))
-    assert code == 1 and "Error: checkpoint 'runs/film-cpu' has no trainer state" in err
-    assert "Traceback" not in err
 
 
 def test_an_exported_run_now_carries_its_trainer_state_and_resumes(trained, tmp_path, run_cli):
