@@ -73,10 +73,19 @@ class Store:
     Args:
         root: Store root directory. A missing directory reads as an empty store.
         lock_timeout: Seconds to wait for a lock before raising :class:`StoreError`.
+
+    Raises:
+        StoreError: ``root`` (or a folder on its way) is an existing file.
     """
 
     def __init__(self, root: Path | str, *, lock_timeout: float = DEFAULT_TIMEOUT_S) -> None:
         self.root = Path(root)
+        for path in (self.root, *self.root.parents):
+            if path.exists():
+                if not path.is_dir():
+                    raise StoreError(f"store root {self.root}: {path} is a file, not a folder; pass a folder (or a "
+                                     "path that does not exist yet) to --store or MORFIC_STORE.")
+                break
         self.objects = ObjectDB(self.root)
         self.index = ManifestIndex(self.root)
         self.refs = RefDB(self.root)

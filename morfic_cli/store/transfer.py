@@ -108,12 +108,19 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
         StoreError: A reachable object is missing (run ``verify``) or ``out`` cannot be written.
     """
     names = sorted(set(refs))
+    out = Path(out)
+    if out.is_dir() or not out.name:
+        raise StoreError(f"--out {out} is a folder; give the tar file to write, e.g. --out {out / 'export.tar'}.")
+    for parent in out.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise StoreError(f"--out {out}: {parent} is a file, so the tar cannot be written there.")
+            break
     if not names:
         raise StoreError("name at least one ref to export, e.g. `morfic store export runs/film-s0 --out x.tar`.")
     for name in names:
         if not store.refs.exists(check_ref_name(name)):
             raise ArtifactNotFoundError(f"no ref '{name}' in store {store.root}; try `morfic store ls`.")
-    out = Path(out)
     report = ExportReport(path=out, refs=names)
     with store.reading():
         histories = {name: store.refs.history(name) for name in names}
