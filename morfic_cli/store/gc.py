@@ -258,6 +258,8 @@ def _verify_manifest_links(store: Store, manifest: Manifest, report: VerifyRepor
     for role, oid in manifest.inputs.items():
         if not store.objects.has(oid):
             report.problems.append(f"manifest {manifest.id}: input '{role}' {oid} is missing")
+        elif not store.index.has(oid):
+            report.problems.append(f"manifest {manifest.id}: input '{role}' {oid} is not an indexed manifest")
 
 
 def _verify_refs(store: Store, report: VerifyReport) -> None:

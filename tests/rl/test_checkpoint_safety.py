@@ -219,3 +219,30 @@ def test_a_damaged_trainer_state_is_an_error(json_bytes):
     tensors = trainer_state.encode({})["trainer-tensors.pt"]
     with pytest.raises(MorficError, match="trainer state of test is damaged"):
         trainer_state.decode(json_bytes, tensors, "test")
+
+
+def test_a_run_in_the_old_two_ref_layout_still_resumes(trained, tmp_path):
+    """Migration: runs/NAME without a trainer_state input, trainer.pt (torch.save of the state) under resume/NAME."""
+    src = _copy(trained, tmp_path)
+    ckpt = src.read_manifest("runs/film-s0")
+    state = src.read_manifest(ckpt.inputs["trainer_state"])
+    trainer = trainer_state.decode(src.read_file(state.id, "trainer.json"),
+                                   src.read_file(state.id, "trainer-tensors.pt"), "test")
+    buf = io.BytesIO()
+    torch.save(trainer, buf)  # exactly what morfic wrote as trainer.pt before the one-ref layout
+    files = {name: src.read_file(ckpt.id, name) for name in ckpt.files}
+    meta = dict(ckpt.meta, run="old")
+    old = src.put_manifest("checkpoint", config=ckpt.config, meta=meta, files=files)
+    src.set_ref("runs/old", old)
+    src.set_ref("resume/old", src.put_manifest("checkpoint", config={"role": "trainer-state"},
+                                               inputs={"checkpoint": old}, files={"trainer.pt": buf.getvalue()}))
+    resumed = resume_run(src, "runs/old")
+    assert resumed.iteration == 1
+    for key, value in resumed.runner.alg.optimizer.state_dict()["state"].items():
+        assert torch.equal(value["exp_avg"], trainer["alg"]["optimizer_state_dict"]["state"][key]["exp_avg"])
+    resumed.env.close()
+    # the old layout's kill window: runs/old moved on, resume/old did not; the error names the way out
+    src.set_ref("runs/old", src.put_manifest("checkpoint", config=ckpt.config, meta=dict(meta, iteration=2),
+                                             files=files))
+    with pytest.raises(MorficError, match=r"no trainer state.*--resume runs/old@1"):
+        resume_run(src, "runs/old")
