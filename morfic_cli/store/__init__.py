@@ -83,7 +83,7 @@ class Store:
         for path in (self.root, *self.root.parents):
             if path.exists():
                 if not path.is_dir():
-                    raise StoreError(f"store root {self.root}: {path} is a file, not a folder; pass a folder (or a "
+                    raise StoreError(f"store root {self.root}: {path} is a file, not a directory; pass a folder (or a "
                                      "path that does not exist yet) to --store or MORFIC_STORE.")
                 break
         self.objects = ObjectDB(self.root)
