@@ -380,8 +380,11 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
     """Parse an exported manifest strictly and check that everything it names is there, with the right size."""
     if oid in plan.staged:
         data = plan.staged[oid].read_bytes()
-    elif oid in sizes and oid in plan.contents:
+    elif oid in plan.contents:
         data = plan.contents[oid]
+    elif oid in sizes:
+        raise StoreError(f"manifest {oid} in the export is {sizes[oid]} bytes, more than the {MAX_MANIFEST_BYTES} a "
+                         "manifest may have; nothing was imported.")
     elif store.objects.intact(oid):
         data = store.objects.get_bytes(oid)
     else:
