@@ -302,7 +302,7 @@ def check_args(
         for count in parse_counts(env_counts, "--envs"):
             check_env_count(count, "--envs", SIM_BYTES_PER_ENV)
     if steps is not None and not integer(1, 10**7).test(steps):
-        raise MorficError(f"--steps {steps} is out of range; use an integer in [1, 10000000].")
+        raise MorficError(f"--steps {steps}: step counts must be positive integers, at most 10000000.")
     if command_vx is not None:
         parse_commands_vx(command_vx)
     if robots is not None:
@@ -371,7 +371,7 @@ def check_spec(spec: str) -> None:
 def check_env_count(count: int, flag: str, bytes_per_env: int) -> None:
     """An env count in [1, :data:`MAX_ENVS`] that fits in the memory available now."""
     if not integer(1, MAX_ENVS).test(count):
-        raise MorficError(f"{flag} {count} is out of range; use an integer in [1, {MAX_ENVS}].")
+        raise MorficError(f"{flag} {count}: env counts must be positive integers, at most {MAX_ENVS}.")
     problem = memory_problem(count, bytes_per_env, flag)
     if problem:
         raise MorficError(problem + ".")

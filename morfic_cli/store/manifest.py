@@ -56,6 +56,7 @@ MAX_LABEL = 100
 
 _FILE_PART = re.compile(r"[^\x00-\x1f\x7f/\\:]+")
 _LABEL = re.compile(r"[A-Za-z0-9._+-]+")
+_ROLE = re.compile(r"[A-Za-z0-9._+-]+(/[A-Za-z0-9._+-]+)*")
 _CREATED = re.compile(r"\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d{1,6})?Z")
 
 
@@ -298,8 +299,8 @@ def manifest_problem(doc: dict[str, Any]) -> str | None:
     if not isinstance(inputs, dict):
         return "inputs is not a JSON object"
     for role, oid in inputs.items():
-        if not (len(role) <= MAX_LABEL and _LABEL.fullmatch(role)):
-            return f"input role {role[:40]!r} is not a short label"
+        if not (len(role) <= 2 * MAX_LABEL and _ROLE.fullmatch(role)):
+            return f"input role {role[:40]!r} is not a label like 'checkpoint' or 'rollout/go2/vx2'"
         if not (isinstance(oid, str) and is_object_id(oid)):
             return f"input '{role}' is not a full object id"
     files = doc["files"]
