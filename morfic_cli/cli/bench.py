@@ -9,6 +9,7 @@ import typer
 from morfic_cli.cli._options import DEFAULT_STORE, Device, DeviceOpt, FormatOpt, OutputFormat, QuietOpt, StoreOpt
 from morfic_cli.cli._render import Column, emit_object, emit_rows, info
 from morfic_cli.errors import MorficError
+from morfic_cli.validation import check_args
 
 
 def bench(
@@ -43,6 +44,7 @@ def bench(
     morfic bench env --backend warp --device cuda --envs 4096,8192;
     morfic bench train --preset cpu --iterations 5
     """
+    check_args(store=store, env_counts=envs if what == "env" else None, steps=steps, seed=seed)
     if what not in ("env", "train"):
         raise MorficError(f"unknown benchmark '{what}'; valid benchmarks are: env, train.")
     if backend not in ("cpu", "warp", "gpu"):

@@ -20,6 +20,7 @@ from morfic_cli.cli._options import (
 from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
 from morfic_cli.errors import MorficError
+from morfic_cli.validation import check_args
 
 
 def _num(v: float | None) -> str:
@@ -94,6 +95,7 @@ def diagnose(
     Example: morfic diagnose runs/film-s0 runs/ppo-s0 --robots aliengo,mini_cheetah
     Example: morfic diagnose --fixed-rollout aliengo --actor runs/film-s0 --critics runs/film-s0,runs/ppo-s0
     """
+    check_args(store=store, out_file=out, seed=seed, envs=envs, steps=steps, command_vx=str(command_vx), specs=runs)
     from morfic_cli.diagnostics.samples import DiagnoseCfg
     from morfic_cli.morphology.distance import parse_robot_list
     from morfic_cli.store import Store

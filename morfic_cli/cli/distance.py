@@ -16,6 +16,7 @@ from morfic_cli.cli._options import (
     StoreOpt,
 )
 from morfic_cli.cli._render import Column, emit_rows, info
+from morfic_cli.validation import check_args
 
 
 def distance(
@@ -37,6 +38,7 @@ def distance(
 
     Example: morfic distance --robots go1,a1,b1 --format json
     """
+    check_args(store=store, robots=robots, reference=reference)
     from morfic_cli.morphology.distance import distance_table, parse_robot_list
     from morfic_cli.recording.tables import write_distance_table
 

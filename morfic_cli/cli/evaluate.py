@@ -20,6 +20,7 @@ from morfic_cli.cli._options import (
 from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
 from morfic_cli.errors import MorficError
+from morfic_cli.validation import check_args
 
 
 def evaluate(
@@ -69,6 +70,8 @@ def evaluate(
 
     Example: morfic eval runs/film-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
     """
+    check_args(store=store, out_file=out, seed=seed, envs=envs, steps=steps, command_vx=command_vx, robots=robots,
+               specs=[run])
     if training_conditions:
         _training_check(run, robots, command_vx, mode, envs, steps, seed, video, out, fmt, quiet, store)
         return

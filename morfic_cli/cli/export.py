@@ -10,6 +10,7 @@ import typer
 from morfic_cli.cli._options import DEFAULT_STORE, OutputFormat, QuietOpt, StoreOpt
 from morfic_cli.cli._render import emit_object, info
 from morfic_cli.errors import MorficError
+from morfic_cli.validation import check_args
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -58,6 +59,7 @@ def export(
 
     Example: morfic export runs/film-s0 --robot go1 --format onnx --out deploy/go1
     """
+    check_args(store=store, out_dir=out, specs=[run])
     from morfic_cli.export.artifact import ExportCfg, export_policy
     from morfic_cli.store import Store
 

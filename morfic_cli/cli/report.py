@@ -9,6 +9,7 @@ import typer
 
 from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, QuietOpt, StoreOpt
 from morfic_cli.cli._render import emit_object, info
+from morfic_cli.validation import check_args
 
 
 def report(
@@ -39,6 +40,7 @@ def report(
 
     Example: morfic report --latex --markdown --figures --out report/
     """
+    check_args(store=store, out_dir=out, report_name=name, specs=runs)
     from morfic_cli.report.build import ReportCfg, build_report
     from morfic_cli.store import Store
 

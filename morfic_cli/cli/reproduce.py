@@ -20,6 +20,7 @@ from morfic_cli.cli._options import (
     StoreOpt,
 )
 from morfic_cli.cli._render import emit_object, info
+from morfic_cli.validation import check_args
 
 _MARKS = {"done": "[green]done[/]", "resumed": "[green]resumed[/]", "skipped": "[dim]skipped (in the store)[/]",
           "interrupted": "[yellow]interrupted[/]"}
@@ -58,6 +59,7 @@ def reproduce(
 
     Example: morfic reproduce --preset smoke
     """
+    check_args(store=store, out_dir=out, variants=variants)
     from morfic_cli.report.pipeline import PIPELINE_VARIANTS, Pipeline, reproduce_cfg
     from morfic_cli.rl.runner import check_device
     from morfic_cli.store import Store

@@ -180,5 +180,6 @@ def import_(
     report = Store(store).import_tar(path)
     rows = [{"ref": name, "status": status} for name, status in report.refs.items()]
     _emit(rows, fmt, [Column("ref"), Column("status")], title=f"refs imported from {path.name}")
-    info(f"imported {report.objects_added} new object(s) ({report.objects_present} already present), "
+    repaired = f", {report.objects_repaired} corrupt here and repaired" if report.objects_repaired else ""
+    info(f"imported {report.objects_added} new object(s) ({report.objects_present} already present{repaired}), "
          f"{len(rows)} ref(s) into {escape(str(store))}")

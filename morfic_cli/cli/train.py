@@ -20,6 +20,7 @@ from morfic_cli.cli._options import (
     StoreOpt,
 )
 from morfic_cli.cli._render import emit_object, info
+from morfic_cli.validation import check_args
 
 
 def train(
@@ -58,6 +59,7 @@ def train(
 
     Example: morfic train --variant film --preset cpu --seed 0
     """
+    check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None)
     from morfic_cli.rl.config import apply_overrides, preset_cfg
     from morfic_cli.rl.runner import new_run, resume_run
     from morfic_cli.store import Store

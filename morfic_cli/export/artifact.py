@@ -35,6 +35,7 @@ from morfic_cli.export.verify import TOLERANCE, Verification, model_mismatches, 
 from morfic_cli.morphology.robots import list_robots, load_robot
 from morfic_cli.rl.runner import TrainedModels, load_trained
 from morfic_cli.store import Store
+from morfic_cli.store.manifest import safe_join
 
 EXPORTS_PREFIX = "exports/"
 METADATA_FILE = "policy.json"
@@ -272,7 +273,7 @@ def write_files(out: Path, files: dict[str, bytes]) -> list[Path]:
         out.mkdir(parents=True, exist_ok=True)
         paths = []
         for name, data in files.items():
-            path = out / name
+            path = safe_join(out, name)
             path.write_bytes(data)
             paths.append(path)
     except OSError as exc:

@@ -290,11 +290,18 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
 
 
 def write_out(store: Store, report_id: str, out: Path) -> list[Path]:
-    """Copy every file of a stored report into the folder ``out`` (created); returns the paths written."""
+    """Copy every file of a stored report into the folder ``out`` (created); returns the paths written.
+
+    Raises:
+        StoreError: A file name that would leave ``out`` (a report imported from an untrusted bundle).
+    """
+    from morfic_cli.store.manifest import safe_join
+
     manifest = store.read_manifest(report_id)
+    Path(out).mkdir(parents=True, exist_ok=True)
     paths = []
     for name in sorted(manifest.files):
-        path = Path(out) / name
+        path = safe_join(Path(out), name)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(store.read_file(report_id, name))
         paths.append(path)

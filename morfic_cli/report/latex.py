@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from morfic_cli.report.model import Part, Table, number_text
+from morfic_cli.store.manifest import safe_join
 
 _ESCAPES = {
     "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{",
@@ -160,8 +161,9 @@ def compile_pdf(tex: str, files: Mapping[str, bytes] | None = None, *, timeout_s
     with tempfile.TemporaryDirectory(prefix="morfic-tex-") as tmp:
         root = Path(tmp)
         for name, data in (files or {}).items():
-            (root / name).parent.mkdir(parents=True, exist_ok=True)
-            (root / name).write_bytes(data)
+            path = safe_join(root, name)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
         (root / "report.tex").write_text(tex, encoding="utf-8")
         for _ in range(2):
             proc = subprocess.run([exe, "-interaction=nonstopmode", "-halt-on-error", "report.tex"], cwd=root,

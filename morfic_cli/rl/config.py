@@ -19,6 +19,7 @@ from typing import Any
 from morfic_cli.config import CommandCfg, EnvCfg
 from morfic_cli.errors import MorficError, UnknownNameError
 from morfic_cli.rl.models import VARIANTS
+from morfic_cli.validation import validate_train_cfg
 
 PRESETS: tuple[str, ...] = ("smoke", "cpu", "paper")
 
@@ -269,9 +270,5 @@ def apply_overrides(cfg: TrainCfg, items: list[str]) -> TrainCfg:
     out = train_cfg_from_dict(doc)
     if out.variant not in VARIANTS:
         raise UnknownNameError("variant", out.variant, VARIANTS)
-    for name in ("max_iterations", "num_steps_per_env", "save_interval"):
-        if getattr(out, name) < 1:
-            raise MorficError(f"{name} must be at least 1, got {getattr(out, name)}.")
-    if out.env.num_envs < 1:
-        raise MorficError(f"env.num_envs must be at least 1, got {out.env.num_envs}.")
+    validate_train_cfg(out)  # ranges, finiteness, known schedules, env count vs memory (morfic_cli/validation.py)
     return out

@@ -7,12 +7,18 @@ iterations. Store layout of a run named ``NAME``:
 
 - ref ``runs/NAME`` -> ``checkpoint`` manifests: ``model.pt`` (actor and critic weights),
   ``curve.csv`` and ``curve.png`` (the training curve so far); config = the resolved :class:`TrainCfg`;
-  meta = variant, seed, iteration, env steps, wall time, git commit, finished/interrupted.
-- ref ``resume/NAME`` -> ``checkpoint`` manifests with ``trainer.pt`` (optimiser states, env state,
-  RNG states, logger buffers), input ``checkpoint`` = the weights it belongs to.
+  meta = variant, seed, iteration, env steps, wall time, git commit, finished/interrupted;
+  input ``trainer_state`` = a ``checkpoint`` manifest (config ``{"role": "trainer-state"}``) with
+  ``trainer.json`` + ``trainer-tensors.pt`` (optimiser states, env state, RNG states, logger buffers as
+  tensors + JSON, :mod:`morfic_cli.rl.trainer_state`).
 
-Keeping the trainer state apart keeps ``runs/NAME`` small to export (a policy bundle), while
-``--resume`` continues bit-exactly on CPU.
+A checkpoint is therefore ONE ref update: whatever instant a kill hits, ``runs/NAME`` names a
+checkpoint whose trainer state is there, and ``--resume`` continues bit-exactly on CPU. Every
+``torch.load`` here is ``weights_only=True``: a bundle from anyone can never run code.
+
+Runs written before this layout kept the trainer state apart, under ref ``resume/NAME`` (``trainer.pt``,
+input ``checkpoint`` = the weights); they still resume when that file holds only tensors and plain
+containers, and give a clear error otherwise.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ from tensordict import TensorDict
 
 from morfic_cli.envs import observations as O
 from morfic_cli.errors import ArtifactNotFoundError, MorficError
+from morfic_cli.rl import trainer_state
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
 from morfic_cli.rl.models import model_cfgs
 from morfic_cli.rl.ppo import ALGORITHM_CLASS
@@ -41,6 +48,8 @@ from morfic_cli.store import Store
 
 RUNS_PREFIX = "runs/"
 RESUME_PREFIX = "resume/"
+"""Legacy: where runs written before the one-ref checkpoint layout kept their trainer state."""
+TRAINER_STATE_ROLE = "trainer_state"
 
 
 def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
@@ -119,7 +128,7 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
                           "pass a run ref such as runs/film-s0 (see `morfic store ls --kind checkpoint`).")
     cfg = train_cfg_from_dict(manifest.config)
     actor, critic = build_models(cfg)
-    state = torch.load(io.BytesIO(store.read_file(manifest.id, "model.pt")), map_location="cpu", weights_only=True)
+    state = _load_weights(store, manifest.id, "cpu")
     actor.load_state_dict(state["actor"])
     critic.load_state_dict(state["critic"])
     actor.eval()
@@ -281,14 +290,14 @@ class TrainingRun:
 
     # ------------------------------------------------------------------ checkpoints
     def save_checkpoint(self, *, finished: bool, interrupted: bool = False) -> Checkpoint:
-        """Write the weights manifest (advancing ``runs/NAME``) and the trainer-state manifest (``resume/NAME``)."""
+        """Write the trainer state and the weights manifest naming it, then advance ``runs/NAME`` (one ref update)."""
         from morfic_cli.recording.curves import curve_csv, curve_png
 
         alg = self.runner.alg
         model = _to_bytes({"actor": alg._raw_actor.state_dict(), "critic": alg._raw_critic.state_dict()})
         saved = alg.save()
         saved.pop("actor_state_dict"), saved.pop("critic_state_dict")
-        trainer = _to_bytes({
+        trainer = trainer_state.encode({
             "iteration": self.iteration,
             "alg": saved,
             "learning_rate": alg.learning_rate,
@@ -305,15 +314,14 @@ class TrainingRun:
             "vx_max": float(self.env.command_ranges.vx[1]),
         }
         with self.store.writing():
+            state = self.store.put_manifest("checkpoint", config={"role": "trainer-state"}, files=trainer,
+                                            meta={"iteration": self.iteration, "run": self.name,
+                                                  "format": trainer_state.FORMAT})
             ckpt = self.store.put_manifest(
-                "checkpoint", config=train_cfg_to_dict(self.cfg), meta=meta,
+                "checkpoint", config=train_cfg_to_dict(self.cfg), meta=meta, inputs={TRAINER_STATE_ROLE: state},
                 files={"model.pt": model, "curve.csv": curve_csv(self.rows), "curve.png": curve_png(self.rows)},
             )
-            state = self.store.put_manifest("checkpoint", config={"role": "trainer-state"},
-                                            inputs={"checkpoint": ckpt}, files={"trainer.pt": trainer},
-                                            meta={"iteration": self.iteration, "run": self.name})
-            version = self.store.set_ref(RUNS_PREFIX + self.name, ckpt)
-            self.store.set_ref(RESUME_PREFIX + self.name, state)
+            version = self.store.set_ref(RUNS_PREFIX + self.name, ckpt)  # the one visible step
         self.parent = ckpt
         out = Checkpoint(ckpt, RUNS_PREFIX + self.name, version, self.iteration)
         self.checkpoints.append(out)
@@ -321,8 +329,7 @@ class TrainingRun:
 
     def _restore(self, ckpt_id: str, trainer: dict[str, Any], rows: list[dict[str, float]]) -> None:
         alg = self.runner.alg
-        model = torch.load(io.BytesIO(self.store.read_file(ckpt_id, "model.pt")), map_location=self.device,
-                           weights_only=True)
+        model = _load_weights(self.store, ckpt_id, self.device)
         loaded = dict(trainer["alg"], actor_state_dict=model["actor"], critic_state_dict=model["critic"])
         alg.load(loaded, None, True)
         alg.learning_rate = trainer["learning_rate"]
@@ -333,6 +340,16 @@ class TrainingRun:
         self.rows = rows
         self.parent = ckpt_id
         self._fresh = False
+
+
+def _load_weights(store: Store, ckpt_id: str, device: str) -> dict[str, Any]:
+    """``model.pt`` of a checkpoint: ``{"actor": state dict, "critic": state dict}``, loaded as tensors only."""
+    state = trainer_state.load_tensors(store.read_file(ckpt_id, "model.pt"), f"model.pt of checkpoint {ckpt_id[:12]}",
+                                       map_location=device)
+    if not (isinstance(state, dict) and isinstance(state.get("actor"), dict) and isinstance(state.get("critic"), dict)):
+        raise MorficError(f"model.pt of checkpoint {ckpt_id[:12]} is not {{'actor': ..., 'critic': ...}} weights; "
+                          "use a checkpoint written by `morfic train`.")
+    return state
 
 
 def _to_bytes(obj: Any) -> bytes:
@@ -424,9 +441,31 @@ def resume_run(store: Store, spec: str, overrides: list[str] | None = None, devi
 
     Raises:
         ArtifactNotFoundError: No such checkpoint.
-        MorficError: Not a checkpoint, or its trainer state is not in this store (an exported policy bundle).
+        MorficError: Not a checkpoint, or its trainer state is missing (a policy bundle of an older morfic) or
+            cannot be loaded as tensors.
     """
     check_device(device)
+    point = load_resume_point(store, spec)
+    cfg = apply_overrides(train_cfg_from_dict(point.manifest.config), list(overrides or []))
+    run = TrainingRun(store, cfg, point.name, device)
+    run._restore(point.manifest.id, point.trainer, point.rows)
+    return run
+
+
+@dataclasses.dataclass
+class ResumePoint:
+    """What ``--resume`` continues from: the checkpoint, its run name, trainer state and curve so far."""
+
+    manifest: Any
+    name: str
+    trainer: dict[str, Any]
+    rows: list[dict[str, float]]
+
+
+def load_resume_point(store: Store, spec: str) -> ResumePoint:
+    """The checkpoint ``spec`` names with its trainer state, loaded without building an env (see :func:`resume_run`)."""
+    from morfic_cli.recording.curves import read_curve_csv
+
     try:
         manifest = store.read_manifest(spec)
     except ArtifactNotFoundError:
@@ -436,22 +475,40 @@ def resume_run(store: Store, spec: str, overrides: list[str] | None = None, devi
             raise
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-s0.")
-    name = manifest.meta.get("run") or spec.removeprefix(RUNS_PREFIX).split("@")[0]
-    state_id = None
-    if store.has_ref(RESUME_PREFIX + name):
-        for entry in reversed(store.ref_history(RESUME_PREFIX + name)):
-            if store.read_manifest(entry.id).inputs.get("checkpoint") == manifest.id:
-                state_id = entry.id
-                break
-    if state_id is None:
-        raise MorficError(f"checkpoint '{spec}' has no trainer state in {store.root} (policy bundles carry weights "
-                          "only), so it cannot be resumed; start a new run with `morfic train`.")
-    cfg = apply_overrides(train_cfg_from_dict(manifest.config), list(overrides or []))
-    trainer = torch.load(io.BytesIO(store.read_file(state_id, "trainer.pt")), map_location="cpu", weights_only=False)
-    from morfic_cli.recording.curves import read_curve_csv
-
+    name = str(manifest.meta.get("run") or spec.removeprefix(RUNS_PREFIX).split("@")[0])
+    state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
+    if state_id is not None:
+        state = store.read_manifest(state_id)
+        trainer = trainer_state.decode(store.read_file(state.id, trainer_state.JSON_FILE),
+                                       store.read_file(state.id, trainer_state.TENSORS_FILE), f"checkpoint '{spec}'")
+    else:
+        trainer = _legacy_trainer_state(store, spec, manifest.id, name)
+    if not isinstance(trainer, dict) or not TRAINER_KEYS <= set(trainer):
+        missing = sorted(TRAINER_KEYS - set(trainer if isinstance(trainer, dict) else {}))
+        raise MorficError(f"the trainer state of checkpoint '{spec}' lacks {missing}; use a checkpoint written by "
+                          "`morfic train`.")
     rows = read_curve_csv(store.read_file(manifest.id, "curve.csv"))
-    run = TrainingRun(store, cfg, name, device)
-    run._restore(manifest.id, trainer, rows)
-    return run
+    return ResumePoint(manifest, name, trainer, rows)
 
+
+#: Keys every trainer state holds.
+TRAINER_KEYS = frozenset({"iteration", "alg", "learning_rate", "env", "logger", "torch_rng"})
+
+
+def _legacy_trainer_state(store: Store, spec: str, ckpt_id: str, name: str) -> dict[str, Any]:
+    """The ``resume/NAME`` trainer state of a checkpoint written before the one-ref layout (tensors only)."""
+    legacy = RESUME_PREFIX + name
+    states = {}
+    if store.has_ref(legacy):
+        for entry in store.ref_history(legacy):
+            states[store.read_manifest(entry.id).inputs.get("checkpoint")] = entry.id
+    if ckpt_id not in states:
+        older = [e for e in store.ref_history(RUNS_PREFIX + name) if e.id in states] \
+            if store.has_ref(RUNS_PREFIX + name) else []
+        hint = (f" Its last resumable checkpoint is {RUNS_PREFIX}{name}@{older[-1].version}: `morfic train --resume "
+                f"{RUNS_PREFIX}{name}@{older[-1].version}`." if older else " Start a new run with `morfic train`.")
+        raise MorficError(f"checkpoint '{spec}' has no trainer state in {store.root} (policy bundles of older morfic "
+                          f"versions carry weights only, as does a checkpoint cut short by a kill), so it cannot be "
+                          f"resumed.{hint}")
+    return trainer_state.load_tensors(store.read_file(states[ckpt_id], "trainer.pt"),
+                                      f"the trainer state (trainer.pt, an older format) of checkpoint '{spec}'")

@@ -39,6 +39,7 @@ from morfic_cli.store.manifest import (
     canonical_json,
     check_file_name,
     check_kind,
+    manifest_problem,
     parse_manifest,
     utc_now,
 )
@@ -72,10 +73,19 @@ class Store:
     Args:
         root: Store root directory. A missing directory reads as an empty store.
         lock_timeout: Seconds to wait for a lock before raising :class:`StoreError`.
+
+    Raises:
+        StoreError: ``root`` (or a folder on its way) is an existing file.
     """
 
     def __init__(self, root: Path | str, *, lock_timeout: float = DEFAULT_TIMEOUT_S) -> None:
         self.root = Path(root)
+        for path in (self.root, *self.root.parents):
+            if path.exists():
+                if not path.is_dir():
+                    raise StoreError(f"store root {self.root}: {path} is a file, not a directory; pass a folder (or a "
+                                     "path that does not exist yet) to --store or MORFIC_STORE.")
+                break
         self.objects = ObjectDB(self.root)
         self.index = ManifestIndex(self.root)
         self.refs = RefDB(self.root)
@@ -176,6 +186,9 @@ class Store:
                        for name, value in (files or {}).items()}
             doc = build_manifest(kind, created=utc_now(), morfic_version=__version__, config=config,
                                  inputs=input_ids, files=entries, meta=meta)
+            problem = manifest_problem(doc)
+            if problem is not None:
+                raise StoreError(f"cannot store this {kind} manifest: {problem}.")
             oid = self.objects.put_bytes(canonical_json(doc))
             self.index.add(oid)
         return oid
@@ -184,9 +197,13 @@ class Store:
         if not isinstance(spec, str):
             raise StoreError(f"manifest input '{role}' must be an artifact id or ref, not {type(spec).__name__}.")
         try:
-            return self.resolve(spec)
+            oid = self.resolve(spec)
         except ArtifactNotFoundError as exc:
             raise StoreError(f"manifest input '{role}': {exc}") from exc
+        if not self.index.has(oid):
+            raise StoreError(f"manifest input '{role}' must be a manifest, but {oid} is a plain object; give the "
+                             "id or ref of a manifest (see `morfic store ls`).")
+        return oid
 
     def _put_entry(self, name: str, value: bytes | Path) -> FileEntry:
         if isinstance(value, bytes | bytearray | memoryview):

@@ -108,20 +108,49 @@ def load_manifest_if_any(store: Store, oid: str, *, strict: bool) -> Manifest | 
 def closure(store: Store, roots: Iterable[str], *, strict: bool = True) -> set[str]:
     """Every id reachable from ``roots`` (manifest -> files and inputs, recursively).
 
-    Ids that are not stored are included (they are referenced) but not followed.
+    Roots and inputs must be manifests. Ids that are not stored are included (they are referenced) but
+    not followed.
+
+    Args:
+        store: The store.
+        roots: Manifest ids (every version of the refs).
+        strict: Raise when a root or input is missing or is not a readable manifest: what it names is
+            then unknown, so gc and export must not guess.
+
+    Raises:
+        StoreError: ``strict`` and some reachable manifest cannot be read; the message lists them.
     """
     seen: set[str] = set()
-    stack = list(roots)
+    manifests: set[str] = set()
+    damaged: dict[str, str] = {}
+    stack = [(oid, True) for oid in roots]
     while stack:
-        oid = stack.pop()
-        if oid in seen:
+        oid, must_be_manifest = stack.pop()
+        if oid in seen and not (must_be_manifest and oid not in manifests and oid not in damaged):
             continue
         seen.add(oid)
         if not store.objects.has(oid):
+            if must_be_manifest:
+                damaged[oid] = "missing"
             continue
-        manifest = load_manifest_if_any(store, oid, strict=strict)
-        if manifest is not None:
-            stack.extend(manifest.referenced_ids())
+        expected = must_be_manifest or store.index.has(oid)
+        if not expected and store.objects.read_head(oid, len(MANIFEST_MAGIC)) != MANIFEST_MAGIC:
+            continue
+        try:
+            manifest = parse_manifest(oid, store.objects.get_bytes(oid))
+        except StoreError as exc:
+            if expected:
+                damaged[oid] = "corrupt" if "corrupt" in str(exc) else "not a readable manifest"
+            continue
+        manifests.add(oid)
+        stack.extend((f.id, False) for f in manifest.files.values())
+        stack.extend((i, True) for i in manifest.inputs.values())
+    if strict and damaged:
+        listed = ", ".join(f"{oid} ({why})" for oid, why in sorted(damaged.items())[:10])
+        more = f" and {len(damaged) - 10} more" if len(damaged) > 10 else ""
+        raise StoreError(f"{len(damaged)} manifest(s) reachable from refs cannot be read: {listed}{more}; what "
+                         "they name is unknown, so refusing to delete or export anything. Run `morfic store "
+                         "verify`, restore them (`morfic store import` of an export that holds them), then retry.")
     return seen
 
 
@@ -213,8 +242,8 @@ def _verify_index(store: Store, report: VerifyReport) -> None:
             continue
         try:
             manifest = parse_manifest(oid, store.objects.get_bytes(oid, verify=False))
-        except StoreError:
-            report.problems.append(f"manifest index entry {oid} is not a readable manifest")
+        except StoreError as exc:
+            report.problems.append(f"manifest index entry {oid} is not a readable manifest: {exc}")
             continue
         _verify_manifest_links(store, manifest, report)
 
@@ -229,6 +258,8 @@ def _verify_manifest_links(store: Store, manifest: Manifest, report: VerifyRepor
     for role, oid in manifest.inputs.items():
         if not store.objects.has(oid):
             report.problems.append(f"manifest {manifest.id}: input '{role}' {oid} is missing")
+        elif not store.index.has(oid):
+            report.problems.append(f"manifest {manifest.id}: input '{role}' {oid} is not an indexed manifest")
 
 
 def _verify_refs(store: Store, report: VerifyReport) -> None:
@@ -241,6 +272,9 @@ def _verify_refs(store: Store, report: VerifyReport) -> None:
             continue
         if not history:
             report.problems.append(f"ref '{name}' has an empty history")
+        head = store.refs.head_problem(name, history)
+        if head is not None:
+            report.problems.append(head)
         for entry in history:
             if not store.objects.has(entry.id):
                 report.problems.append(f"ref '{name}@{entry.version}' points at missing object {entry.id}")

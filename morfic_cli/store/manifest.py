@@ -42,7 +42,22 @@ MANIFEST_KEYS = frozenset({"schema", "kind", "morfic_version", "created", "confi
 #: Every canonical manifest starts with these bytes ("config" sorts first among its keys).
 MANIFEST_MAGIC = b'{"config":'
 
-_FILE_NAME = re.compile(r"[^\x00-\x1f\\]+")
+#: Longest accepted file name in a manifest (the whole relative name, and each '/'-separated part).
+MAX_FILE_NAME = 255
+
+#: Most '/'-separated parts of a manifest file name (``figures/ev.png`` has 2).
+MAX_FILE_DEPTH = 4
+
+#: Largest accepted manifest object (bytes); real manifests are a few KiB.
+MAX_MANIFEST_BYTES = 16 << 20
+
+#: Longest accepted ``morfic_version`` and input role.
+MAX_LABEL = 100
+
+_FILE_PART = re.compile(r"[^\x00-\x1f\x7f/\\:]+")
+_LABEL = re.compile(r"[A-Za-z0-9._+-]+")
+_ROLE = re.compile(r"[A-Za-z0-9._+-]+(/[A-Za-z0-9._+-]+)*")
+_CREATED = re.compile(r"\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d{1,6})?Z")
 
 
 @dataclass(frozen=True)
@@ -144,17 +159,61 @@ def check_kind(kind: str) -> str:
     return kind
 
 
+def file_name_problem(name: object) -> str | None:
+    """Why ``name`` is not a safe manifest file name, or ``None`` if it is.
+
+    A safe name is relative and stays inside any folder it is joined to: 1 to
+    :data:`MAX_FILE_DEPTH` parts separated by ``/``, each non-empty, not ``.`` or ``..``, without
+    control characters, NUL, backslash or colon, at most :data:`MAX_FILE_NAME` characters in all.
+    """
+    if not isinstance(name, str):
+        return f"is a {type(name).__name__}, not a string"
+    if not name or len(name) > MAX_FILE_NAME:
+        return f"must have 1 to {MAX_FILE_NAME} characters"
+    if name.startswith("/"):
+        return "is absolute"
+    parts = name.split("/")
+    if len(parts) > MAX_FILE_DEPTH:
+        return f"has more than {MAX_FILE_DEPTH} '/'-separated parts"
+    for part in parts:
+        if part in ("", ".", ".."):
+            return "has an empty, '.' or '..' part"
+        if not _FILE_PART.fullmatch(part):
+            return "holds a control character, NUL, '\\' or ':'"
+    return None
+
+
 def check_file_name(name: str) -> str:
-    """Return ``name`` if it is a valid relative file name inside a manifest (``a.csv``, ``x/y.pt``).
+    """Return ``name`` if it is a safe relative file name inside a manifest (``a.csv``, ``figures/x.png``).
 
     Raises:
-        StoreError: Empty, absolute, with a ``.``/``..`` segment, a backslash or control characters.
+        StoreError: See :func:`file_name_problem`.
     """
-    segments = name.split("/") if isinstance(name, str) else []
-    if not (isinstance(name, str) and _FILE_NAME.fullmatch(name)) or any(s in ("", ".", "..") for s in segments):
-        raise StoreError(f"invalid manifest file name {name!r}: use a relative name like 'curves.csv' "
-                         "or 'ckpt/model.pt' (no leading '/', no '.' or '..' segments).")
+    problem = file_name_problem(name)
+    if problem is not None:
+        raise StoreError(f"invalid manifest file name {str(name)[:80]!r}: it {problem}; use a relative name "
+                         "like 'curves.csv' or 'figures/ev.png' (no leading '/', no '.' or '..' parts).")
     return name
+
+
+def safe_join(folder: Path, name: str) -> Path:
+    """``folder / name`` for a manifest file name, refusing any name that would leave ``folder``.
+
+    Every command that writes a manifest's files out goes through here (a manifest may come from an
+    imported, untrusted bundle).
+
+    Raises:
+        StoreError: An unsafe name, or one that resolves outside ``folder`` (e.g. through a symlink).
+    """
+    check_file_name(name)
+    base = Path(folder).resolve()
+    path = base.joinpath(*name.split("/"))
+    try:
+        path.resolve().relative_to(base)
+    except ValueError:
+        raise StoreError(f"manifest file name {name!r} leads outside {folder} (through a symlink?); "
+                         "remove the link or write to an empty folder.") from None
+    return path
 
 
 def build_manifest(
@@ -184,40 +243,98 @@ def build_manifest(
 
 
 def parse_manifest(oid: str, data: bytes) -> Manifest:
-    """Parse the bytes of object ``oid`` as a manifest.
+    """Parse the bytes of object ``oid`` as a manifest, checking it against the schema.
 
     Raises:
-        StoreError: The object is not a manifest (not JSON, wrong keys, bad ids or schema).
+        StoreError: The object is not a manifest (not canonical JSON of the schema), or a manifest
+            whose content breaks the schema (the message names the field).
     """
     not_manifest = StoreError(f"object {oid} is not a manifest (a {len(data)}-byte blob); give the id "
                               "or ref of a manifest, see `morfic store ls`.")
     if not data.startswith(MANIFEST_MAGIC):
         raise not_manifest
+    if len(data) > MAX_MANIFEST_BYTES:
+        raise StoreError(f"manifest {oid} is {len(data)} bytes, more than the {MAX_MANIFEST_BYTES} a manifest "
+                         "may have; it was not written by morfic.")
     try:
-        doc = json.loads(data)
-    except ValueError:
+        doc = json.loads(data, parse_constant=_refuse_constant)
+    except (ValueError, RecursionError):
         raise not_manifest from None
     if not isinstance(doc, dict) or set(doc) != MANIFEST_KEYS:
         raise not_manifest
-    if doc["schema"] != SCHEMA_VERSION:
-        raise StoreError(f"manifest {oid} has schema {doc['schema']!r}; this morfic reads schema "
+    if doc["schema"] != SCHEMA_VERSION or isinstance(doc["schema"], bool):
+        raise StoreError(f"manifest {oid} has schema {str(doc['schema'])[:40]!r}; this morfic reads schema "
                          f"{SCHEMA_VERSION}. Upgrade morfic to read it.")
+    problem = manifest_problem(doc)
+    if problem is None and canonical_json(doc) != bytes(data):
+        problem = "its bytes are not the canonical JSON of its content"
+    if problem is not None:
+        raise StoreError(f"manifest {oid} is invalid: {problem}. It was not written by morfic; drop it "
+                         "(or the bundle it came from).")
+    return _from_doc(oid, doc)
+
+
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not JSON")
+
+
+def manifest_problem(doc: dict[str, Any]) -> str | None:
+    """What in a manifest document (already keyed by :data:`MANIFEST_KEYS`) breaks the schema, or ``None``.
+
+    Checked: the kind, ``morfic_version`` (a short label), ``created`` (UTC ISO-8601 ending in ``Z``),
+    ``config`` and ``meta`` (JSON objects), ``inputs`` (role -> full id), ``files`` (safe name ->
+    ``{"id": full id, "size": int >= 0}``). NaN/Inf and non-canonical bytes are refused by the caller.
+    """
+    if doc["kind"] not in MANIFEST_KINDS:
+        return f"unknown kind {str(doc['kind'])[:40]!r} (valid: {', '.join(MANIFEST_KINDS)})"
+    version = doc["morfic_version"]
+    if not (isinstance(version, str) and len(version) <= MAX_LABEL and _LABEL.fullmatch(version)):
+        return "morfic_version is not a version label"
+    if not _is_timestamp(doc["created"]):
+        return "created is not a UTC time like 2025-01-02T03:04:05.123456Z"
+    for what in ("config", "meta"):
+        if not isinstance(doc[what], dict):
+            return f"{what} is not a JSON object"
+    inputs = doc["inputs"]
+    if not isinstance(inputs, dict):
+        return "inputs is not a JSON object"
+    for role, oid in inputs.items():
+        if not (len(role) <= 2 * MAX_LABEL and _ROLE.fullmatch(role)):
+            return f"input role {role[:40]!r} is not a label like 'checkpoint' or 'rollout/go2/vx2'"
+        if not (isinstance(oid, str) and is_object_id(oid)):
+            return f"input '{role}' is not a full object id"
+    files = doc["files"]
+    if not isinstance(files, dict):
+        return "files is not a JSON object"
+    for name, entry in files.items():
+        problem = file_name_problem(name)
+        if problem is not None:
+            return f"file name {name[:80]!r} {problem}"
+        if not (isinstance(entry, dict) and set(entry) == {"id", "size"}):
+            return f"file '{name}' is not {{\"id\": ..., \"size\": ...}}"
+        if not (isinstance(entry["id"], str) and is_object_id(entry["id"])):
+            return f"file '{name}' id is not a full object id"
+        size = entry["size"]
+        if isinstance(size, bool) or not isinstance(size, int) or size < 0:
+            return f"file '{name}' size {str(size)[:40]} is not a byte count"
+    return None
+
+
+def _is_timestamp(text: Any) -> bool:
+    if not (isinstance(text, str) and _CREATED.fullmatch(text)):
+        return False
     try:
-        return _from_doc(oid, doc)
-    except (TypeError, KeyError, AttributeError, ValueError):
-        raise not_manifest from None
+        datetime.strptime(text[:19], "%Y-%m-%dT%H:%M:%S")
+    except ValueError:
+        return False
+    return True
 
 
 def _from_doc(oid: str, doc: dict[str, Any]) -> Manifest:
-    files = {str(n): FileEntry(id=str(f["id"]), size=int(f["size"])) for n, f in doc["files"].items()}
-    inputs = {str(r): str(i) for r, i in doc["inputs"].items()}
-    if not all(is_object_id(i) for i in [*inputs.values(), *(f.id for f in files.values())]):
-        raise ValueError("bad id")
-    if not isinstance(doc["config"], dict) or not isinstance(doc["meta"], dict):
-        raise ValueError("config/meta")
-    return Manifest(id=oid, kind=str(doc["kind"]), schema=int(doc["schema"]),
-                    morfic_version=str(doc["morfic_version"]), created=str(doc["created"]),
-                    config=doc["config"], inputs=inputs, files=files, meta=doc["meta"])
+    files = {n: FileEntry(id=f["id"], size=f["size"]) for n, f in doc["files"].items()}
+    return Manifest(id=oid, kind=doc["kind"], schema=doc["schema"], morfic_version=doc["morfic_version"],
+                    created=doc["created"], config=doc["config"], inputs=dict(doc["inputs"]), files=files,
+                    meta=doc["meta"])
 
 
 class ManifestIndex:

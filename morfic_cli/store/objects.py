@@ -4,7 +4,8 @@ Writing an object is crash-safe: the bytes go to a temp file under ``tmp/`` (sam
 ``objects/``), are flushed and ``fsync``-ed, made read-only (``0o444``) and only then
 ``os.replace``-d into place. A crash, a full disk or Ctrl-C before the rename leaves no visible
 object, only (at worst) a temp file that ``gc`` removes. Putting bytes that are already stored
-is a no-op.
+is a no-op when the stored copy is intact; a stored copy that no longer hashes to its id is rewritten
+(so putting or importing good bytes repairs a corrupt object).
 """
 
 from __future__ import annotations
@@ -161,7 +162,7 @@ class ObjectDB:
     def put_bytes(self, data: bytes) -> str:
         """Store ``data``; return its id. Idempotent."""
         oid = hashlib.sha256(data).hexdigest()
-        if self._present(oid, len(data)):
+        if self.intact(oid, len(data)):
             return oid
         return self._write([data], expected=oid)
 
@@ -181,10 +182,6 @@ class ObjectDB:
         Raises:
             StoreError: The bytes hash to something else; nothing is stored.
         """
-        if self._present(expected, None):
-            for _ in chunks:
-                pass
-            return expected
         return self._write(chunks, expected=expected)
 
     def get_bytes(self, oid: str, *, verify: bool = True) -> bytes:
@@ -254,13 +251,49 @@ class ObjectDB:
                                         "try `morfic store ls`.")
         return path
 
-    def _present(self, oid: str, size: int | None) -> bool:
-        """Whether ``oid`` is stored already (and, if ``size`` is given, has that size)."""
+    def intact(self, oid: str, size: int | None = None) -> bool:
+        """Whether ``oid`` is stored and its bytes hash to it (and, if ``size`` is given, has that size)."""
         try:
             st = self.path(oid).stat()
-        except FileNotFoundError:
+        except (FileNotFoundError, NotADirectoryError):
             return False
-        return size is None or st.st_size == size
+        if size is not None and st.st_size != size:
+            return False
+        try:
+            return sha256_file(self.path(oid)) == oid
+        except OSError:
+            return False
+
+    def stage(self, chunks: Iterable[bytes], staging: Path) -> tuple[Path, str, int]:
+        """Write ``chunks`` to a fsynced read-only temp file in ``staging`` (not yet an object).
+
+        Returns:
+            ``(temp path, sha256 hex, size)``; :meth:`commit_staged` makes it the object.
+        """
+        staging.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=staging, prefix="obj-", suffix=".tmp")
+        try:
+            oid = _write_fd(fd, chunks)
+            os.chmod(tmp, 0o444)
+            return Path(tmp), oid, os.stat(tmp).st_size
+        except BaseException:
+            unlink_quiet(tmp)
+            raise
+
+    def commit_staged(self, tmp: Path, oid: str) -> bool:
+        """Rename a staged file (from :meth:`stage`, hashing to ``oid``) into place unless an intact copy exists.
+
+        Returns:
+            Whether the object was written (new, or replacing a corrupt copy).
+        """
+        if self.intact(oid):
+            unlink_quiet(tmp)
+            return False
+        dest = self.path(oid)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(tmp, dest)
+        fsync_dir(dest.parent)
+        return True
 
     def _write(self, chunks: Iterable[bytes], expected: str | None = None) -> str:
         """Write ``chunks`` to a temp file, then rename it to the object path of its hash."""
@@ -275,7 +308,7 @@ class ObjectDB:
                 raise StoreError(f"object {expected} is corrupt: its bytes hash to {oid}; nothing "
                                  "was stored.")
             size = os.stat(tmp).st_size
-            if not self._present(oid, size):
+            if not self.intact(oid, size):
                 os.chmod(tmp, 0o444)
                 dest = self.path(oid)
                 dest.parent.mkdir(parents=True, exist_ok=True)

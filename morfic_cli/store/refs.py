@@ -3,11 +3,17 @@
 Each ref is one file ``refs/<name>`` holding its whole history as JSON lines, oldest first::
 
     {"id":"<64 hex>","time":"2025-01-02T03:04:05.123456Z","version":1}
-    {"id":"<64 hex>","time":"2025-01-02T04:00:00.000000Z","version":2}
+    {"id":"<64 hex>","prev":"<sha256 of line 1>","time":"2025-01-02T04:00:00.000000Z","version":2}
 
 The current value is the last line. An update appends a line by writing the full new history to a
 temp file and renaming it over the old one, under the exclusive ``locks/refs.lock``, so
 concurrent writers never lose an update and a crash leaves either the old or the new history.
+
+Tamper evidence: every entry after the first carries ``prev``, the sha256 of the previous line's
+bytes (a hash chain), so an edited, reordered or dropped line breaks the chain. After each update the
+head -- version and sha256 of the last line -- is written to ``heads/<name>``; a history shorter than
+its head was truncated. Both are checked by ``morfic store verify``. Histories written before the
+chain existed (no ``prev``) still read; the chain starts at their first new entry.
 
 Version syntax (see :func:`split_spec`): ``name`` is the current version, ``name@N`` (N >= 1)
 is version N counted from the first, ``name@-K`` (K >= 1) is K updates before the current one
@@ -16,6 +22,7 @@ is version N counted from the first, ``name@-K`` (K >= 1) is K updates before th
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -26,9 +33,11 @@ from pathlib import Path
 
 from morfic_cli.errors import ArtifactNotFoundError, StoreError
 from morfic_cli.store.lock import file_lock
-from morfic_cli.store.objects import is_object_id, store_os_error, write_atomic
+from morfic_cli.store.objects import is_object_id, store_os_error, unlink_quiet, write_atomic
 
 _SEGMENT = re.compile(r"[A-Za-z0-9._-]+")
+_TIME = re.compile(r"\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d{1,6})?Z")
+_ENTRY_KEYS = (frozenset({"id", "time", "version"}), frozenset({"id", "prev", "time", "version"}))
 
 #: Longest accepted ref name.
 MAX_REF_LENGTH = 200
@@ -42,11 +51,14 @@ class RefEntry:
         version: 1-based version number.
         id: Manifest id the ref pointed to at this version.
         time: UTC ISO-8601 time of the update.
+        prev: sha256 of the previous history line (``None`` for version 1 and for entries written
+            before the hash chain existed).
     """
 
     version: int
     id: str
     time: str
+    prev: str | None = None
 
 
 def is_ref_name(name: str) -> bool:
@@ -104,30 +116,67 @@ def pick_version(name: str, history: list[RefEntry], number: int) -> RefEntry:
     return history[index]
 
 
+def encode_entry(entry: RefEntry) -> bytes:
+    """One history line (canonical JSON, no newline)."""
+    doc = {"id": entry.id, "time": entry.time, "version": entry.version}
+    if entry.prev is not None:
+        doc["prev"] = entry.prev
+    return json.dumps(doc, sort_keys=True, separators=(",", ":")).encode("ascii")
+
+
+def entry_hash(entry: RefEntry) -> str:
+    """sha256 hex of an entry's line: what the next entry's ``prev`` holds."""
+    return hashlib.sha256(encode_entry(entry)).hexdigest()
+
+
+def next_entry(history: list[RefEntry], oid: str, time: str) -> RefEntry:
+    """The entry that appends ``oid`` to ``history`` (chained to its last line)."""
+    prev = entry_hash(history[-1]) if history else None
+    return RefEntry(version=len(history) + 1, id=oid, time=time, prev=prev)
+
+
 def encode_history(entries: list[RefEntry]) -> bytes:
     """The bytes of a ref history file (one canonical JSON object per line)."""
-    lines = (json.dumps({"id": e.id, "time": e.time, "version": e.version}, sort_keys=True,
-                        separators=(",", ":")) for e in entries)
-    return "".join(line + "\n" for line in lines).encode("ascii")
+    return b"".join(encode_entry(e) + b"\n" for e in entries)
 
 
 def decode_history(name: str, data: bytes) -> list[RefEntry]:
-    """Parse a ref history file.
+    """Parse a ref history file and check its hash chain.
 
     Raises:
-        StoreError: A line that is not a valid entry, or versions that are not 1, 2, 3, ...
+        StoreError: A line that is not a valid entry, versions that are not 1, 2, 3, ..., a time that is
+            not a UTC timestamp, a broken chain (an edited, dropped or reordered line), or a missing last
+            newline (a truncated file).
     """
-    entries = []
-    for number, line in enumerate(data.decode("utf-8", "replace").splitlines(), start=1):
+    def damaged(number: int, why: str) -> StoreError:
+        return StoreError(f"ref '{name}' is damaged (line {number}: {why}); run `morfic store verify`, and "
+                          "re-import the ref from an export if it was tampered with.")
+
+    entries: list[RefEntry] = []
+    if data and not data.endswith(b"\n"):
+        raise damaged(data.count(b"\n") + 1, "cut short, no newline at its end")
+    for number, line in enumerate(data.split(b"\n")[:-1], start=1):
         try:
             raw = json.loads(line)
-            entry = RefEntry(version=int(raw["version"]), id=str(raw["id"]), time=str(raw["time"]))
-        except (ValueError, KeyError, TypeError):
-            raise StoreError(f"ref '{name}' is damaged (line {number} is not a history entry); "
-                             "run `morfic store verify`.") from None
-        if entry.version != number or not is_object_id(entry.id):
-            raise StoreError(f"ref '{name}' is damaged (line {number}: version {entry.version}, "
-                             f"id {entry.id!r}); run `morfic store verify`.")
+        except ValueError:
+            raise damaged(number, "not JSON") from None
+        if not isinstance(raw, dict) or frozenset(raw) not in _ENTRY_KEYS:
+            raise damaged(number, "not a history entry")
+        version, oid, time, prev = raw["version"], raw["id"], raw["time"], raw.get("prev")
+        if isinstance(version, bool) or version != number:
+            raise damaged(number, f"version {str(version)[:20]}, expected {number}")
+        if not (isinstance(oid, str) and is_object_id(oid)):
+            raise damaged(number, "id is not a full object id")
+        if not (isinstance(time, str) and _TIME.fullmatch(time)):
+            raise damaged(number, "time is not a UTC timestamp")
+        if prev is not None or (entries and entries[-1].prev is not None):
+            expected = entry_hash(entries[-1]) if entries else None
+            if prev != expected:
+                raise damaged(number, "its hash chain is broken: a line before it was edited, dropped or "
+                                      "reordered")
+        entry = RefEntry(version=version, id=oid, time=time, prev=prev)
+        if encode_entry(entry) != line:
+            raise damaged(number, "not in canonical form")
         entries.append(entry)
     return entries
 
@@ -160,6 +209,7 @@ class RefDB:
     def __init__(self, root: Path) -> None:
         self.root = root
         self.dir = root / "refs"
+        self.heads_dir = root / "heads"
         self.tmp_dir = root / "tmp"
         self.lock_path = root / "locks" / "refs.lock"
 
@@ -209,7 +259,7 @@ class RefDB:
             history = self.history(name)
             if history and history[-1].id == oid:
                 return history[-1].version
-            entry = RefEntry(version=len(history) + 1, id=oid, time=time)
+            entry = next_entry(history, oid, time)
             self.write(name, [*history, entry])
         return entry.version
 
@@ -219,8 +269,45 @@ class RefDB:
         self._check_no_conflict(name, path)
         try:
             write_atomic(self.tmp_dir, path, [encode_history(entries)])
+            head = self.head_path(name)
+            if entries:
+                doc = {"entry": entry_hash(entries[-1]), "version": entries[-1].version}
+                write_atomic(self.tmp_dir, head, [json.dumps(doc, sort_keys=True).encode() + b"\n"])
+            else:
+                unlink_quiet(head)
         except OSError as exc:
             raise store_os_error(exc, f"updating ref '{name}'", self.root) from exc
+
+    def remove(self, name: str) -> None:
+        """Delete ref ``name`` and its head (only to undo a failed import; caller holds :meth:`locked`)."""
+        unlink_quiet(self.path(name))
+        unlink_quiet(self.head_path(name))
+
+    def head_path(self, name: str) -> Path:
+        """``heads/<name>``: version and line hash of the last entry written to ref ``name``."""
+        return self.heads_dir.joinpath(*check_ref_name(name).split("/"))
+
+    def head_problem(self, name: str, history: list[RefEntry]) -> str | None:
+        """Why ``history`` does not match the head recorded for it (truncated, rewritten), or ``None``.
+
+        No head (a ref written before heads existed) is not a problem. A head one version behind the
+        history is the trace of an update interrupted between its two writes, also not a problem.
+        """
+        try:
+            raw = json.loads(self.head_path(name).read_bytes())
+            version, digest = int(raw["version"]), str(raw["entry"])
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError, KeyError, TypeError):
+            return f"ref '{name}' has an unreadable head file heads/{name}"
+        if version < 1:
+            return f"ref '{name}' has an unreadable head file heads/{name}"
+        if version > len(history):
+            return (f"ref '{name}' was truncated: its head is version {version} but the history has "
+                    f"{len(history)} version(s)")
+        if version < len(history) - 1 or entry_hash(history[version - 1]) != digest:
+            return f"ref '{name}' was rewritten: version {version} does not match the head recorded for it"
+        return None
 
     def _check_no_conflict(self, name: str, path: Path) -> None:
         """Refuse ``a/b`` when ref ``a`` exists, and ``a`` when refs ``a/...`` exist (like git)."""

@@ -8,17 +8,22 @@ The tar mirrors the store layout and holds the closure of the named refs::
     refs/<name>                  the full history of each named ref
 
 Members are written in sorted order with fixed owner, mode and mtime, so exporting the same refs
-twice gives the same bytes. Import rehashes every object, adds only what is missing, and merges
-each ref history (see :func:`morfic_cli.store.refs.merge_status`); it is idempotent.
+twice gives the same bytes. Import treats the tar as untrusted: it checks everything before anything
+becomes visible (see :func:`import_tar`), adds only what is missing or corrupt here, and merges each
+ref history (see :func:`morfic_cli.store.refs.merge_status`); it is idempotent and all or nothing.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
+import lzma
 import os
+import shutil
 import tarfile
 import tempfile
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,9 +32,9 @@ from typing import IO, TYPE_CHECKING
 from morfic_cli import __version__
 from morfic_cli.errors import ArtifactNotFoundError, StoreError
 from morfic_cli.store.gc import closure
-from morfic_cli.store.manifest import parse_manifest
+from morfic_cli.store.manifest import MAX_MANIFEST_BYTES, parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, is_object_id, object_relpath, store_os_error, unlink_quiet
-from morfic_cli.store.refs import RefEntry, check_ref_name, decode_history, encode_history, merge_status
+from morfic_cli.store.refs import RefEntry, check_ref_name, decode_history, encode_history, is_ref_name, merge_status
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -65,12 +70,14 @@ class ImportReport:
     Attributes:
         objects_added: Objects that were new to this store.
         objects_present: Objects this store already had.
+        objects_repaired: Of those, copies that were corrupt here and were replaced by the export's.
         manifests: Manifests indexed.
         refs: Ref name -> ``created``, ``extended`` or ``unchanged``.
     """
 
     objects_added: int = 0
     objects_present: int = 0
+    objects_repaired: int = 0
     manifests: int = 0
     refs: dict[str, str] = field(default_factory=dict)
 
@@ -101,12 +108,19 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
         StoreError: A reachable object is missing (run ``verify``) or ``out`` cannot be written.
     """
     names = sorted(set(refs))
+    out = Path(out)
+    if out.is_dir() or not out.name:
+        raise StoreError(f"--out {out} is a folder; give the tar file to write, e.g. --out {out / 'export.tar'}.")
+    for parent in out.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise StoreError(f"--out {out}: {parent} is a file, so the tar cannot be written there.")
+            break
     if not names:
         raise StoreError("name at least one ref to export, e.g. `morfic store export runs/film-s0 --out x.tar`.")
     for name in names:
         if not store.refs.exists(check_ref_name(name)):
             raise ArtifactNotFoundError(f"no ref '{name}' in store {store.root}; try `morfic store ls`.")
-    out = Path(out)
     report = ExportReport(path=out, refs=names)
     with store.reading():
         histories = {name: store.refs.history(name) for name in names}
@@ -152,6 +166,12 @@ def _write_tar(store: Store, out: Path, names: list[str], histories: dict[str, l
             unlink_quiet(tmp)
 
 
+#: Largest accepted header member and ref history member of an export (bytes).
+MAX_SMALL_MEMBER = 16 << 20
+
+_HEADER_KEYS = frozenset({"format", "morfic_version", "objects", "refs"})
+
+
 @dataclass
 class _Members:
     objects: list[tarfile.TarInfo] = field(default_factory=list)
@@ -163,22 +183,28 @@ class _Members:
 def _classify(tar: tarfile.TarFile, path: Path) -> _Members:
     """Sort the tar's members into objects, index markers and refs; refuse anything else."""
     members = _Members()
+    names: set[str] = set()
     for member in tar.getmembers():
         name = member.name
         if member.isdir():
             continue
         if not member.isfile():
-            raise StoreError(f"{path} is not a morfic export: member '{name}' is not a regular file.")
+            raise StoreError(f"{path} is not a morfic export: member '{name[:200]}' is not a regular file.")
+        if name in names:
+            raise StoreError(f"{path} is not a morfic export: member '{name[:200]}' appears twice.")
+        names.add(name)
         if name == HEADER:
             members.header = member
         elif _object_id_of(name) is not None:
             members.objects.append(member)
         elif name.startswith("manifests/") and is_object_id(name[10:]):
+            if member.size != 0:
+                raise StoreError(f"{path} is not a morfic export: index marker '{name}' is not empty.")
             members.manifests.append(name[10:])
-        elif name.startswith("refs/"):
-            members.refs[check_ref_name(name[5:])] = member
+        elif name.startswith("refs/") and is_ref_name(name[5:]):
+            members.refs[name[5:]] = member
         else:
-            raise StoreError(f"{path} is not a morfic export: unexpected member '{name}'.")
+            raise StoreError(f"{path} is not a morfic export: unexpected member '{name[:200]}'.")
     if members.header is None:
         raise StoreError(f"{path} is not a morfic export (no {HEADER}); make one with `morfic store export`.")
     return members
@@ -199,71 +225,217 @@ def _open_tar(path: Path) -> tarfile.TarFile:
         return tarfile.open(path, "r:*")
     except FileNotFoundError:
         raise StoreError(f"no such file: {path}.") from None
-    except (tarfile.TarError, OSError) as exc:
+    except IsADirectoryError:
+        raise StoreError(f"{path} is a folder; give the tar file made by `morfic store export`.") from None
+    except (tarfile.TarError, OSError, EOFError, zlib.error, lzma.LZMAError) as exc:
         raise StoreError(f"{path} is not a readable tar file ({exc}); make one with `morfic store export`.") from exc
 
 
-def import_tar(store: Store, path: Path) -> ImportReport:
-    """Import an export tar: rehash and add its objects, index its manifests, merge its refs.
+@dataclass
+class _Plan:
+    """Everything an import will write, checked before anything is written."""
 
-    Objects go in first, refs last, and every ref merge is checked before any ref is written, so a
-    failure leaves the refs untouched (at worst some new unreferenced objects that ``gc`` removes).
+    staged: dict[str, Path] = field(default_factory=dict)
+    """Object id -> staged temp file (new objects, and good copies of locally corrupt ones)."""
+    present: int = 0
+    contents: dict[str, bytes] = field(default_factory=dict)
+    """Bytes of the exported manifests (read while hashing)."""
+    manifests: list[str] = field(default_factory=list)
+    histories: dict[str, list[RefEntry]] = field(default_factory=dict)
+
+
+def import_tar(store: Store, path: Path) -> ImportReport:
+    """Import an export tar, all or nothing.
+
+    Everything is checked before anything becomes visible: the header, every object against its
+    hash and declared size (objects this store already has are rehashed, and a corrupt local copy is
+    replaced by the export's good one), every manifest against the schema (safe file names, sizes
+    that match the objects, inputs that are manifests), every ref history (entries, hash chain,
+    targets that are manifests) and how it merges with the local one. Only then are objects renamed
+    into place, manifests indexed and refs written (under the ref lock; a failure while writing refs
+    puts the old histories back).
 
     Raises:
-        StoreError: Not an export, a corrupt object, or a ref whose history diverged from the local one.
+        StoreError: Not an export, a damaged or truncated tar, a corrupt object, an invalid manifest or
+            history, or a ref whose history diverged from the local one. Nothing was imported.
     """
     path = Path(path)
     report = ImportReport()
-    with _open_tar(path) as tar, store.writing():
-        members = _classify(tar, path)
-        for member in members.objects:
-            _import_object(store, tar, member, report)
-        histories = {name: _read_history(tar, name, member) for name, member in members.refs.items()}
-        _index_manifests(store, members.manifests, report)
-        _check_history_targets(store, histories)
-        with store.refs.locked():
-            report.refs = {name: merge_status(name, store.refs.history(name), hist)
-                           for name, hist in sorted(histories.items())}
-            for name, status in report.refs.items():
-                if status in ("created", "extended"):
-                    store.refs.write(name, histories[name])
+    with _open_tar(path) as tar:
+        _checked_stage(store, tar, path, None)  # a first pass that writes nothing, not even a new store's folders
+        with store.writing():
+            staging = Path(tempfile.mkdtemp(dir=store.root / "tmp", prefix="import-"))
+            try:
+                _commit(store, _checked_stage(store, tar, path, staging), report)
+            finally:
+                shutil.rmtree(staging, ignore_errors=True)
     return report
 
 
-def _import_object(store: Store, tar: tarfile.TarFile, member: tarfile.TarInfo, report: ImportReport) -> None:
-    oid = _object_id_of(member.name)
-    assert oid is not None  # checked by _classify
-    if store.objects.has(oid):
-        report.objects_present += 1
-        return
-    fh = tar.extractfile(member)
-    assert fh is not None  # regular file, checked by _classify
-    store.objects.put_stream(_chunks(fh), expected=oid)
-    report.objects_added += 1
+def _checked_stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None) -> _Plan:
+    try:
+        return _stage(store, tar, path, staging)
+    except (tarfile.TarError, EOFError, zlib.error, lzma.LZMAError) as exc:
+        raise StoreError(f"{path} is damaged or truncated ({exc}); nothing was imported. Copy the whole file "
+                         "again, or re-export it.") from exc
+    except OSError as exc:
+        raise store_os_error(exc, f"reading {path}", store.root) from exc
 
 
-def _read_history(tar: tarfile.TarFile, name: str, member: tarfile.TarInfo) -> list[RefEntry]:
+def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None) -> _Plan:
+    """Read and check the whole tar; stage the objects this store lacks or has corrupt (none without ``staging``)."""
+    members = _classify(tar, path)
+    header = _read_header(tar, members, path)
+    plan = _Plan()
+    sizes: dict[str, int] = {}
+    listed = set(members.manifests)
+    for member in members.objects:
+        oid = _object_id_of(member.name)
+        assert oid is not None  # checked by _classify
+        fh = tar.extractfile(member)
+        assert fh is not None  # regular file, checked by _classify
+        if oid in listed and member.size <= MAX_MANIFEST_BYTES:
+            plan.contents[oid] = fh.read()
+            fh = io.BytesIO(plan.contents[oid])
+        if staging is None or store.objects.intact(oid, member.size):
+            actual, size = _hash_stream(_chunks(fh))
+            plan.present += 1
+        else:
+            tmp, actual, size = store.objects.stage(_chunks(fh), staging)
+            plan.staged[oid] = tmp
+        if actual != oid or size != member.size:
+            raise StoreError(f"object {oid} in {path} is corrupt (its bytes hash to {actual}); nothing was "
+                             "imported. Re-export it from an intact store.")
+        sizes[oid] = size
+    if header["objects"] != len(sizes):
+        raise StoreError(f"{path} is incomplete: its header lists {header['objects']} objects, it holds "
+                         f"{len(sizes)}; nothing was imported. Re-export it.")
+    exported = set(members.manifests)
+    for oid in sorted(exported):
+        _check_manifest(store, oid, plan, sizes, exported)
+    plan.manifests = sorted(exported)
+    for name, member in sorted(members.refs.items()):
+        history = decode_history(name, _read_small(tar, member, f"ref '{name}'", path))
+        if not history:
+            raise StoreError(f"ref '{name}' in {path} has an empty history; nothing was imported.")
+        for entry in history:
+            if entry.id not in exported and not store.index.has(entry.id):
+                raise StoreError(f"ref '{name}@{entry.version}' in {path} points at {entry.id}, which is not a "
+                                 "manifest in the export; nothing was imported. Re-export it.")
+        plan.histories[name] = history
+    if sorted(plan.histories) != header["refs"]:
+        raise StoreError(f"{path} is inconsistent: its header lists refs {header['refs'][:5]}, it holds "
+                         f"{sorted(plan.histories)[:5]}; nothing was imported. Re-export it.")
+    for name, history in plan.histories.items():
+        merge_status(name, store.refs.history(name), history)  # diverged: refuse before writing anything
+    return plan
+
+
+def _read_small(tar: tarfile.TarFile, member: tarfile.TarInfo, what: str, path: Path) -> bytes:
+    if member.size > MAX_SMALL_MEMBER:
+        raise StoreError(f"{what} in {path} is {member.size} bytes, more than {MAX_SMALL_MEMBER}; it was not "
+                         "made by `morfic store export`.")
     fh = tar.extractfile(member)
     assert fh is not None
-    return decode_history(name, fh.read())
+    return fh.read()
 
 
-def _index_manifests(store: Store, ids: list[str], report: ImportReport) -> None:
-    for oid in ids:
-        if not store.objects.has(oid):
-            raise StoreError(f"the export lists manifest {oid} but does not contain it; re-export it.")
-        manifest = parse_manifest(oid, store.objects.get_bytes(oid))
-        missing = [ref for ref in manifest.referenced_ids() if not store.objects.has(ref)]
-        if missing:
-            raise StoreError(f"the export is incomplete: manifest {oid} names {missing[0]}, which is neither "
-                             "in the export nor in this store; re-export it.")
-        store.index.add(oid)
-        report.manifests += 1
+def _read_header(tar: tarfile.TarFile, members: _Members, path: Path) -> dict:
+    assert members.header is not None
+    bad = StoreError(f"{path} has an invalid {HEADER}; it was not made by `morfic store export` (or by a "
+                     "newer morfic: upgrade morfic).")
+    try:
+        header = json.loads(_read_small(tar, members.header, HEADER, path), parse_constant=_no_constant)
+    except ValueError:
+        raise bad from None
+    if not isinstance(header, dict) or set(header) != _HEADER_KEYS:
+        raise bad
+    if header["format"] != EXPORT_FORMAT or isinstance(header["format"], bool):
+        raise bad
+    count, refs = header["objects"], header["refs"]
+    if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+        raise bad
+    if not (isinstance(refs, list) and all(isinstance(r, str) and is_ref_name(r) for r in refs)):
+        raise bad
+    if not isinstance(header["morfic_version"], str) or len(header["morfic_version"]) > 100:
+        raise bad
+    header["refs"] = sorted(refs)
+    return header
 
 
-def _check_history_targets(store: Store, histories: dict[str, list[RefEntry]]) -> None:
-    for name, history in histories.items():
-        for entry in history:
-            if not store.index.has(entry.id):
-                raise StoreError(f"ref '{name}@{entry.version}' in the export points at {entry.id}, which "
-                                 "is not a manifest in the export; re-export it.")
+def _no_constant(name: str) -> None:
+    raise ValueError(name)
+
+
+def _hash_stream(chunks: Iterator[bytes]) -> tuple[str, int]:
+    digest = hashlib.sha256()
+    size = 0
+    for chunk in chunks:
+        digest.update(chunk)
+        size += len(chunk)
+    return digest.hexdigest(), size
+
+
+def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], exported: set[str]) -> None:
+    """Parse an exported manifest strictly and check that everything it names is there, with the right size."""
+    if oid in plan.staged:
+        data = plan.staged[oid].read_bytes()
+    elif oid in plan.contents:
+        data = plan.contents[oid]
+    elif oid in sizes:
+        raise StoreError(f"manifest {oid} in the export is {sizes[oid]} bytes, more than the {MAX_MANIFEST_BYTES} a "
+                         "manifest may have; nothing was imported.")
+    elif store.objects.intact(oid):
+        data = store.objects.get_bytes(oid)
+    else:
+        raise StoreError(f"the export lists manifest {oid} but does not contain it; nothing was imported. "
+                         "Re-export it.")
+    manifest = parse_manifest(oid, data)
+    for name, entry in manifest.files.items():
+        size = sizes.get(entry.id)
+        if size is None and store.objects.intact(entry.id):
+            size = store.objects.size(entry.id)
+        if size is None:
+            raise StoreError(f"the export is incomplete: manifest {oid} names {entry.id} (file '{name}'), which "
+                             "is neither in the export nor intact in this store; nothing was imported. Re-export it.")
+        if size != entry.size:
+            raise StoreError(f"manifest {oid} declares file '{name}' as {entry.size} bytes, but its object has "
+                             f"{size}; nothing was imported. It was not made by morfic.")
+    for role, input_id in manifest.inputs.items():
+        if input_id not in exported and not store.index.has(input_id):
+            raise StoreError(f"the export is incomplete: manifest {oid} input '{role}' {input_id} is not a "
+                             "manifest in the export or in this store; nothing was imported. Re-export it.")
+
+
+def _commit(store: Store, plan: _Plan, report: ImportReport) -> None:
+    """Make a checked import visible: objects, then index markers, then refs (rolled back on failure)."""
+    with store.refs.locked():
+        previous = {name: store.refs.history(name) for name in plan.histories}
+        statuses = {name: merge_status(name, previous[name], hist) for name, hist in sorted(plan.histories.items())}
+        try:
+            for oid, tmp in sorted(plan.staged.items()):
+                if store.objects.has(oid):
+                    report.objects_repaired += int(store.objects.commit_staged(tmp, oid))
+                    report.objects_present += 1
+                elif store.objects.commit_staged(tmp, oid):
+                    report.objects_added += 1
+            report.objects_present += plan.present
+            for oid in plan.manifests:
+                store.index.add(oid)
+            report.manifests = len(plan.manifests)
+        except OSError as exc:
+            raise store_os_error(exc, "importing objects", store.root) from exc
+        written: list[str] = []
+        try:
+            for name, status in statuses.items():
+                if status in ("created", "extended"):
+                    store.refs.write(name, plan.histories[name])
+                    written.append(name)
+        except BaseException:
+            for name in written:
+                if previous[name]:
+                    store.refs.write(name, previous[name])
+                else:
+                    store.refs.remove(name)
+            raise
+        report.refs = statuses

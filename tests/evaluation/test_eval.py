@@ -118,8 +118,9 @@ def test_bad_input_is_an_error_and_writes_nothing(run_cli, store, argv, needle):
     assert out == "" and store.list_refs() == refs
 
 
-def test_eval_of_a_resume_ref_is_refused(run_cli, store):
-    code, _, err = run_cli("eval", "resume/film-s0", "--robots", "go2", "--steps", "2", "--envs", "1")
+def test_eval_of_a_trainer_state_is_refused(run_cli, store):
+    state = store.read_manifest("runs/film-s0").inputs["trainer_state"]
+    code, _, err = run_cli("eval", state, "--robots", "go2", "--steps", "2", "--envs", "1")
     assert code == 1 and "not a training checkpoint" in err
     assert os.environ["MORFIC_STORE"] == str(store.root)
 
