@@ -110,7 +110,7 @@ def default_actor(store: Store) -> str:
 
 def default_critics(store: Store) -> list[str]:
     """The newest run of each variant, in the paper's variant order."""
-    from morfic_cli.rl.models import VARIANTS
+    from morfic_cli.rl.variants import VARIANTS
 
     runs = newest_runs(store)
     return [runs[v] for v in VARIANTS if v in runs] + [r for v, r in sorted(runs.items()) if v not in VARIANTS]

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from morfic_cli.report import paper
 from morfic_cli.report.gather import StoreData
+from morfic_cli.rl.variants import variant_order
 
 if TYPE_CHECKING:
     from morfic_cli.recording.tables import WrittenArtifact
@@ -37,12 +38,6 @@ TRANSITIONS_400M = 400e6
 
 CALIBRATION_METRICS: tuple[str, ...] = ("ev", "abs_nvb", "nve", "asa", "flip", "cos_grad")
 
-
-def variant_order(variant: str) -> int:
-    """Sort key: the paper's variant order, then anything else."""
-    from morfic_cli.rl.models import VARIANTS
-
-    return VARIANTS.index(variant) if variant in VARIANTS else len(VARIANTS)
 
 
 def robot_order(robot: str) -> int:

@@ -18,7 +18,7 @@ from typing import Any
 
 from morfic_cli.config import CommandCfg, EnvCfg
 from morfic_cli.errors import MorficError, UnknownNameError
-from morfic_cli.rl.models import VARIANTS
+from morfic_cli.rl.variants import resolve_variant
 
 PRESETS: tuple[str, ...] = ("smoke", "cpu", "paper")
 
@@ -62,7 +62,7 @@ class TrainCfg:
     """One training run (SPEC section 4)."""
 
     variant: str = "film"
-    """One of :data:`~morfic_cli.rl.models.VARIANTS`."""
+    """A stock name of :data:`~morfic_cli.rl.variants.VARIANTS`, or a user critic class as ``module:Class``."""
     preset: str = "cpu"
     seed: int = 0
     max_iterations: int = 1000
@@ -119,11 +119,11 @@ def preset_cfg(preset: str, variant: str = "film", seed: int = 0) -> TrainCfg:
 
     Raises:
         UnknownNameError: Unknown preset or variant.
+        MorficError: A user variant that cannot be imported.
     """
     if preset not in _PRESET_FNS:
         raise UnknownNameError("preset", preset, PRESETS)
-    if variant not in VARIANTS:
-        raise UnknownNameError("variant", variant, VARIANTS)
+    resolve_variant(variant)
     return _PRESET_FNS[preset](variant, seed)
 
 
@@ -267,8 +267,7 @@ def apply_overrides(cfg: TrainCfg, items: list[str]) -> TrainCfg:
             node = node[part]
         node[leaf] = value
     out = train_cfg_from_dict(doc)
-    if out.variant not in VARIANTS:
-        raise UnknownNameError("variant", out.variant, VARIANTS)
+    resolve_variant(out.variant)
     for name in ("max_iterations", "num_steps_per_env", "save_interval"):
         if getattr(out, name) < 1:
             raise MorficError(f"{name} must be at least 1, got {getattr(out, name)}.")

@@ -35,8 +35,8 @@ from tensordict import TensorDict
 from morfic_cli.envs import observations as O
 from morfic_cli.errors import ArtifactNotFoundError, MorficError
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
-from morfic_cli.rl.models import model_cfgs
 from morfic_cli.rl.ppo import ALGORITHM_CLASS
+from morfic_cli.rl.variants import resolve_variant
 from morfic_cli.store import Store
 
 RUNS_PREFIX = "runs/"
@@ -44,8 +44,12 @@ RESUME_PREFIX = "resume/"
 
 
 def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
-    """The rsl-rl runner config (``obs_groups``, ``algorithm``, ``actor``, ``critic``, ...) of a TrainCfg."""
-    actor, critic, obs_groups = model_cfgs(cfg.variant)
+    """The rsl-rl runner config (``obs_groups``, ``algorithm``, ``actor``, ``critic``, ...) of a TrainCfg.
+
+    Raises:
+        MorficError: A user variant whose module cannot be imported (:func:`~morfic_cli.rl.variants.resolve_variant`).
+    """
+    actor, critic, obs_groups = resolve_variant(cfg.variant).model_cfgs()
     actor["hidden_dims"] = list(cfg.model.actor_hidden_dims)
     actor["distribution_cfg"]["init_std"] = cfg.model.init_std
     if cfg.model.critic_hidden_dims is not None:
@@ -111,7 +115,8 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
 
     Raises:
         ArtifactNotFoundError: Nothing by that name.
-        MorficError: It is not a training checkpoint.
+        MorficError: It is not a training checkpoint, or its user variant cannot be imported or its weights do
+            not fit that class.
     """
     manifest = store.read_manifest(spec)
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
@@ -120,11 +125,30 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
     cfg = train_cfg_from_dict(manifest.config)
     actor, critic = build_models(cfg)
     state = torch.load(io.BytesIO(store.read_file(manifest.id, "model.pt")), map_location="cpu", weights_only=True)
-    actor.load_state_dict(state["actor"])
-    critic.load_state_dict(state["critic"])
+    variant = resolve_variant(cfg.variant)
+    try:
+        actor.load_state_dict(state["actor"])
+        critic.load_state_dict(state["critic"])
+    except RuntimeError as exc:
+        if variant.stock:
+            raise  # the paper's classes: a mismatch is a bug in morfic
+        first = str(exc).strip().splitlines()[0]
+        raise MorficError(f"checkpoint '{spec}' does not fit variant '{cfg.variant}' ({variant.critic_class}) as "
+                          f"it is installed now ({first}); install the version of the class it was trained "
+                          "with.") from exc
     actor.eval()
     critic.eval()
     return TrainedModels(actor, critic, cfg, manifest.id, dict(manifest.meta))
+
+
+def variant_record(cfg: TrainCfg) -> dict[str, Any]:
+    """What a checkpoint's meta records of its variant: the actor and critic configs it was built from.
+
+    The variant itself (a stock name or a user's import path) is ``meta.variant``; ``model`` keeps the classes
+    and their config as rsl-rl received them, so a reader can see what a user variant's class was given.
+    """
+    rcfg = rsl_rl_cfg(cfg)
+    return {"model": {"actor": rcfg["actor"], "critic": rcfg["critic"], "obs_groups": rcfg["obs_groups"]}}
 
 
 def git_commit() -> str | None:
@@ -302,7 +326,7 @@ class TrainingRun:
             "max_iterations": self.cfg.max_iterations, "env_steps": logger.tot_timesteps,
             "wall_time_s": round(logger.wall_time_s, 3), "git_commit": self.git_commit, "finished": finished,
             "interrupted": interrupted, "parent": self.parent, "device": self.device, "run": self.name,
-            "vx_max": float(self.env.command_ranges.vx[1]),
+            "vx_max": float(self.env.command_ranges.vx[1]), **variant_record(self.cfg),
         }
         with self.store.writing():
             ckpt = self.store.put_manifest(
