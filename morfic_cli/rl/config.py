@@ -16,7 +16,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any
 
-from morfic_cli.config import CommandCfg, EnvCfg
+from morfic_cli.config import EnvCfg
 from morfic_cli.errors import MorficError, UnknownNameError
 from morfic_cli.rl.variants import resolve_variant
 
@@ -143,7 +143,7 @@ def train_cfg_from_dict(doc: dict[str, Any]) -> TrainCfg:
 
 
 def _build(cls: type, doc: dict[str, Any], prefix: str) -> Any:
-    hints = typing.get_type_hints(cls, globalns=_type_namespace())
+    hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(doc) - names)
     if unknown:
@@ -152,16 +152,6 @@ def _build(cls: type, doc: dict[str, Any], prefix: str) -> Any:
     for name, value in doc.items():
         kwargs[name] = _coerce(hints[name], value, f"{prefix}{name}")
     return cls(**kwargs)
-
-
-def _type_namespace() -> dict[str, Any]:
-    from morfic_cli import config as env_config
-    from morfic_cli.envs.gait import GaitCfg
-    from morfic_cli.envs.rewards import RewardCfg
-
-    ns = dict(vars(env_config))
-    ns.update(GaitCfg=GaitCfg, RewardCfg=RewardCfg, PPOCfg=PPOCfg, ModelCfg=ModelCfg, CommandCfg=CommandCfg)
-    return ns
 
 
 def _coerce(tp: Any, value: Any, key: str) -> Any:

@@ -34,9 +34,11 @@ from tensordict import TensorDict
 
 from morfic_cli.envs import observations as O
 from morfic_cli.errors import ArtifactNotFoundError, MorficError
+from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
 from morfic_cli.rl.ppo import ALGORITHM_CLASS
 from morfic_cli.rl.variants import resolve_variant
+from morfic_cli.sim.args import NUM_JOINTS
 from morfic_cli.store import Store
 
 RUNS_PREFIX = "runs/"
@@ -77,7 +79,7 @@ def dummy_observations(cfg: TrainCfg, batch: int = 1) -> TensorDict:
             "history": torch.zeros(batch, h, O.POLICY_DIM),
             "critic": torch.zeros(batch, h, O.POLICY_DIM),
             "privileged": torch.zeros(batch, O.PRIVILEGED_DIM),
-            "morphology": torch.zeros(batch, 11),
+            "morphology": torch.zeros(batch, DESCRIPTOR_DIM),
         },
         batch_size=[batch],
     )
@@ -94,7 +96,7 @@ def build_models(cfg: TrainCfg) -> tuple[torch.nn.Module, torch.nn.Module]:
         groups = resolve_obs_groups(obs, rcfg["obs_groups"], ["actor", "critic"])
     actor_class, actor_kwargs = resolve_class(rcfg["actor"])
     critic_class, critic_kwargs = resolve_class(rcfg["critic"])
-    actor = actor_class(obs, groups, "actor", 12, **actor_kwargs)
+    actor = actor_class(obs, groups, "actor", NUM_JOINTS, **actor_kwargs)
     critic = critic_class(obs, groups, "critic", 1, **critic_kwargs)
     return actor, critic
 
