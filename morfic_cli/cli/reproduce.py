@@ -59,7 +59,7 @@ def reproduce(
 
     Example: morfic reproduce --preset smoke
     """
-    from morfic_cli.report.pipeline import Pipeline, reproduce_cfg
+    from morfic_cli.pipeline import Pipeline, reproduce_cfg
     from morfic_cli.rl.runner import check_device
     from morfic_cli.store import Store
 

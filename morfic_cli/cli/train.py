@@ -20,7 +20,8 @@ from morfic_cli.cli._options import (
     StoreOpt,
 )
 from morfic_cli.cli._render import emit_object, info
-from morfic_cli.rl.variants import help_text, run_name
+from morfic_cli.rl.variants import help_text
+from morfic_cli.runs import run_name
 
 
 def train(

@@ -23,10 +23,11 @@ from morfic_cli import __version__
 from morfic_cli.report import paper
 from morfic_cli.report import tables as T
 from morfic_cli.report.compare import COMPARE_REF, compare_tables, store_comparison
-from morfic_cli.report.gather import Provenance, StoreData, find_manifest, gather, read_csv_rows, resolve_runs
+from morfic_cli.report.gather import Provenance, StoreData, gather, read_csv_rows, resolve_runs
 from morfic_cli.report.model import Table
 from morfic_cli.rl.variants import STOCK
 from morfic_cli.store import Store
+from morfic_cli.store.publish import find_manifest
 
 REPORTS_PREFIX = "reports/"
 
@@ -271,16 +272,11 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
             else:
                 pdf_error = "pdflatex is not installed; report.tex is written, report.pdf is not"
         n_tables = sum(len(s.tables) for s in sections)
-        with store.writing():
-            existing = store.put_manifest("report", config=config, inputs=inputs, files=files,
-                                          meta={"tables": n_tables, "runs": [r.name for r in runs],
-                                                "pdf_error": pdf_error})
-            version = store.set_ref(ref, existing)
-        reused = False
+        pub = store.publish("report", ref, config=config, inputs=inputs, files=files,
+                            meta={"tables": n_tables, "runs": [r.name for r in runs], "pdf_error": pdf_error})
     else:
-        with store.writing():
-            version = store.set_ref(ref, existing)
-        reused = True
+        pub = store.publish("report", ref, config=config, inputs=inputs, reuse=True)
+    existing, version, reused = pub.id, pub.version, pub.reused
     manifest = store.read_manifest(existing)
     result = ReportResult(existing, ref, version, sorted(manifest.files), reused,
                           int(manifest.meta.get("tables", 0)), prov, pdf_error=manifest.meta.get("pdf_error"))

@@ -38,11 +38,9 @@ from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
 from morfic_cli.rl.ppo import ALGORITHM_CLASS
 from morfic_cli.rl.variants import resolve_variant
+from morfic_cli.runs import RESUME_PREFIX, RUNS_PREFIX, run_of
 from morfic_cli.sim.args import NUM_JOINTS
 from morfic_cli.store import Store
-
-RUNS_PREFIX = "runs/"
-RESUME_PREFIX = "resume/"
 
 
 def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
@@ -462,7 +460,7 @@ def resume_run(store: Store, spec: str, overrides: list[str] | None = None, devi
             raise
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-s0.")
-    name = manifest.meta.get("run") or spec.removeprefix(RUNS_PREFIX).split("@")[0]
+    name = run_of(spec, manifest.meta)
     state_id = None
     if store.has_ref(RESUME_PREFIX + name):
         for entry in reversed(store.ref_history(RESUME_PREFIX + name)):

@@ -208,16 +208,6 @@ def user_variant(name: str, cls: Any, path: str) -> Variant:
                    critic_class=f"{cls.__module__}:{cls.__qualname__}", critic_defaults=dict(defaults), stock=False)
 
 
-def run_name(variant: str, seed: int, preset: str | None = None) -> str:
-    """The default run name of a variant and seed: ``<variant>-s<seed>``, or ``<variant>-<preset>-s<seed>``.
-
-    ``train`` uses the short form, ``reproduce`` the one with the preset. A user variant's import path becomes a
-    valid ref segment by writing its ``:`` as ``.`` (``my_lab.critics.GatedCritic-s0``).
-    """
-    slug = variant.replace(":", ".")
-    return f"{slug}-{preset}-s{seed}" if preset else f"{slug}-s{seed}"
-
-
 def model_cfgs(variant: str) -> tuple[dict, dict, dict[str, list[str]]]:
     """``resolve_variant(variant).model_cfgs()``: the rsl-rl ``actor``, ``critic`` and ``obs_groups`` entries.
 

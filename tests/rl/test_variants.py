@@ -7,6 +7,7 @@ import pytest
 from morfic_cli.errors import MorficError, UnknownNameError
 from morfic_cli.report import paper
 from morfic_cli.rl import variants as V
+from morfic_cli.runs import run_name, run_of
 
 
 def test_the_registry_holds_the_papers_seven_in_table_order():
@@ -19,9 +20,11 @@ def test_the_registry_holds_the_papers_seven_in_table_order():
 
 
 def test_run_names_follow_one_rule():
-    assert V.run_name("film", 0) == "film-s0"
-    assert V.run_name("film", 2, "cpu") == "film-cpu-s2"
-    assert V.run_name("my_lab.critics:GatedCritic", 1) == "my_lab.critics.GatedCritic-s1"
+    assert run_name("film", 0) == "film-s0"
+    assert run_name("film", 2, "cpu") == "film-cpu-s2"
+    assert run_name("my_lab.critics:GatedCritic", 1) == "my_lab.critics.GatedCritic-s1"
+    assert run_of("runs/film-s0@3") == run_of("film-s0") == "film-s0"
+    assert run_of("abcdef12", {"run": "ppo-s1"}) == "ppo-s1"
 
 
 def test_a_user_class_becomes_a_variant_with_the_stock_actor():

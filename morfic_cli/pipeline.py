@@ -1,7 +1,7 @@
 """``morfic reproduce``: train every variant (x seeds) -> evaluate -> diagnose -> fixed-rollout -> compare -> report.
 
 Every step is idempotent through the store: before it runs, it looks for a result of the same inputs and config
-(:func:`~morfic_cli.report.gather.find_manifest`) and, when there is one, is skipped. Training is keyed by its run
+(:func:`~morfic_cli.store.publish.find_manifest`) and, when there is one, is skipped. Training is keyed by its run
 ref ``runs/<variant>-<preset>-s<seed>``: a finished run is skipped, an interrupted one (Ctrl-C) is resumed from its
 last checkpoint, a run of that name trained with another config is an error. So a second ``reproduce`` does no
 work, and one after a Ctrl-C continues where the first stopped.
@@ -21,10 +21,11 @@ from typing import Any, Protocol
 
 from morfic_cli.errors import MorficError
 from morfic_cli.report.build import ReportCfg, ReportResult, build_report
-from morfic_cli.report.gather import find_manifest
 from morfic_cli.report.paper import ROBOTS
-from morfic_cli.rl.variants import VARIANTS, resolve_variant, run_name
+from morfic_cli.rl.variants import VARIANTS, resolve_variant
+from morfic_cli.runs import RUNS_PREFIX, run_name, run_of
 from morfic_cli.store import Store
+from morfic_cli.store.publish import find_manifest
 
 
 @dataclass(frozen=True)
@@ -195,7 +196,7 @@ class Pipeline:
     # ------------------------------------------------------------------ plan
     def run_specs(self) -> list[tuple[str, int, str]]:
         """(variant, seed, ``runs/NAME``) of every training run, variant-major."""
-        return [(v, s, f"runs/{run_name(v, s, self.cfg.preset)}") for v in self.cfg.variants
+        return [(v, s, RUNS_PREFIX + run_name(v, s, self.cfg.preset)) for v in self.cfg.variants
                 for s in range(self.cfg.seeds)]
 
     def plan(self) -> list[tuple[str, str, Callable[[], StepResult]]]:
@@ -273,7 +274,7 @@ class Pipeline:
         from morfic_cli.rl.runner import new_run, resume_run
 
         cfg = self.train_cfg(variant, seed)
-        name = spec.removeprefix("runs/")
+        name = run_of(spec)
         self._start("train", spec, cfg.max_iterations, "it")
         status = "done"
         if self.store.has_ref(spec):
