@@ -62,7 +62,6 @@ FormatOpt = Annotated[
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed.")]
 DeviceOpt = Annotated[Device, typer.Option("--device", help="cpu, or cuda where a GPU is present.")]
-PresetOpt = Annotated[Preset, typer.Option("--preset", help="Budget: smoke (tests), cpu (~1 h), paper (GPU).")]
 RobotsOpt = Annotated[
     str,
     typer.Option("--robots", help="Comma-separated robot names, or 'all'. See `morfic robots ls`."),

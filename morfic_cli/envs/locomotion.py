@@ -35,7 +35,8 @@ from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.morphology.descriptor import TRAIN_MAX, TRAIN_MIN, as_descriptor
 from morfic_cli.morphology.robots import RobotSpec, load_robot
 from morfic_cli.sim.args import NUM_JOINTS
-from morfic_cli.sim.backend import SimFrame, SimParams, make_backend
+from morfic_cli.sim.backend import SimFrame, SimParams
+from morfic_cli.sim.factory import make_backend
 
 Mode = Literal["train", "descriptor", "full"]
 MODES: tuple[str, ...] = ("train", "descriptor", "full")

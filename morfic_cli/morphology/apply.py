@@ -109,19 +109,6 @@ def joint_ranges(descriptor: np.ndarray) -> np.ndarray:
     return np.tile(descriptor_ranges(descriptor), (len(LEGS), 1))
 
 
-def reset_morphology(model: mujoco.MjModel, base: TemplateInfo) -> None:
-    """Restore the nominal masses, inertias, joint ranges and control ranges (no ``mj_setConst``).
-
-    Args:
-        model: A model compiled from the same spec as ``base`` (modified in place).
-        base: The template's nominal values.
-    """
-    model.body_mass[:] = base.body_mass
-    model.body_inertia[:] = base.body_inertia
-    model.jnt_range[:] = base.jnt_range
-    model.actuator_ctrlrange[:] = base.ctrlrange
-
-
 @dataclass(frozen=True)
 class DescriptorFields:
     """The model fields a batch of k descriptors sets, whole arrays per model (what :func:`apply_descriptor` writes).

@@ -37,15 +37,6 @@ def object_relpath(oid: str) -> str:
     return f"objects/{oid[:2]}/{oid[2:]}"
 
 
-def sha256_file(path: Path) -> str:
-    """Stream ``path`` through sha256 and return the hex digest."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(CHUNK_SIZE), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
 def store_os_error(exc: OSError, action: str, root: Path) -> StoreError:
     """Turn an ``OSError`` raised while writing into a :class:`StoreError` that says what to do.
 

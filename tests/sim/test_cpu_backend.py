@@ -14,8 +14,9 @@ from morfic_cli.errors import MorficError
 from morfic_cli.morphology.builder import build_model, contact_body_names
 from morfic_cli.morphology.descriptor import TRAIN_MAX, TRAIN_MIN, sample_uniform
 from morfic_cli.morphology.robots import list_robots, load_robot
-from morfic_cli.sim.backend import CONTACT_BODIES, SimBackend, SimFrame, make_backend
+from morfic_cli.sim.backend import CONTACT_BODIES, SimBackend, SimFrame
 from morfic_cli.sim.cpu import CpuBackend, quat_rotate_inverse, restitution_to_dampratio
+from morfic_cli.sim.factory import make_backend
 from morfic_cli.sim.floor import physics_floor
 
 DECIMATION = 4

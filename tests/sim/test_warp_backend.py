@@ -31,8 +31,9 @@ from morfic_cli.envs.locomotion import LocomotionEnv  # noqa: E402
 from morfic_cli.errors import MorficError  # noqa: E402
 from morfic_cli.morphology.descriptor import TRAIN_MAX, TRAIN_MIN  # noqa: E402
 from morfic_cli.morphology.robots import list_robots, load_robot  # noqa: E402
-from morfic_cli.sim.backend import SimFrame, make_backend  # noqa: E402
+from morfic_cli.sim.backend import SimFrame  # noqa: E402
 from morfic_cli.sim.cpu import CpuBackend  # noqa: E402
+from morfic_cli.sim.factory import make_backend  # noqa: E402
 from morfic_cli.sim.warp import PER_WORLD_FIELDS, WarpBackend  # noqa: E402
 
 DECIMATION = 4
