@@ -22,7 +22,7 @@ def _default_threads() -> int:
 
 @dataclass(frozen=True)
 class SimCfg:
-    """Physics backend settings (SPEC section 3)."""
+    """Physics backend settings (docs/concepts.md)."""
 
     backend: str = "cpu"
     """"cpu" (MuJoCo C, one MjModel per env, all cores) or "warp" (MuJoCo Warp, per-world model fields, on
@@ -43,7 +43,7 @@ def to_dict(cfg: object) -> dict:
 
 @dataclass(frozen=True)
 class CommandCfg:
-    """Velocity commands c = (vx, vy, yaw rate) and their curriculum (SPEC section 3)."""
+    """Velocity commands c = (vx, vy, yaw rate) and their curriculum (docs/concepts.md)."""
 
     resample_time_s: float = 10.0
     """Commands are resampled every this many seconds (and at reset)."""
@@ -70,7 +70,7 @@ class CommandCfg:
 
 @dataclass(frozen=True)
 class DomainRandCfg:
-    """Domain randomisation (SPEC section 3; paper appendix "Domain Randomization")."""
+    """Domain randomisation (docs/concepts.md; paper appendix "Domain Randomization")."""
 
     enabled: bool = True
     """Master switch (evaluation turns it off)."""
@@ -121,7 +121,7 @@ class ObsCfg:
 
 @dataclass(frozen=True)
 class TerminationCfg:
-    """When an episode ends early (SPEC section 3)."""
+    """When an episode ends early (docs/concepts.md)."""
 
     contact_force: float = 1.0
     """Ground force (N) on the base or a thigh that ends the episode."""
@@ -158,7 +158,7 @@ class RewardCfg:
     the stability terms add a bounded positive bonus (at most 2), and every penalty is small at
     a normal trot, so the per-step reward stays positive and falling over (which ends the
     episode) is never attractive. Magnitudes follow legged_gym /
-    walk-these-ways / mjlab for the terms they share (anchors.md sections 1, 3, 4).
+    walk-these-ways / mjlab for the terms they share (docs/rewards.md gives the source of each weight).
     """
 
     # ---- task / tracking (added) ----
@@ -268,7 +268,7 @@ class RewardCfg:
 
 @dataclass(frozen=True)
 class EnvCfg:
-    """The locomotion environment (SPEC section 3)."""
+    """The locomotion environment (docs/concepts.md)."""
 
     num_envs: int = 64
     decimation: int = 4
@@ -289,7 +289,7 @@ class EnvCfg:
 
 
 def eval_env_cfg(cfg: EnvCfg) -> EnvCfg:
-    """The evaluation variant of an env config: no pushes, no randomisation, no sensor noise (SPEC 5).
+    """The evaluation variant of an env config: no pushes, no randomisation, no sensor noise (docs/eval.md).
 
     Evaluation simulates on the CPU backend whatever the run trained on (a run trained with
     ``--device cuda`` stores the warp backend on a GPU), so its numbers and rollout logs come from

@@ -6,23 +6,35 @@ from typing import Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, Device, DeviceOpt, FormatOpt, OutputFormat, QuietOpt, StoreOpt
+from morfic_cli.cli._options import (
+    DEFAULT_STORE,
+    Backend,
+    Benchmark,
+    Device,
+    DeviceOpt,
+    FormatOpt,
+    OutputFormat,
+    Preset,
+    QuietOpt,
+    StoreOpt,
+)
 from morfic_cli.cli._render import Column, emit_object, emit_rows, info
 from morfic_cli.errors import MorficError
 
 
 def bench(
-    what: Annotated[str, typer.Argument(help="env (env steps/s vs the physics floor) or train (PPO iterations of "
-                                        "a preset vs the same floor).")],
+    what: Annotated[Benchmark, typer.Argument(help="env (env steps/s vs the physics floor) or train (PPO "
+                                              "iterations of a preset vs the same floor).")],
     envs: Annotated[str, typer.Option("--envs", help="Comma-separated env counts, e.g. 256,1024,4096.")] = "256",
-    steps: Annotated[int, typer.Option("--steps", help="Timed policy steps per measurement.")] = 50,
-    backend: Annotated[str, typer.Option("--backend", help="Simulation backend: cpu (MuJoCo C) or warp (MuJoCo Warp; "
-                                         "pip install 'morfic[gpu]'); --device cuda implies warp.")] = "cpu",
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Timed policy steps per measurement.")] = 50,
+    backend: Annotated[Backend, typer.Option("--backend", help="Simulation backend: cpu (MuJoCo C) or warp (MuJoCo "
+                                             "Warp; alias gpu; pip install 'morfic[gpu]'); --device cuda implies "
+                                             "warp.")] = Backend.cpu,
     device: DeviceOpt = Device.cpu,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the env and the random actions.")] = 0,
-    preset: Annotated[str, typer.Option("--preset", help="bench train: training preset (smoke, cpu, paper).")] = "cpu",
+    preset: Annotated[Preset, typer.Option("--preset", help="bench train: training preset.")] = Preset.cpu,
     variant: Annotated[str, typer.Option("--variant", help="bench train: actor-critic variant.")] = "film",
-    iterations: Annotated[int, typer.Option("--iterations", help="bench train: timed PPO iterations.")] = 5,
+    iterations: Annotated[int, typer.Option("--iterations", min=1, help="bench train: timed PPO iterations.")] = 5,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
@@ -43,19 +55,16 @@ def bench(
     morfic bench env --backend warp --device cuda --envs 4096,8192;
     morfic bench train --preset cpu --iterations 5
     """
-    if what not in ("env", "train"):
-        raise MorficError(f"unknown benchmark '{what}'; valid benchmarks are: env, train.")
-    if backend not in ("cpu", "warp", "gpu"):
-        raise MorficError(f"unknown simulation backend '{backend}'; valid backends are: cpu, warp.")
-    if what == "train":
-        _bench_train(preset, variant, iterations, seed, fmt, quiet, store, device.value, backend)
+    backend = backend.value
+    if what is Benchmark.train:
+        _bench_train(preset.value, variant, iterations, seed, fmt, quiet, store, device.value, backend)
         return
     try:
         counts = [int(x) for x in envs.split(",") if x.strip()]
     except ValueError as exc:
         raise MorficError(f"--envs must be comma-separated integers, got '{envs}'.") from exc
-    if not counts or min(counts) < 1 or steps < 1:
-        raise MorficError("--envs and --steps must be positive integers.")
+    if not counts or min(counts) < 1:
+        raise MorficError(f"--envs must be positive integers, got '{envs}'.")
     if backend == "cpu" and device != Device.cpu:
         raise MorficError("the cpu backend simulates on the CPU; use --backend warp with --device cuda.")
     if device == Device.cuda:
@@ -100,8 +109,6 @@ def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: Out
     from morfic_cli.recording.tables import write_bench_train_table
     from morfic_cli.rl.runner import check_device
 
-    if iterations < 1:
-        raise MorficError("--iterations must be a positive integer.")
     check_device(device)
     if not quiet:
         info(f"bench train: {preset} preset, {variant}, {device}, 1 warm-up + {iterations} timed iterations ...")

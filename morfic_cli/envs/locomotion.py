@@ -71,7 +71,7 @@ class LocomotionEnv(VecEnv):
             seed: Seed of every random draw the env makes.
         """
         if mode not in MODES:
-            raise MorficError(f"unknown env mode '{mode}'; valid modes are: {', '.join(MODES)}.")
+            raise ValueError(f"unknown env mode '{mode}'; valid modes are: {', '.join(MODES)}.")
         self.cfg = cfg
         self.mode = mode
         self.target: RobotSpec = load_robot(robot)

@@ -1,4 +1,4 @@
-"""Domain randomisation samplers (SPEC section 3): pure functions of a generator and a config."""
+"""Domain randomisation samplers (docs/concepts.md): pure functions of a generator and a config."""
 
 from __future__ import annotations
 

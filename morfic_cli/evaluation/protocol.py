@@ -34,7 +34,7 @@ EVALS_PREFIX = "evals/"
 
 @dataclass(frozen=True)
 class EvalCfg:
-    """An evaluation (defaults: the paper's protocol, SPEC section 5)."""
+    """An evaluation (defaults: the paper's protocol, docs/eval.md)."""
 
     robots: tuple[str, ...]
     modes: tuple[str, ...] = ("descriptor",)

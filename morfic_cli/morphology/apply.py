@@ -1,4 +1,4 @@
-"""Apply an 11-D morphology descriptor to a compiled model (SPEC section 2).
+"""Apply an 11-D morphology descriptor to a compiled model (docs/robots.md).
 
 Pure functions on one :class:`mujoco.MjModel` plus a scratch :class:`mujoco.MjData`. A
 :class:`TemplateInfo`, made once from the template model, remembers the nominal masses, inertias

@@ -1,4 +1,4 @@
-r"""The paper's published numbers, once, as data (``reference/morfic_paper.tex``), for side-by-side comparison.
+r"""The paper's published numbers, once, as data (the paper's LaTeX source), for side-by-side comparison.
 
 Every table of the paper that reports results is here, named after its ``\label``: zero-shot transfer,
 external baselines at 2.0 and 2.5 m/s, the conditioning ablation, the expanded morphology range, the critic

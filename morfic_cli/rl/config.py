@@ -59,7 +59,7 @@ class ModelCfg:
 
 @dataclass(frozen=True)
 class TrainCfg:
-    """One training run (SPEC section 4)."""
+    """One training run (docs/training.md)."""
 
     variant: str = "film"
     """A stock name of :data:`~morfic_cli.rl.variants.VARIANTS`, or a user critic class as ``module:Class``."""

@@ -1,4 +1,4 @@
-"""Actor and critic models of the MorFiC variants (SPEC section 4; paper Sec. "MorFiC").
+"""Actor and critic models of the MorFiC variants (docs/training.md; paper Sec. "MorFiC").
 
 Sizes follow the paper's Tables "architecture" and "conditioning variants". Both classes subclass rsl-rl's
 :class:`~rsl_rl.models.MLPModel`, so PPO, the rollout storage and the runner use them unchanged; rsl-rl resolves them

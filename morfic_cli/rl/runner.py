@@ -1,4 +1,4 @@
-"""Training runs: rsl-rl's OnPolicyRunner with checkpoints in the artifact store (SPEC sections 4 and 8).
+"""Training runs: rsl-rl's OnPolicyRunner with checkpoints in the artifact store (docs/training.md, docs/concepts.md).
 
 rsl-rl does the PPO loop (:class:`~rsl_rl.runners.OnPolicyRunner.learn`); morfic plugs in through its
 ``Logger``: :class:`CurveLogger` turns each iteration's metrics into a training-curve row and calls
@@ -37,6 +37,7 @@ from morfic_cli.errors import ArtifactNotFoundError, MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
 from morfic_cli.rl.ppo import ALGORITHM_CLASS
+from morfic_cli.rl.rsl_rl_patches import raw_models, replace_logger
 from morfic_cli.rl.variants import resolve_variant
 from morfic_cli.runs import RESUME_PREFIX, RUNS_PREFIX, run_of
 from morfic_cli.sim.args import NUM_JOINTS
@@ -261,13 +262,12 @@ class TrainingRun:
         self.env = LocomotionEnv(cfg.env, mode="train", seed=cfg.seed + self.dist.rank)
         with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the models on stdout
             self.runner = _StoreRunner(self.env, rsl_rl_cfg(cfg), log_dir=None, device=self.device)
-        old = self.runner.logger
-        self.runner.logger = CurveLogger(
+        replace_logger(self.runner, lambda old: CurveLogger(
             log_dir="", cfg=old.cfg, env_cfg=old.env_cfg, num_envs=old.num_envs,
             is_distributed=self.runner.is_distributed, gpu_world_size=self.runner.gpu_world_size,
             gpu_global_rank=self.runner.gpu_global_rank, device=old.device, dt=self.env.dt,
             on_iteration=self._on_iteration,
-        )
+        ))
         self.rows: list[dict[str, float]] = []
         self.iteration = 0
         self.parent: str | None = None
@@ -309,7 +309,8 @@ class TrainingRun:
         from morfic_cli.recording.curves import curve_csv, curve_png
 
         alg = self.runner.alg
-        model = _to_bytes({"actor": alg._raw_actor.state_dict(), "critic": alg._raw_critic.state_dict()})
+        actor, critic = raw_models(alg)
+        model = _to_bytes({"actor": actor.state_dict(), "critic": critic.state_dict()})
         saved = alg.save()
         saved.pop("actor_state_dict"), saved.pop("critic_state_dict")
         trainer = _to_bytes({

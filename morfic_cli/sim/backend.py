@@ -152,7 +152,7 @@ class SimBackend(Protocol):
         ...
 
     def set_morphology(self, env_ids: torch.Tensor, descriptors: torch.Tensor) -> None:
-        """Apply 11-D descriptors (raw units) to some envs' models (SPEC section 2).
+        """Apply 11-D descriptors (raw units) to some envs' models (docs/robots.md).
 
         Link masses are set with inertia scaled by the same factor, joint ranges and actuator
         control ranges follow the new limits, and derived constants are recomputed. Raises

@@ -1,4 +1,4 @@
-"""The artifact store: content-addressed objects, manifests and refs (SPEC section 8).
+"""The artifact store: content-addressed objects, manifests and refs (docs/concepts.md).
 
 :class:`Store` is the one entry point; the modules beside it do the file work:
 ``objects`` (immutable blobs), ``manifest`` (manifest schema and index), ``refs`` (named, versioned

@@ -11,7 +11,6 @@ from paper_facts import PAPER_DESCRIPTORS
 
 from morfic_cli.config import EnvCfg, SimCfg, eval_env_cfg
 from morfic_cli.envs.locomotion import LocomotionEnv
-from morfic_cli.errors import MorficError
 from morfic_cli.morphology.robots import list_robots, load_robot
 
 ROBOTS = list_robots()
@@ -123,7 +122,7 @@ def test_same_seed_gives_identical_rollouts():
 
 
 def test_unknown_mode_is_an_error():
-    with pytest.raises(MorficError, match="valid modes"):
+    with pytest.raises(ValueError, match="valid modes"):
         LocomotionEnv(_cfg(n=1), mode="sideways")  # type: ignore[arg-type]
 
 

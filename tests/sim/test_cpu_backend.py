@@ -216,7 +216,7 @@ def test_set_dynamics_changes_only_that_envs_model():
     assert p.restitution[1].item() == pytest.approx(math.exp(-math.pi))
     np.testing.assert_allclose(p.com_offset[1].numpy(), com[0].numpy(), rtol=1e-6)
     assert p.joint_friction[1].tolist() == pytest.approx([0.15] * 12) and p.joint_friction[0].abs().sum() == 0
-    with pytest.raises(MorficError):
+    with pytest.raises(ValueError):
         backend.set_dynamics(torch.tensor([0]), torch.tensor([1.0]), torch.tensor([1.0]), torch.zeros(1, 3),
                              torch.zeros(1, 12))
     backend.close()

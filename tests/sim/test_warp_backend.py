@@ -243,9 +243,9 @@ def test_factory_full_mode_and_bad_input():
         assert isinstance(backend, WarpBackend) and not backend.morphology_mutable
         with pytest.raises(MorficError, match="full mode"):
             backend.set_morphology(torch.arange(2), torch.zeros(2, 11))
-        with pytest.raises(MorficError, match="restitution"):
+        with pytest.raises(ValueError, match="restitution"):
             backend.set_dynamics(torch.arange(1), torch.ones(1), torch.ones(1), torch.zeros(1, 3), torch.zeros(1, 12))
-        with pytest.raises(MorficError, match="env ids"):
+        with pytest.raises(ValueError, match="env ids"):
             backend.push(torch.tensor([5]), torch.zeros(1, 2))
     finally:
         backend.close()
