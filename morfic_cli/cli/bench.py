@@ -80,7 +80,7 @@ def bench(
         if not quiet:
             info(f"bench env: {n} envs x {steps} steps on {backend} ({device.value}) ...")
         rows.append(bench_env(n, steps, backend=backend, seed=seed, device=device.value).as_dict())
-    artifact = write_bench_table(store, rows)
+    artifact = write_bench_table(store, "env", rows)
     if fmt == OutputFormat.json and len(rows) == 1:
         emit_object(rows[0], fmt)
     else:
@@ -106,7 +106,7 @@ def bench(
 def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: OutputFormat, quiet: bool,
                  store, device: str, backend: str) -> None:
     from morfic_cli.benchmarks import bench_train
-    from morfic_cli.recording.tables import write_bench_train_table
+    from morfic_cli.recording.tables import write_bench_table
     from morfic_cli.rl.runner import check_device
 
     check_device(device)
@@ -114,7 +114,7 @@ def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: Out
         info(f"bench train: {preset} preset, {variant}, {device}, 1 warm-up + {iterations} timed iterations ...")
     overrides = [] if backend == "cpu" else [f"env.sim.backend={backend}"]  # --device cuda selects warp itself
     row = bench_train(preset, variant, iterations, seed, overrides, device=device).as_dict()
-    artifact = write_bench_train_table(store, [row])
+    artifact = write_bench_table(store, "train", [row])
     if fmt == OutputFormat.csv:
         emit_rows([row], fmt)
     else:

@@ -55,16 +55,6 @@ BENCH_ENV_COLUMNS: tuple[str, ...] = (
 """Columns of the env benchmark table (``morfic bench env``)."""
 
 
-def write_bench_table(store_root: Path, rows: Sequence[dict]) -> Published:
-    """Store a ``morfic bench env`` table as a ``table`` manifest and advance ref ``tables/bench-env``."""
-    from morfic_cli.store import Store
-
-    store = Store(store_root)
-    return store.publish("table", "tables/bench-env",
-                         config={"table": "bench-env", "num_envs": [r["num_envs"] for r in rows]},
-                         files={"bench_env.csv": rows_to_csv(rows, BENCH_ENV_COLUMNS)})
-
-
 BENCH_TRAIN_COLUMNS: tuple[str, ...] = (
     "preset", "variant", "backend", "device", "num_envs", "iterations", "transitions", "s_per_iteration",
     "collect_s_per_iteration", "learn_s_per_iteration", "train_steps_per_s", "floor_env_steps_per_s",
@@ -73,11 +63,17 @@ BENCH_TRAIN_COLUMNS: tuple[str, ...] = (
 """Columns of the training benchmark table (``morfic bench train``)."""
 
 
-def write_bench_train_table(store_root: Path, rows: Sequence[dict]) -> Published:
-    """Store a ``morfic bench train`` table as a ``table`` manifest and advance ref ``tables/bench-train``."""
+BENCH_KEYS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "env": ("num_envs", BENCH_ENV_COLUMNS), "train": ("preset", BENCH_TRAIN_COLUMNS),
+}
+"""Per benchmark: the column its config lists, and the table's columns."""
+
+
+def write_bench_table(store_root: Path, what: str, rows: Sequence[dict]) -> Published:
+    """Store a ``morfic bench env|train`` table as a ``table`` manifest and advance ref ``tables/bench-<what>``."""
     from morfic_cli.store import Store
 
-    store = Store(store_root)
-    return store.publish("table", "tables/bench-train",
-                         config={"table": "bench-train", "preset": [r["preset"] for r in rows]},
-                         files={"bench_train.csv": rows_to_csv(rows, BENCH_TRAIN_COLUMNS)})
+    key, columns = BENCH_KEYS[what]
+    return Store(store_root).publish("table", f"tables/bench-{what}",
+                                     config={"table": f"bench-{what}", key: [r[key] for r in rows]},
+                                     files={f"bench_{what}.csv": rows_to_csv(rows, columns)})
