@@ -6,33 +6,24 @@ from typing import Annotated
 
 import typer
 
-from morfic_cli.cli._options import (
-    DEFAULT_STORE,
-    Backend,
-    Benchmark,
-    Device,
-    DeviceOpt,
-    FormatOpt,
-    OutputFormat,
-    Preset,
-    QuietOpt,
-    StoreOpt,
-)
+from morfic_cli.cli import _options
+from morfic_cli.cli._options import DEFAULT_STORE, Device, DeviceOpt, FormatOpt, OutputFormat, QuietOpt, StoreOpt
 from morfic_cli.cli._render import Column, emit_object, emit_rows, info
 from morfic_cli.errors import MorficError
 
 
 def bench(
-    what: Annotated[Benchmark, typer.Argument(help="env (env steps/s vs the physics floor) or train (PPO "
+    what: Annotated[_options.Benchmark, typer.Argument(help="env (env steps/s vs the physics floor) or train (PPO "
                                               "iterations of a preset vs the same floor).")],
     envs: Annotated[str, typer.Option("--envs", help="Comma-separated env counts, e.g. 256,1024,4096.")] = "256",
     steps: Annotated[int, typer.Option("--steps", min=1, help="Timed policy steps per measurement.")] = 50,
-    backend: Annotated[Backend, typer.Option("--backend", help="Simulation backend: cpu (MuJoCo C) or warp (MuJoCo "
-                                             "Warp; alias gpu; pip install 'morfic[gpu]'); --device cuda implies "
-                                             "warp.")] = Backend.cpu,
+    backend: Annotated[_options.Backend, typer.Option(
+        "--backend", help="Simulation backend: cpu (MuJoCo C) or warp (MuJoCo Warp; alias gpu; pip install "
+        "'morfic[gpu]'); --device cuda implies warp.")] = _options.Backend.cpu,
     device: DeviceOpt = Device.cpu,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the env and the random actions.")] = 0,
-    preset: Annotated[Preset, typer.Option("--preset", help="bench train: training preset.")] = Preset.cpu,
+    preset: Annotated[_options.Preset, typer.Option("--preset", help="bench train: training preset.")] = (
+        _options.Preset.cpu),
     variant: Annotated[str, typer.Option("--variant", help="bench train: actor-critic variant.")] = "film",
     iterations: Annotated[int, typer.Option("--iterations", min=1, help="bench train: timed PPO iterations.")] = 5,
     fmt: FormatOpt = OutputFormat.table,
@@ -56,7 +47,7 @@ def bench(
     morfic bench train --preset cpu --iterations 5
     """
     backend = backend.value
-    if what is Benchmark.train:
+    if what is _options.Benchmark.train:
         _bench_train(preset.value, variant, iterations, seed, fmt, quiet, store, device.value, backend)
         return
     try:
