@@ -1,7 +1,12 @@
-"""Typed configuration dataclasses. Presets are factory functions; overrides fail on unknown keys.
+"""The environment's configuration in one module: :class:`EnvCfg` and every part of it.
 
-Every config is a frozen dataclass with documented attributes (unit, default). The resolved config
-is serialised as sorted-key JSON into run manifests (:func:`to_dict`).
+Parts: simulation (:class:`SimCfg`), velocity commands and their curriculum (:class:`CommandCfg`), domain
+randomisation (:class:`DomainRandCfg`), observations (:class:`ObsCfg`), terminations (:class:`TerminationCfg`),
+the gait clock (:class:`GaitCfg`) and the reward weights and parameters (:class:`RewardCfg`; the terms that read
+them are the objects of :data:`morfic_cli.envs.rewards.TERMS`). Every config is a frozen dataclass with
+documented attributes (unit, default); this module imports nothing of morfic's, so every module may import it.
+The resolved config is serialised as sorted-key JSON into run manifests (:func:`to_dict`); training presets are
+factory functions in :mod:`morfic_cli.rl.config`, where ``--set`` overrides fail on unknown keys.
 """
 
 from __future__ import annotations
@@ -9,11 +14,6 @@ from __future__ import annotations
 import dataclasses
 import os
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from morfic_cli.envs.gait import GaitCfg
-    from morfic_cli.envs.rewards import RewardCfg
 
 
 def _default_threads() -> int:
@@ -22,7 +22,7 @@ def _default_threads() -> int:
 
 @dataclass(frozen=True)
 class SimCfg:
-    """Physics backend settings (SPEC section 3)."""
+    """Physics backend settings (docs/concepts.md)."""
 
     backend: str = "cpu"
     """"cpu" (MuJoCo C, one MjModel per env, all cores) or "warp" (MuJoCo Warp, per-world model fields, on
@@ -43,7 +43,7 @@ def to_dict(cfg: object) -> dict:
 
 @dataclass(frozen=True)
 class CommandCfg:
-    """Velocity commands c = (vx, vy, yaw rate) and their curriculum (SPEC section 3)."""
+    """Velocity commands c = (vx, vy, yaw rate) and their curriculum (docs/concepts.md)."""
 
     resample_time_s: float = 10.0
     """Commands are resampled every this many seconds (and at reset)."""
@@ -70,7 +70,7 @@ class CommandCfg:
 
 @dataclass(frozen=True)
 class DomainRandCfg:
-    """Domain randomisation (SPEC section 3; paper appendix "Domain Randomization")."""
+    """Domain randomisation (docs/concepts.md; paper appendix "Domain Randomization")."""
 
     enabled: bool = True
     """Master switch (evaluation turns it off)."""
@@ -121,7 +121,7 @@ class ObsCfg:
 
 @dataclass(frozen=True)
 class TerminationCfg:
-    """When an episode ends early (SPEC section 3)."""
+    """When an episode ends early (docs/concepts.md)."""
 
     contact_force: float = 1.0
     """Ground force (N) on the base or a thigh that ends the episode."""
@@ -132,8 +132,143 @@ class TerminationCfg:
 
 
 @dataclass(frozen=True)
+class GaitCfg:
+    """A periodic gait schedule (default: trot)."""
+
+    frequency: float = 3.0
+    """Gait frequency f (Hz). Default 3 Hz: walk-these-ways' default trot (its range is 2-4 Hz); at
+    duty 0.5 the stance lasts 1/6 s, a stride of v/6 m at speed v (0.42 m at 2.5 m/s)."""
+    offsets: tuple[float, float, float, float] = (0.0, 0.5, 0.5, 0.0)
+    """Phase offset of each foot, FL, FR, RL, RR (periods). Trot: FL and RR together, FR and RL
+    half a period later."""
+    duty: float = 0.5
+    """Duty factor: fraction of the period each foot is in stance, in (0, 1)."""
+    kappa: float = 0.07
+    """Smoothing width of the desired-contact indicator, in (normalised) periods
+    (walk-these-ways' ``kappa_gait_probs``)."""
+
+
+@dataclass(frozen=True)
+class RewardCfg:
+    """Weights and parameters of every reward term (the paper gives no weights; these are ours).
+
+    Weights are non-negative; the group in :data:`TERMS` gives the sign (penalties subtracted).
+    A weight of 0 skips the term. Defaults are set so that a quadruped learns to trot on flat
+    ground with PPO: velocity tracking dominates (r_lin at most 4 w_lin = 4 per second, r_yaw 2),
+    the stability terms add a bounded positive bonus (at most 2), and every penalty is small at
+    a normal trot, so the per-step reward stays positive and falling over (which ends the
+    episode) is never attractive. Magnitudes follow legged_gym /
+    walk-these-ways / mjlab for the terms they share (docs/rewards.md gives the source of each weight).
+    """
+
+    # ---- task / tracking (added) ----
+    w_lin: float = 1.0
+    """r_lin, linear-velocity tracking (task, +). 1.0 like legged_gym / walk-these-ways; with the
+    paper's factor 4 the term is worth up to 4, the largest in the sum."""
+    w_yaw: float = 2.0
+    """r_yaw, yaw-rate tracking (task, +). Half of r_lin's maximum (4), the 2:1 lin/yaw ratio of
+    legged_gym (1.0 / 0.5)."""
+    w_gaitF: float = 2.0
+    """r_gaitF, no force on swing feet (task, +; the term itself is <= 0). walk-these-ways uses 4
+    next to tracking 1; halved here so tracking (4 w_lin) stays twice the gait shaping."""
+    w_gaitV: float = 2.0
+    """r_gaitV, no velocity of stance feet (task, +; term <= 0). Same reasoning as ``w_gaitF``."""
+    w_jump: float = 10.0
+    """r_jump, base-height tracking with h_cmd = 0 (task, +; term <= 0). walk-these-ways' 10: a
+    5 cm height error costs 0.025."""
+
+    # ---- penalties (subtracted) ----
+    w_vz: float = 2.0
+    """p_vz, vertical base velocity (penalty, -). legged_gym's lin_vel_z 2.0."""
+    w_omega_xy: float = 0.05
+    """p_omega_xy, roll/pitch rate (penalty, -). legged_gym's ang_vel_xy 0.05."""
+    w_ori: float = 1.0
+    """p_ori, base tilt ||g_xy||^2 (penalty, -). Mild (Playground 5, legged_gym 0) because
+    r_upright already rewards an upright base; a 0.3 rad tilt costs 0.087."""
+    w_tau: float = 1e-4
+    """p_tau, joint torques (penalty, -). walk-these-ways' 1e-4 (legged_gym Go2 2e-4): ~0.06 at
+    a trot with ~7 N m per joint."""
+    w_qddot: float = 2.5e-7
+    """p_qddot, joint accelerations (penalty, -). legged_gym's dof_acc 2.5e-7."""
+    w_da: float = 0.01
+    """p_da, action rate (penalty, -). legged_gym's action_rate 0.01 (same 0.25 action scale)."""
+    w_coll: float = 1.0
+    """p_coll, number of base/thigh/calf bodies touching the ground (penalty, -). legged_gym's
+    collision 1.0; base and thigh contacts also end the episode."""
+    w_jl: float = 10.0
+    """p_jl, joint-limit excess in rad (penalty, -). legged_gym A1/Go2 and walk-these-ways 10:
+    excesses are small numbers of radians, so the weight is large."""
+    w_slip: float = 0.05
+    """p_slip, planar speed^2 of contact feet (penalty, -). walk-these-ways' feet_slip 0.04,
+    mjlab / Playground 0.1."""
+    w_impact: float = 0.05
+    """p_impact, downward foot speed^2 just before contact (penalty, -). Same size as ``w_slip``
+    (walk-these-ways ships 0): a 0.7 m/s touchdown costs 0.025 per foot."""
+    w_f: float = 0.01
+    """p_f, foot force above ``f_max_factor`` body weights, in N (penalty, -). legged_gym's
+    feet_contact_forces term (its weight is 0 there); 0.01 makes a 50 N excess cost 0.5."""
+    w_q: float = 0.05
+    """p_q, deviation from the default pose (penalty, -). Small (mjlab / Playground reward the pose
+    with weight 0.5-1): keeps the hips near default without forbidding the trot's joint swing."""
+    w_qdot: float = 1e-4
+    """p_qdot, joint speeds (penalty, -). walk-these-ways' dof_vel 1e-4."""
+    w_raibert: float = 5.0
+    """r_raibert, squared distance of the feet from the Raibert footholds (penalty, -: the table
+    defines it as a non-negative distance, so it is subtracted). walk-these-ways uses -10 next to
+    its gait terms at 4; halved with them."""
+
+    # ---- stability shaping (added) ----
+    w_upright: float = 1.0
+    """r_upright, eq. (upright_stability) (stability, +). mjlab's upright 1.0."""
+    w_cop: float = 0.5
+    """r_cop, eq. (cop_stability) (stability, +). Half of r_upright: in a trot the CoP sits between
+    the two diagonal feet, so this rewards an even load split without dominating."""
+    w_width: float = 0.5
+    """r_width, eq. (stance_width) (stability, +). Constant 1 unless the gate is on, so it only
+    matters when tilted or fast; 0.5 like r_cop."""
+
+    # ---- term parameters ----
+    sigma_lin: float = 0.25
+    """sigma_lin of r_lin ((m/s)^2): legged_gym's tracking_sigma."""
+    sigma_yaw: float = 0.25
+    """sigma_yaw of r_yaw ((rad/s)^2): legged_gym's tracking_sigma."""
+    theta0: float = 0.3
+    """theta0 of r_upright (rad), the paper's value: a tilt of theta0 gives exp(-1)."""
+    tau_cop: float = 0.10
+    """tau of r_cop (m), the paper's value."""
+    eta: float = 0.05
+    """eta of the width gate, eq. (width_gate): the gate opens when ||g_xy||^2 > eta (a tilt of
+    about 0.23 rad, 13 degrees)."""
+    v_th: float = 1.0
+    """v_th of the width gate (m/s): the gate opens when the planar base speed exceeds it."""
+    w_min_ratio: float = 0.8
+    """w_min of r_width as a fraction of the nominal stance width (from ``nominal_foot_pos_b``), so
+    it follows each robot's geometry; 0.8 lets the feet come 20% inside the hips for free."""
+    sigma_w: float = 0.05
+    """sigma_w of r_width (m): 5 cm narrower than w_min gives exp(-1)."""
+    sigma_F: float = 100.0
+    """sigma_F of r_gaitF (N^2): walk-these-ways' gait_force_sigma."""
+    sigma_V: float = 10.0
+    """sigma_V of r_gaitV ((m/s)^2): walk-these-ways' gait_vel_sigma."""
+    f_max_factor: float = 1.5
+    """f_max of p_f as a multiple of body weight (total_mass * g), so it scales with morphology
+    mass; a trotting foot carries about half to one body weight."""
+    collision_force: float = 0.1
+    """Force (N) above which a body counts as colliding in p_coll (the paper's table: 0.1)."""
+    impact_clip: float = 100.0
+    """p_impact clips the previous foot z-velocity to [-impact_clip, 0] (m/s), the table's 100."""
+    h_cmd: float = 0.0
+    """h_cmd of r_jump (m): the commanded extra height; 0 (no jumping) as in the paper."""
+    gait_duty: float = 0.5
+    """Duty factor of the gait r_raibert assumes; must match ``GaitCfg.duty``."""
+    raibert_kv: float = 0.0
+    """Raibert's velocity-feedback gain k_v (s): x_des += k_v (v - v_cmd). 0 = walk-these-ways
+    (pure feed-forward footholds)."""
+
+
+@dataclass(frozen=True)
 class EnvCfg:
-    """The locomotion environment (SPEC section 3)."""
+    """The locomotion environment (docs/concepts.md)."""
 
     num_envs: int = 64
     decimation: int = 4
@@ -149,24 +284,12 @@ class EnvCfg:
     rand: DomainRandCfg = field(default_factory=DomainRandCfg)
     obs: ObsCfg = field(default_factory=ObsCfg)
     terminations: TerminationCfg = field(default_factory=TerminationCfg)
-    rewards: RewardCfg = field(default_factory=lambda: _reward_cfg())
-    gait: GaitCfg = field(default_factory=lambda: _gait_cfg())
-
-
-def _reward_cfg() -> RewardCfg:
-    from morfic_cli.envs.rewards import RewardCfg
-
-    return RewardCfg()
-
-
-def _gait_cfg() -> GaitCfg:
-    from morfic_cli.envs.gait import GaitCfg
-
-    return GaitCfg()
+    rewards: RewardCfg = field(default_factory=RewardCfg)
+    gait: GaitCfg = field(default_factory=GaitCfg)
 
 
 def eval_env_cfg(cfg: EnvCfg) -> EnvCfg:
-    """The evaluation variant of an env config: no pushes, no randomisation, no sensor noise (SPEC 5).
+    """The evaluation variant of an env config: no pushes, no randomisation, no sensor noise (docs/eval.md).
 
     Evaluation simulates on the CPU backend whatever the run trained on (a run trained with
     ``--device cuda`` stores the warp backend on a GPU), so its numbers and rollout logs come from

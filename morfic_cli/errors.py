@@ -14,16 +14,6 @@ class MorficError(Exception):
     """Base class for every error a user can cause (bad input, missing artifact, ...)."""
 
 
-class NotImplementedYetError(MorficError):
-    """A command that a later release builds."""
-
-    def __init__(self, command: str) -> None:
-        super().__init__(
-            f"`morfic {command}` is not implemented yet in this release; "
-            "see `morfic --help` for the commands that work now."
-        )
-
-
 class UnknownNameError(MorficError):
     """A name (robot, variant, ...) that is not one of the valid choices."""
 

@@ -18,7 +18,7 @@ class OutputFormat(str, enum.Enum):
 
 
 class Preset(str, enum.Enum):
-    """Training/pipeline budget presets (SPEC section 4)."""
+    """Training/pipeline budget presets (docs/training.md)."""
 
     smoke = "smoke"
     cpu = "cpu"
@@ -26,10 +26,37 @@ class Preset(str, enum.Enum):
 
 
 class EvalMode(str, enum.Enum):
-    """Zero-shot evaluation modes (SPEC section 2)."""
+    """Zero-shot evaluation modes (docs/robots.md)."""
 
     descriptor = "descriptor"
     full = "full"
+
+
+class EvalModes(str, enum.Enum):
+    """``morfic eval --mode``: one evaluation mode, or both."""
+
+    descriptor = "descriptor"
+    full = "full"
+    both = "both"
+
+    def modes(self) -> tuple[str, ...]:
+        """The evaluation modes this choice runs."""
+        return ("descriptor", "full") if self is EvalModes.both else (self.value,)
+
+
+class Backend(str, enum.Enum):
+    """Simulation backend (``SimCfg.backend``): MuJoCo C, or MuJoCo Warp (``gpu`` is an alias of ``warp``)."""
+
+    cpu = "cpu"
+    warp = "warp"
+    gpu = "gpu"
+
+
+class Benchmark(str, enum.Enum):
+    """What ``morfic bench`` measures."""
+
+    env = "env"
+    train = "train"
 
 
 class Device(str, enum.Enum):
@@ -62,12 +89,12 @@ FormatOpt = Annotated[
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed.")]
 DeviceOpt = Annotated[Device, typer.Option("--device", help="cpu, or cuda where a GPU is present.")]
-PresetOpt = Annotated[Preset, typer.Option("--preset", help="Budget: smoke (tests), cpu (~1 h), paper (GPU).")]
 RobotsOpt = Annotated[
     str,
     typer.Option("--robots", help="Comma-separated robot names, or 'all'. See `morfic robots ls`."),
 ]
-ModeOpt = Annotated[EvalMode, typer.Option("--mode", help="descriptor: Go2 template with the target's "
-                                           "11-D descriptor (paper); full: the target's own model.")]
+ModeOpt = Annotated[EvalMode, typer.Option("--mode", help="descriptor (Go2 template with the target's 11-D "
+                                           "descriptor, the paper's) or full (the target's own model).")]
+EnvsOpt = Annotated[int, typer.Option("--envs", min=1, help="Parallel envs per rollout.")]
 
 DEFAULT_STORE = Path("artifacts")

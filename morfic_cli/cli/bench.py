@@ -6,6 +6,7 @@ from typing import Annotated
 
 import typer
 
+from morfic_cli.cli import _options
 from morfic_cli.cli._options import DEFAULT_STORE, Device, DeviceOpt, FormatOpt, OutputFormat, QuietOpt, StoreOpt
 from morfic_cli.cli._render import Column, emit_object, emit_rows, info
 from morfic_cli.errors import MorficError
@@ -13,17 +14,19 @@ from morfic_cli.validation import check_args
 
 
 def bench(
-    what: Annotated[str, typer.Argument(help="env (env steps/s vs the physics floor) or train (PPO iterations of "
-                                        "a preset vs the same floor).")],
+    what: Annotated[_options.Benchmark, typer.Argument(help="env (env steps/s vs the physics floor) or train (PPO "
+                                              "iterations of a preset vs the same floor).")],
     envs: Annotated[str, typer.Option("--envs", help="Comma-separated env counts, e.g. 256,1024,4096.")] = "256",
-    steps: Annotated[int, typer.Option("--steps", help="Timed policy steps per measurement.")] = 50,
-    backend: Annotated[str, typer.Option("--backend", help="Simulation backend: cpu (MuJoCo C) or warp (MuJoCo Warp; "
-                                         "pip install 'morfic[gpu]'); --device cuda implies warp.")] = "cpu",
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Timed policy steps per measurement.")] = 50,
+    backend: Annotated[_options.Backend, typer.Option(
+        "--backend", help="Simulation backend: cpu (MuJoCo C) or warp (MuJoCo Warp; alias gpu; pip install "
+        "'morfic[gpu]'); --device cuda implies warp.")] = _options.Backend.cpu,
     device: DeviceOpt = Device.cpu,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the env and the random actions.")] = 0,
-    preset: Annotated[str, typer.Option("--preset", help="bench train: training preset (smoke, cpu, paper).")] = "cpu",
+    preset: Annotated[_options.Preset, typer.Option("--preset", help="bench train: training preset.")] = (
+        _options.Preset.cpu),
     variant: Annotated[str, typer.Option("--variant", help="bench train: actor-critic variant.")] = "film",
-    iterations: Annotated[int, typer.Option("--iterations", help="bench train: timed PPO iterations.")] = 5,
+    iterations: Annotated[int, typer.Option("--iterations", min=1, help="bench train: timed PPO iterations.")] = 5,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
@@ -44,20 +47,17 @@ def bench(
     morfic bench env --backend warp --device cuda --envs 4096,8192;
     morfic bench train --preset cpu --iterations 5
     """
-    check_args(store=store, env_counts=envs if what == "env" else None, steps=steps, seed=seed)
-    if what not in ("env", "train"):
-        raise MorficError(f"unknown benchmark '{what}'; valid benchmarks are: env, train.")
-    if backend not in ("cpu", "warp", "gpu"):
-        raise MorficError(f"unknown simulation backend '{backend}'; valid backends are: cpu, warp.")
-    if what == "train":
-        _bench_train(preset, variant, iterations, seed, fmt, quiet, store, device.value, backend)
+    check_args(store=store, env_counts=envs if what is _options.Benchmark.env else None, steps=steps, seed=seed)
+    backend = backend.value
+    if what is _options.Benchmark.train:
+        _bench_train(preset.value, variant, iterations, seed, fmt, quiet, store, device.value, backend)
         return
     try:
         counts = [int(x) for x in envs.split(",") if x.strip()]
     except ValueError as exc:
         raise MorficError(f"--envs must be comma-separated integers, got '{envs}'.") from exc
-    if not counts or min(counts) < 1 or steps < 1:
-        raise MorficError("--envs and --steps must be positive integers.")
+    if not counts or min(counts) < 1:
+        raise MorficError(f"--envs must be positive integers, got '{envs}'.")
     if backend == "cpu" and device != Device.cpu:
         raise MorficError("the cpu backend simulates on the CPU; use --backend warp with --device cuda.")
     if device == Device.cuda:
@@ -73,7 +73,7 @@ def bench(
         if not quiet:
             info(f"bench env: {n} envs x {steps} steps on {backend} ({device.value}) ...")
         rows.append(bench_env(n, steps, backend=backend, seed=seed, device=device.value).as_dict())
-    artifact = write_bench_table(store, rows)
+    artifact = write_bench_table(store, "env", rows)
     if fmt == OutputFormat.json and len(rows) == 1:
         emit_object(rows[0], fmt)
     else:
@@ -99,17 +99,15 @@ def bench(
 def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: OutputFormat, quiet: bool,
                  store, device: str, backend: str) -> None:
     from morfic_cli.benchmarks import bench_train
-    from morfic_cli.recording.tables import write_bench_train_table
+    from morfic_cli.recording.tables import write_bench_table
     from morfic_cli.rl.runner import check_device
 
-    if iterations < 1:
-        raise MorficError("--iterations must be a positive integer.")
     check_device(device)
     if not quiet:
         info(f"bench train: {preset} preset, {variant}, {device}, 1 warm-up + {iterations} timed iterations ...")
     overrides = [] if backend == "cpu" else [f"env.sim.backend={backend}"]  # --device cuda selects warp itself
     row = bench_train(preset, variant, iterations, seed, overrides, device=device).as_dict()
-    artifact = write_bench_train_table(store, [row])
+    artifact = write_bench_table(store, "train", [row])
     if fmt == OutputFormat.csv:
         emit_rows([row], fmt)
     else:

@@ -9,8 +9,10 @@ import typer
 
 from morfic_cli.cli._options import (
     DEFAULT_STORE,
+    EnvsOpt,
     EvalMode,
     FormatOpt,
+    ModeOpt,
     OutputFormat,
     QuietOpt,
     RobotsOpt,
@@ -51,20 +53,13 @@ def diagnose(
             help="Comma-separated critic runs for --fixed-rollout (default: the newest run of each variant).",
         ),
     ] = None,
-    mode: Annotated[
-        str,
-        typer.Option(
-            "--mode",
-            help="descriptor (Go2 template with the target's descriptor, the paper's) or "
-            "full (the target's own model).",
-        ),
-    ] = EvalMode.descriptor.value,
+    mode: ModeOpt = EvalMode.descriptor,
     command_vx: Annotated[float, typer.Option("--command-vx", help="Forward command in m/s.")] = 2.0,
-    envs: Annotated[int, typer.Option("--envs", help="Parallel envs per rollout.")] = 64,
+    envs: EnvsOpt = 64,
     steps: Annotated[
         int,
         typer.Option(
-            "--steps",
+            "--steps", min=1,
             help="Policy steps per rollout (50 per second); must exceed the horizon "
             "H_eps the returns need (299 at gamma 0.99, --trunc-eps 0.05).",
         ),
@@ -100,14 +95,10 @@ def diagnose(
     from morfic_cli.morphology.distance import parse_robot_list
     from morfic_cli.store import Store
 
-    if mode not in ("descriptor", "full"):
-        raise MorficError(f"unknown --mode '{mode}'; valid modes are: descriptor, full.")
-    if envs < 1 or steps < 1:
-        raise MorficError("--envs and --steps must be positive integers.")
     if not command_vx == command_vx:  # NaN
         raise MorficError("--command-vx must be a number in m/s, e.g. 2.0.")
     st = Store(store)
-    settings = dict(mode=mode, command_vx=command_vx, num_envs=envs, steps=steps, seed=seed, trunc_eps=trunc_eps)
+    settings = dict(mode=mode.value, command_vx=command_vx, num_envs=envs, steps=steps, seed=seed, trunc_eps=trunc_eps)
     if fixed_rollout is None:
         if actor is not None or critics is not None:
             raise MorficError(

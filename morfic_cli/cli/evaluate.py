@@ -9,7 +9,7 @@ import typer
 
 from morfic_cli.cli._options import (
     DEFAULT_STORE,
-    EvalMode,
+    EvalModes,
     FormatOpt,
     OutputFormat,
     QuietOpt,
@@ -31,12 +31,12 @@ def evaluate(
                                  "with --training-conditions].")
     ] = None,
     mode: Annotated[
-        str, typer.Option("--mode", help="descriptor (Go2 template with the target's descriptor, the paper's), full "
-                          "(the target's own model), or both.")
-    ] = EvalMode.descriptor.value,
-    envs: Annotated[int, typer.Option("--envs", help="Parallel envs per robot.")] = 64,
+        EvalModes, typer.Option("--mode", help="descriptor (Go2 template with the target's descriptor, the paper's), "
+                                "full (the target's own model), or both.")
+    ] = EvalModes.descriptor,
+    envs: Annotated[int, typer.Option("--envs", min=1, help="Parallel envs per robot.")] = 64,
     steps: Annotated[
-        int | None, typer.Option("--steps", help="Policy steps per rollout (50 per second) [default: 500].")
+        int | None, typer.Option("--steps", min=1, help="Policy steps per rollout (50 per second) [default: 500].")
     ] = None,
     seed: SeedOpt = 0,
     video: Annotated[bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")]
@@ -85,16 +85,12 @@ def evaluate(
     names = parse_robot_list(robots)
     if not names:
         raise MorficError("--robots is empty; give 'all' or names such as go1,a1 (see `morfic robots ls`).")
-    modes = ("descriptor", "full") if mode == "both" else (mode,)
-    if any(m not in ("descriptor", "full") for m in modes):
-        raise MorficError(f"unknown --mode '{mode}'; valid modes are: descriptor, full, both.")
+    modes = mode.modes()
     try:
         commands = parse_commands(command_vx)
     except ValueError as exc:
         raise MorficError(f"--command-vx takes comma-separated numbers in m/s (e.g. 2.0,2.5), got '{command_vx}'.") \
             from exc
-    if envs < 1 or steps < 1:
-        raise MorficError("--envs and --steps must be positive integers.")
     cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed)
     st = Store(store)
     from morfic_cli.rl.runner import load_trained
@@ -146,7 +142,7 @@ def _training_check(run: str, robots: str, command_vx: str | None, mode: str, en
     from morfic_cli.rl.runner import load_trained
     from morfic_cli.store import Store
 
-    if steps is not None or video or mode != EvalMode.descriptor.value:
+    if steps is not None or video or mode != EvalModes.descriptor:
         raise MorficError("--training-conditions runs one episode length of the run's own training env; it takes "
                           "no --steps, --video or --mode (use --envs, --seed, --robots, --command-vx).")
     names = ["go2"] if robots == "all" else parse_robot_list(robots)

@@ -20,6 +20,7 @@ from morfic_cli.cli._options import (
     StoreOpt,
 )
 from morfic_cli.cli._render import emit_object, info
+from morfic_cli.rl.variants import VARIANTS
 from morfic_cli.validation import check_args
 
 _MARKS = {"done": "[green]done[/]", "resumed": "[green]resumed[/]", "skipped": "[dim]skipped (in the store)[/]",
@@ -31,8 +32,8 @@ def reproduce(
                                            "pipeline), cpu (~10 h per seed on 2 cores), paper (GPU).")] = Preset.smoke,
     seeds: Annotated[int, typer.Option("--seeds", help="Seeds per variant (0..N-1).")] = 1,
     variants: Annotated[
-        str, typer.Option("--variants", help="Comma-separated variants to train, or 'all' (ppo, actor-only, concat, "
-                          "film, film-scaled, hyper, adaln).")
+        str, typer.Option("--variants", help=f"Comma-separated variants to train, or 'all' (the paper's: "
+                          f"{', '.join(VARIANTS)}); a user variant by import path module:Class.")
     ] = "all",
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Folder for the report's files (default "
@@ -60,11 +61,11 @@ def reproduce(
     Example: morfic reproduce --preset smoke
     """
     check_args(store=store, out_dir=out, variants=variants)
-    from morfic_cli.report.pipeline import PIPELINE_VARIANTS, Pipeline, reproduce_cfg
+    from morfic_cli.pipeline import Pipeline, reproduce_cfg
     from morfic_cli.rl.runner import check_device
     from morfic_cli.store import Store
 
-    names = PIPELINE_VARIANTS if variants.strip().lower() == "all" else tuple(
+    names = VARIANTS if variants.strip().lower() == "all" else tuple(
         v.strip() for v in variants.split(",") if v.strip())
     cfg = reproduce_cfg(preset.value, seeds=seeds, variants=names, device=device.value)
     if overrides:

@@ -20,13 +20,15 @@ from morfic_cli.cli._options import (
     StoreOpt,
 )
 from morfic_cli.cli._render import emit_object, info
+from morfic_cli.rl.variants import help_text
+from morfic_cli.runs import run_name
 from morfic_cli.validation import check_args
 
 
 def train(
     variant: Annotated[
         str | None,
-        typer.Option("--variant", help="ppo, actor-only, concat, film, film-scaled, adaln, hyper (default film)."),
+        typer.Option("--variant", help=f"{help_text()} (default film)."),
     ] = None,
     preset: Annotated[
         Preset | None, typer.Option("--preset", help="Budget: smoke (seconds), cpu (2-core machine), paper (GPU).")
@@ -58,6 +60,7 @@ def train(
     torchrun --nproc_per_node=G -m morfic_cli train --device cuda ... (docs/gpu.md).
 
     Example: morfic train --variant film --preset cpu --seed 0
+    Your own critic: morfic train --variant my_lab.critics:GatedCritic (docs/extending.md)
     """
     check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None)
     from morfic_cli.rl.config import apply_overrides, preset_cfg
@@ -72,7 +75,7 @@ def train(
     else:
         base = preset_cfg((preset or Preset.smoke).value, variant or "film", seed)
         cfg = apply_overrides(base, list(overrides or []))
-        run = new_run(st, cfg, name or f"{cfg.variant}-s{cfg.seed}", device.value)
+        run = new_run(st, cfg, name or run_name(cfg.variant, cfg.seed), device.value)
 
     cfg = run.cfg
     quiet = quiet or run.dist.rank != 0  # torchrun: one progress bar, rank 0's

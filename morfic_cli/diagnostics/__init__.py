@@ -1,4 +1,4 @@
-"""Critic diagnostics (SPEC section 6; paper appendix "Evaluation Metrics and Diagnostic Definitions").
+"""Critic diagnostics (docs/metrics.md; paper appendix "Evaluation Metrics and Diagnostic Definitions").
 
 - :mod:`~morfic_cli.diagnostics.returns`: Monte-Carlo returns G_hat and the truncation-safe sample set I_eps.
 - :mod:`~morfic_cli.diagnostics.metrics`: EV, NVB, NVE, ASA, Flip and CosGrad as pure tensor functions.

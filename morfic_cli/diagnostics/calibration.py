@@ -26,6 +26,7 @@ from morfic_cli.diagnostics.returns import mc_returns, min_horizon
 from morfic_cli.diagnostics.samples import DiagnoseCfg, Samples, collect_samples
 from morfic_cli.diagnostics.scoring import actor_gradients, critic_values
 from morfic_cli.errors import MorficError
+from morfic_cli.runs import run_of
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
@@ -190,7 +191,7 @@ def paper_cell(nvb: float, nve: float, asa: float) -> str:
 
 def run_label(trained: TrainedModels, spec: str) -> str:
     """The run name of a checkpoint (its ``run`` meta, else the spec minus ``runs/``), plus the spec's ``@N``."""
-    name = trained.meta.get("run") or spec.split("@")[0].removeprefix("runs/")
+    name = run_of(spec, trained.meta)
     return f"{name}@{spec.split('@', 1)[1]}" if "@" in spec else name
 
 
@@ -262,13 +263,6 @@ def diagnose_runs(
     rows = [{**{k: row[k] for k in CALIBRATION_COLUMNS}, "reused": row["reused"]} for row in rows]
     png, pdf = ev_figure(rows)
     config = {"specs": list(specs), **dataclasses.asdict(cfg)}
-    with store.writing():
-        mid = store.put_manifest(
-            "diagnosis",
-            config=config,
-            inputs=inputs,
-            files={"calibration.csv": rows_to_csv(rows, CALIBRATION_COLUMNS), "ev.png": png, "ev.pdf": pdf},
-            meta={"runs": labels},
-        )
-        version = store.set_ref(CALIBRATION_REF, mid)
-    return DiagnosisResult(rows, mid, CALIBRATION_REF, version)
+    pub = store.publish("diagnosis", CALIBRATION_REF, config=config, inputs=inputs, meta={"runs": labels},
+                        files={"calibration.csv": rows_to_csv(rows, CALIBRATION_COLUMNS), "ev.png": png, "ev.pdf": pdf})
+    return DiagnosisResult(rows, pub.id, CALIBRATION_REF, pub.version)

@@ -7,16 +7,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-#: Display names of the variants, as the paper's figures and tables name them.
-VARIANT_LABELS: dict[str, str] = {
-    "ppo": "PPO",
-    "actor-only": "Act-only",
-    "concat": "Concat",
-    "film": "MorFiC",
-    "film-scaled": "MorFiC-scaled",
-    "adaln": "AdaLN",
-    "hyper": "Hyper",
-}
+from morfic_cli.rl.variants import variant_label
 
 EV_FLOOR = -1.0
 """Bars below this EV are drawn down to it, marked with their value (EV is unbounded below)."""
@@ -47,7 +38,7 @@ def ev_figure(rows: Sequence[dict[str, Any]]) -> tuple[bytes, bytes]:
         xs = [i + (k - (len(runs) - 1) / 2) * width for i in range(len(robots))]
         values = [ev.get((run, robot), math.nan) for robot in robots]
         shown = [max(v, EV_FLOOR) if not math.isnan(v) else math.nan for v in values]
-        label = f"{VARIANT_LABELS.get(variant, variant)} ({run})"
+        label = f"{variant_label(variant)} ({run})"
         ax.bar(xs, shown, width=width * 0.95, label=label)
         for x, v in zip(xs, values, strict=True):
             if not math.isnan(v) and v < EV_FLOOR:

@@ -76,7 +76,7 @@ class _MeanCritic(torch.nn.Module):
 
 def newest_runs(store: Store) -> dict[str, str]:
     """Variant -> ref (``runs/NAME``) of the newest checkpoint of that variant in the store."""
-    from morfic_cli.rl.runner import RUNS_PREFIX
+    from morfic_cli.runs import RUNS_PREFIX
 
     newest: dict[str, tuple[str, str]] = {}
     for name in store.list_refs():
@@ -110,7 +110,7 @@ def default_actor(store: Store) -> str:
 
 def default_critics(store: Store) -> list[str]:
     """The newest run of each variant, in the paper's variant order."""
-    from morfic_cli.rl.models import VARIANTS
+    from morfic_cli.rl.variants import VARIANTS
 
     runs = newest_runs(store)
     return [runs[v] for v in VARIANTS if v in runs] + [r for v, r in sorted(runs.items()) if v not in VARIANTS]
@@ -249,13 +249,7 @@ def fixed_rollout(
     config = {"robot": robot, "actor": actor_spec, "critics": critic_specs, **dataclasses.asdict(cfg)}
     config.pop("robots")
     ref_name = FIXED_ROLLOUT_PREFIX + robot
-    with store.writing():
-        mid = store.put_manifest(
-            "diagnosis",
-            config=config,
-            inputs=inputs,
-            files={"fixed_rollout.csv": rows_to_csv(rows, FIXED_ROLLOUT_COLUMNS)},
-            meta={"actor": actor_label, "critics": [r["critic"] for r in rows[1:]]},
-        )
-        version = store.set_ref(ref_name, mid)
-    return DiagnosisResult(rows, mid, ref_name, version)
+    pub = store.publish("diagnosis", ref_name, config=config, inputs=inputs,
+                        files={"fixed_rollout.csv": rows_to_csv(rows, FIXED_ROLLOUT_COLUMNS)},
+                        meta={"actor": actor_label, "critics": [r["critic"] for r in rows[1:]]})
+    return DiagnosisResult(rows, pub.id, ref_name, pub.version)

@@ -1,4 +1,4 @@
-"""Critic calibration metrics (paper appendix "Evaluation Metrics and Diagnostic Definitions"; SPEC section 6).
+"""Critic calibration metrics (paper appendix "Evaluation Metrics and Diagnostic Definitions"; docs/metrics.md).
 
 Pure functions on 1-D tensors over the sample set I_eps (see :mod:`morfic_cli.diagnostics.returns`): ``G`` the
 Monte-Carlo returns G_hat_{t,i}, ``V`` the critic's values V_phi(s_{t,i}, z_{m_i}) of the same samples. Every

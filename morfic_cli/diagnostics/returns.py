@@ -1,4 +1,4 @@
-"""Discounted Monte-Carlo returns of a recorded rollout and the diagnostic sample set I_eps (SPEC section 6).
+"""Discounted Monte-Carlo returns of a recorded rollout and the diagnostic sample set I_eps (docs/metrics.md).
 
 Arrays are (T, N): T policy steps of N envs. Step t of env i took action a_{t,i} in s_{t,i}, received r_{t,i} and
 ended its episode when ``done[t, i]`` (the env was reset, row t+1 starts a new episode). An episode ends

@@ -43,7 +43,7 @@ ROLLOUT_PURPOSE = "diagnose"
 
 @dataclass(frozen=True)
 class DiagnoseCfg:
-    """What ``morfic diagnose`` collects and which samples count (defaults: SPEC section 6, docs/metrics.md)."""
+    """What ``morfic diagnose`` collects and which samples count (defaults: docs/metrics.md)."""
 
     robots: tuple[str, ...] = ("go2",)
     """Target robots."""

@@ -1,4 +1,4 @@
-"""Score trained models on stored samples: critic values V_phi and actor-loss gradients g(A) (SPEC section 6).
+"""Score trained models on stored samples: critic values V_phi and actor-loss gradients g(A) (docs/metrics.md).
 
 The models get the observation groups recorded in the rollout, flattened over (T, N) into one batch, as a
 TensorDict: a critic reads its own groups (``critic`` history, ``privileged``, and ``morphology`` when conditioned),

@@ -17,26 +17,10 @@ All functions are pure and batched; shapes use N = num_envs, legs FL, FR, RL, RR
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import torch
 
-
-@dataclass(frozen=True)
-class GaitCfg:
-    """A periodic gait schedule (default: trot)."""
-
-    frequency: float = 3.0
-    """Gait frequency f (Hz). Default 3 Hz: walk-these-ways' default trot (its range is 2-4 Hz); at
-    duty 0.5 the stance lasts 1/6 s, a stride of v/6 m at speed v (0.42 m at 2.5 m/s)."""
-    offsets: tuple[float, float, float, float] = (0.0, 0.5, 0.5, 0.0)
-    """Phase offset of each foot, FL, FR, RL, RR (periods). Trot: FL and RR together, FR and RL
-    half a period later."""
-    duty: float = 0.5
-    """Duty factor: fraction of the period each foot is in stance, in (0, 1)."""
-    kappa: float = 0.07
-    """Smoothing width of the desired-contact indicator, in (normalised) periods
-    (walk-these-ways' ``kappa_gait_probs``)."""
+from morfic_cli.config import GaitCfg
 
 
 def advance_phase(phase: torch.Tensor, freq: torch.Tensor, dt: float) -> torch.Tensor:

@@ -27,13 +27,16 @@ from morfic_cli.envs.randomization import (
     sample_push,
     sample_reset_joint_pos,
 )
-from morfic_cli.envs.rewards import compute_rewards
+from morfic_cli.envs.rewards import TRACKING_TERM, compute_rewards
 from morfic_cli.envs.state import EnvState
 from morfic_cli.envs.terminations import compute_terminations
 from morfic_cli.errors import MorficError
+from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.morphology.descriptor import TRAIN_MAX, TRAIN_MIN, as_descriptor
 from morfic_cli.morphology.robots import RobotSpec, load_robot
-from morfic_cli.sim.backend import SimFrame, SimParams, make_backend
+from morfic_cli.sim.args import NUM_JOINTS
+from morfic_cli.sim.backend import SimFrame, SimParams
+from morfic_cli.sim.factory import make_backend
 
 Mode = Literal["train", "descriptor", "full"]
 MODES: tuple[str, ...] = ("train", "descriptor", "full")
@@ -68,13 +71,13 @@ class LocomotionEnv(VecEnv):
             seed: Seed of every random draw the env makes.
         """
         if mode not in MODES:
-            raise MorficError(f"unknown env mode '{mode}'; valid modes are: {', '.join(MODES)}.")
+            raise ValueError(f"unknown env mode '{mode}'; valid modes are: {', '.join(MODES)}.")
         self.cfg = cfg
         self.mode = mode
         self.target: RobotSpec = load_robot(robot)
         self.spec: RobotSpec = self.target if mode == "full" else load_robot(TEMPLATE)
         self.num_envs = cfg.num_envs
-        self.num_actions = 12
+        self.num_actions = NUM_JOINTS
         self.device = torch.device(cfg.sim.device)
         self.dt = cfg.sim.physics_dt * cfg.decimation
         self.max_episode_length = int(math.ceil(cfg.episode_length_s / self.dt))
@@ -97,15 +100,15 @@ class LocomotionEnv(VecEnv):
         self._all_ids = torch.arange(n)
         self.episode_length_buf = torch.zeros(n, dtype=torch.long)
         self.common_step_counter = 0
-        self.actions = torch.zeros(n, 12, **f32)
-        self.action_prev = torch.zeros(n, 12, **f32)
-        self.action_buffer = torch.zeros(n, self.cfg.rand.max_latency_steps + 1, 12, **f32)
+        self.actions = torch.zeros(n, NUM_JOINTS, **f32)
+        self.action_prev = torch.zeros(n, NUM_JOINTS, **f32)
+        self.action_buffer = torch.zeros(n, self.cfg.rand.max_latency_steps + 1, NUM_JOINTS, **f32)
         self.latency = torch.zeros(n, dtype=torch.long)
         self.commands = torch.zeros(n, 3, **f32)
         self.command_ranges = CommandRanges.initial(self.cfg.commands)
         self.gait_phase = torch.zeros(n, **f32)
         self.gait_frequency = torch.full((n,), self.cfg.gait.frequency, **f32)
-        self.joint_vel_prev = torch.zeros(n, 12, **f32)
+        self.joint_vel_prev = torch.zeros(n, NUM_JOINTS, **f32)
         self.foot_vel_prev = torch.zeros(n, 4, 3, **f32)
         self.history = torch.zeros(n, h, O.POLICY_DIM, **f32)
         self.critic_history = torch.zeros(n, h, O.POLICY_DIM, **f32)
@@ -146,7 +149,7 @@ class LocomotionEnv(VecEnv):
         self.gait_phase = advance_phase(self.gait_phase, self.gait_frequency, self.dt)
 
         state = self._state(frame)
-        reward, terms = compute_rewards(state, self.cfg.rewards)
+        reward, terms, raw = compute_rewards(state, self.cfg.rewards)
         self.last_state, self.last_reward_terms = state, terms  # pre-reset view of this step (evaluation logs)
         reward = reward * self.dt
         terminated, term_masks = compute_terminations(state, self.cfg.terminations)
@@ -163,9 +166,10 @@ class LocomotionEnv(VecEnv):
             value = torch.nan_to_num(value) * self.dt
             self.episode_sums.setdefault(name, torch.zeros(self.num_envs))
             self.episode_sums[name] += value
-        self.episode_lin_tracking += torch.nan_to_num(_raw_lin(terms, self.cfg))
+        self.episode_lin_tracking += torch.nan_to_num(raw[TRACKING_TERM])  # unweighted: --set w_lin=0 keeps it
 
         log: dict[str, float] = {f"/reward/{k}": float(torch.nan_to_num(v).mean()) * self.dt for k, v in terms.items()}
+        log.update({f"/reward_raw/{k}": float(torch.nan_to_num(v).mean()) for k, v in raw.items()})
         vx_err = torch.nan_to_num(state.command[:, 0] - state.base_lin_vel_b[:, 0]).abs()
         log["/tracking/vx_error"] = float(vx_err.mean())
         reset_ids = dones.nonzero(as_tuple=False).flatten()
@@ -225,7 +229,7 @@ class LocomotionEnv(VecEnv):
     def _reset_envs(self, ids: torch.Tensor) -> None:
         k = len(ids)
         if self.mode == "train":
-            u = torch.rand((k, 11), generator=self.gen, dtype=torch.float64)
+            u = torch.rand((k, DESCRIPTOR_DIM), generator=self.gen, dtype=torch.float64)
             lo, hi = self._support_lo.double(), self._support_hi.double()
             self.backend.set_morphology(ids, lo + (hi - lo) * u)
         dyn = sample_dynamics(k, self.cfg.rand, self.gen)
@@ -238,7 +242,7 @@ class LocomotionEnv(VecEnv):
         yaw = (torch.rand(k, generator=self.gen) * 2.0 - 1.0) * math.pi
         base_pos = torch.zeros(k, 3)
         base_pos[:, 2] = self.spec.init_height
-        self.backend.reset_envs(ids, base_pos, yaw_quat(yaw), torch.zeros(k, 6), q, torch.zeros(k, 12))
+        self.backend.reset_envs(ids, base_pos, yaw_quat(yaw), torch.zeros(k, 6), q, torch.zeros(k, NUM_JOINTS))
         self.latency[ids] = sample_latency(k, self.cfg.rand, self.gen)
         self.action_buffer[ids] = 0.0
         self.actions[ids] = 0.0
@@ -380,8 +384,3 @@ class LocomotionEnv(VecEnv):
         """Release the backend."""
         self.backend.close()
 
-
-def _raw_lin(terms: dict[str, torch.Tensor], cfg: EnvCfg) -> torch.Tensor:
-    """Unweighted r_lin (in [0, 4]) recovered from its weighted contribution, for the curriculum."""
-    w = cfg.rewards.w_lin
-    return terms["r_lin"] / w if w else torch.zeros_like(terms["r_lin"])

@@ -1,4 +1,4 @@
-"""Observation groups (SPEC section 3; paper Table "Observation streams").
+"""Observation groups (docs/concepts.md; paper Table "Observation streams").
 
 - ``policy``: o_t (48) = [v (3), omega (3), g_proj (3), c (3), q - q0 (12), qdot (12), a_{t-1} (12)],
   scaled, with sensor noise during training.

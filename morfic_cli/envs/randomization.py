@@ -1,4 +1,4 @@
-"""Domain randomisation samplers (SPEC section 3): pure functions of a generator and a config."""
+"""Domain randomisation samplers (docs/concepts.md): pure functions of a generator and a config."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import torch
 
 from morfic_cli.config import DomainRandCfg
+from morfic_cli.sim.args import NUM_JOINTS
 
 
 @dataclass
@@ -30,7 +31,7 @@ def _uniform(shape: tuple[int, ...], lo: float, hi: float, gen: torch.Generator)
 
 def nominal_dynamics(k: int) -> DynamicsSample:
     """No randomisation: friction 1, restitution 0, no COM offset, no joint friction."""
-    return DynamicsSample(torch.ones(k), torch.zeros(k), torch.zeros(k, 3), torch.zeros(k, 12))
+    return DynamicsSample(torch.ones(k), torch.zeros(k), torch.zeros(k, 3), torch.zeros(k, NUM_JOINTS))
 
 
 def sample_dynamics(k: int, cfg: DomainRandCfg, gen: torch.Generator) -> DynamicsSample:
@@ -41,7 +42,7 @@ def sample_dynamics(k: int, cfg: DomainRandCfg, gen: torch.Generator) -> Dynamic
         friction=_uniform((k,), *cfg.friction, gen),
         restitution=_uniform((k,), *cfg.restitution, gen),
         com_offset=_uniform((k, 3), -cfg.com_offset, cfg.com_offset, gen),
-        joint_friction=_uniform((k, 12), *cfg.joint_friction, gen),
+        joint_friction=_uniform((k, NUM_JOINTS), *cfg.joint_friction, gen),
     )
 
 

@@ -2,12 +2,12 @@
 
 Every term is a pure function ``(state, cfg) -> Tensor`` of shape (N,) returning the **unweighted**
 value exactly as the table defines it (``r_lin`` keeps its factor 4, ``r_gaitF`` its minus sign).
-:data:`TERMS` files each term under a group of eq. (rews)::
+:data:`TERMS` holds one :class:`RewardTerm` object per term (function, group, weight and parameter fields)::
 
     r_t = sum_{i in T} w_i r_i  -  sum_{j in P} w_j p_j  +  sum_{k in S} w_k s_k
 
 ``task`` (T) and ``stability`` (S) terms are added, ``penalty`` (P) terms are subtracted; every
-weight is a non-negative number in :class:`RewardCfg` (``w_<name without its r_/p_ prefix>``).
+weight is a non-negative number in :class:`~morfic_cli.config.RewardCfg`, in the field the term names.
 :func:`compute_rewards` returns eq. (rews) exactly; the env multiplies the total (and the logged
 contributions) by the policy step dt, as legged_gym and mjlab do, so the weights read as rates
 per second and compare with theirs.
@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import torch
 
+from morfic_cli.config import RewardCfg
 from morfic_cli.envs.gait import raibert_foot_targets
 from morfic_cli.envs.math import quat_rotate, yaw_from_quat
 from morfic_cli.envs.state import EnvState
@@ -33,124 +34,6 @@ GRAVITY = 9.81
 
 LEFT_RIGHT_PAIRS = ((0, 1), (2, 3))
 """(left, right) foot indices of the front (FL, FR) and rear (RL, RR) pairs, for the stance width."""
-
-
-@dataclass(frozen=True)
-class RewardCfg:
-    """Weights and parameters of every reward term (the paper gives no weights; these are ours).
-
-    Weights are non-negative; the group in :data:`TERMS` gives the sign (penalties subtracted).
-    A weight of 0 skips the term. Defaults are set so that a quadruped learns to trot on flat
-    ground with PPO: velocity tracking dominates (r_lin at most 4 w_lin = 4 per second, r_yaw 2),
-    the stability terms add a bounded positive bonus (at most 2), and every penalty is small at
-    a normal trot, so the per-step reward stays positive and falling over (which ends the
-    episode) is never attractive. Magnitudes follow legged_gym /
-    walk-these-ways / mjlab for the terms they share (anchors.md sections 1, 3, 4).
-    """
-
-    # ---- task / tracking (added) ----
-    w_lin: float = 1.0
-    """r_lin, linear-velocity tracking (task, +). 1.0 like legged_gym / walk-these-ways; with the
-    paper's factor 4 the term is worth up to 4, the largest in the sum."""
-    w_yaw: float = 2.0
-    """r_yaw, yaw-rate tracking (task, +). Half of r_lin's maximum (4), the 2:1 lin/yaw ratio of
-    legged_gym (1.0 / 0.5)."""
-    w_gaitF: float = 2.0
-    """r_gaitF, no force on swing feet (task, +; the term itself is <= 0). walk-these-ways uses 4
-    next to tracking 1; halved here so tracking (4 w_lin) stays twice the gait shaping."""
-    w_gaitV: float = 2.0
-    """r_gaitV, no velocity of stance feet (task, +; term <= 0). Same reasoning as ``w_gaitF``."""
-    w_jump: float = 10.0
-    """r_jump, base-height tracking with h_cmd = 0 (task, +; term <= 0). walk-these-ways' 10: a
-    5 cm height error costs 0.025."""
-
-    # ---- penalties (subtracted) ----
-    w_vz: float = 2.0
-    """p_vz, vertical base velocity (penalty, -). legged_gym's lin_vel_z 2.0."""
-    w_omega_xy: float = 0.05
-    """p_omega_xy, roll/pitch rate (penalty, -). legged_gym's ang_vel_xy 0.05."""
-    w_ori: float = 1.0
-    """p_ori, base tilt ||g_xy||^2 (penalty, -). Mild (Playground 5, legged_gym 0) because
-    r_upright already rewards an upright base; a 0.3 rad tilt costs 0.087."""
-    w_tau: float = 1e-4
-    """p_tau, joint torques (penalty, -). walk-these-ways' 1e-4 (legged_gym Go2 2e-4): ~0.06 at
-    a trot with ~7 N m per joint."""
-    w_qddot: float = 2.5e-7
-    """p_qddot, joint accelerations (penalty, -). legged_gym's dof_acc 2.5e-7."""
-    w_da: float = 0.01
-    """p_da, action rate (penalty, -). legged_gym's action_rate 0.01 (same 0.25 action scale)."""
-    w_coll: float = 1.0
-    """p_coll, number of base/thigh/calf bodies touching the ground (penalty, -). legged_gym's
-    collision 1.0; base and thigh contacts also end the episode."""
-    w_jl: float = 10.0
-    """p_jl, joint-limit excess in rad (penalty, -). legged_gym A1/Go2 and walk-these-ways 10:
-    excesses are small numbers of radians, so the weight is large."""
-    w_slip: float = 0.05
-    """p_slip, planar speed^2 of contact feet (penalty, -). walk-these-ways' feet_slip 0.04,
-    mjlab / Playground 0.1."""
-    w_impact: float = 0.05
-    """p_impact, downward foot speed^2 just before contact (penalty, -). Same size as ``w_slip``
-    (walk-these-ways ships 0): a 0.7 m/s touchdown costs 0.025 per foot."""
-    w_f: float = 0.01
-    """p_f, foot force above ``f_max_factor`` body weights, in N (penalty, -). legged_gym's
-    feet_contact_forces term (its weight is 0 there); 0.01 makes a 50 N excess cost 0.5."""
-    w_q: float = 0.05
-    """p_q, deviation from the default pose (penalty, -). Small (mjlab / Playground reward the pose
-    with weight 0.5-1): keeps the hips near default without forbidding the trot's joint swing."""
-    w_qdot: float = 1e-4
-    """p_qdot, joint speeds (penalty, -). walk-these-ways' dof_vel 1e-4."""
-    w_raibert: float = 5.0
-    """r_raibert, squared distance of the feet from the Raibert footholds (penalty, -: the table
-    defines it as a non-negative distance, so it is subtracted). walk-these-ways uses -10 next to
-    its gait terms at 4; halved with them."""
-
-    # ---- stability shaping (added) ----
-    w_upright: float = 1.0
-    """r_upright, eq. (upright_stability) (stability, +). mjlab's upright 1.0."""
-    w_cop: float = 0.5
-    """r_cop, eq. (cop_stability) (stability, +). Half of r_upright: in a trot the CoP sits between
-    the two diagonal feet, so this rewards an even load split without dominating."""
-    w_width: float = 0.5
-    """r_width, eq. (stance_width) (stability, +). Constant 1 unless the gate is on, so it only
-    matters when tilted or fast; 0.5 like r_cop."""
-
-    # ---- term parameters ----
-    sigma_lin: float = 0.25
-    """sigma_lin of r_lin ((m/s)^2): legged_gym's tracking_sigma."""
-    sigma_yaw: float = 0.25
-    """sigma_yaw of r_yaw ((rad/s)^2): legged_gym's tracking_sigma."""
-    theta0: float = 0.3
-    """theta0 of r_upright (rad), the paper's value: a tilt of theta0 gives exp(-1)."""
-    tau_cop: float = 0.10
-    """tau of r_cop (m), the paper's value."""
-    eta: float = 0.05
-    """eta of the width gate, eq. (width_gate): the gate opens when ||g_xy||^2 > eta (a tilt of
-    about 0.23 rad, 13 degrees)."""
-    v_th: float = 1.0
-    """v_th of the width gate (m/s): the gate opens when the planar base speed exceeds it."""
-    w_min_ratio: float = 0.8
-    """w_min of r_width as a fraction of the nominal stance width (from ``nominal_foot_pos_b``), so
-    it follows each robot's geometry; 0.8 lets the feet come 20% inside the hips for free."""
-    sigma_w: float = 0.05
-    """sigma_w of r_width (m): 5 cm narrower than w_min gives exp(-1)."""
-    sigma_F: float = 100.0
-    """sigma_F of r_gaitF (N^2): walk-these-ways' gait_force_sigma."""
-    sigma_V: float = 10.0
-    """sigma_V of r_gaitV ((m/s)^2): walk-these-ways' gait_vel_sigma."""
-    f_max_factor: float = 1.5
-    """f_max of p_f as a multiple of body weight (total_mass * g), so it scales with morphology
-    mass; a trotting foot carries about half to one body weight."""
-    collision_force: float = 0.1
-    """Force (N) above which a body counts as colliding in p_coll (the paper's table: 0.1)."""
-    impact_clip: float = 100.0
-    """p_impact clips the previous foot z-velocity to [-impact_clip, 0] (m/s), the table's 100."""
-    h_cmd: float = 0.0
-    """h_cmd of r_jump (m): the commanded extra height; 0 (no jumping) as in the paper."""
-    gait_duty: float = 0.5
-    """Duty factor of the gait r_raibert assumes; must match ``GaitCfg.duty``."""
-    raibert_kv: float = 0.0
-    """Raibert's velocity-feedback gain k_v (s): x_des += k_v (v - v_cmd). 0 = walk-these-ways
-    (pure feed-forward footholds)."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -405,70 +288,106 @@ def r_width(state: EnvState, cfg: RewardCfg) -> torch.Tensor:
 
 
 # --------------------------------------------------------------------------------------------------
-# registry and sum, eq. (rews)
+# the terms, eq. (rews)
 
 TermFn = Callable[[EnvState, RewardCfg], torch.Tensor]
 
 GROUP_SIGN = {"task": 1.0, "penalty": -1.0, "stability": 1.0}
 """Sign of each group in eq. (rews): task T and stability S added, penalties P subtracted."""
 
-TERMS: dict[str, tuple[TermFn, str]] = {
-    "r_lin": (r_lin, "task"),
-    "r_yaw": (r_yaw, "task"),
-    "p_vz": (p_vz, "penalty"),
-    "p_omega_xy": (p_omega_xy, "penalty"),
-    "p_ori": (p_ori, "penalty"),
-    "p_tau": (p_tau, "penalty"),
-    "p_qddot": (p_qddot, "penalty"),
-    "p_da": (p_da, "penalty"),
-    "p_coll": (p_coll, "penalty"),
-    "p_jl": (p_jl, "penalty"),
-    "r_upright": (r_upright, "stability"),
-    "r_cop": (r_cop, "stability"),
-    "r_width": (r_width, "stability"),
-    "r_gaitF": (r_gaitF, "task"),
-    "r_gaitV": (r_gaitV, "task"),
-    "p_slip": (p_slip, "penalty"),
-    "p_impact": (p_impact, "penalty"),
-    "p_f": (p_f, "penalty"),
-    "p_q": (p_q, "penalty"),
-    "p_qdot": (p_qdot, "penalty"),
-    "r_jump": (r_jump, "task"),
-    "r_raibert": (r_raibert, "penalty"),
-}
-"""Every term of the paper's Table "Reward terms", in its order: name -> (function, group)."""
+
+@dataclass(frozen=True)
+class RewardTerm:
+    """One reward term: its function, its group, and the config fields of its weight and parameters.
+
+    Modelled on mjlab's ``RewardTerm(func, weight, params)``; the numbers stay in the typed
+    :class:`~morfic_cli.config.RewardCfg`, so ``--set env.rewards.<field>=...`` and the run manifest see them.
+
+    Attributes:
+        name: The paper's name (``r_lin``); logged as ``reward/<name>`` and ``reward_raw/<name>``.
+        func: ``(state, cfg) -> (N,)``, the unweighted value exactly as the paper's table defines it.
+        group: ``task``, ``penalty`` or ``stability`` (the sign, :data:`GROUP_SIGN`).
+        weight: Name of the RewardCfg field with the non-negative weight w.
+        params: Names of the RewardCfg fields ``func`` reads.
+    """
+
+    name: str
+    func: TermFn
+    group: str
+    weight: str
+    params: tuple[str, ...] = ()
+
+    def weight_of(self, cfg: RewardCfg) -> float:
+        """The term's weight w in ``cfg``."""
+        return float(getattr(cfg, self.weight))
+
+    def sign(self) -> float:
+        """+1 for task and stability terms, -1 for penalties."""
+        return GROUP_SIGN[self.group]
 
 
-def weight(cfg: RewardCfg, name: str) -> float:
-    """The weight of term ``name``: ``cfg.w_<name without its 2-letter prefix>`` (e.g. r_lin -> w_lin)."""
-    return float(getattr(cfg, "w_" + name[2:]))
+TERMS: tuple[RewardTerm, ...] = (
+    RewardTerm("r_lin", r_lin, "task", "w_lin", ("sigma_lin",)),
+    RewardTerm("r_yaw", r_yaw, "task", "w_yaw", ("sigma_yaw",)),
+    RewardTerm("p_vz", p_vz, "penalty", "w_vz"),
+    RewardTerm("p_omega_xy", p_omega_xy, "penalty", "w_omega_xy"),
+    RewardTerm("p_ori", p_ori, "penalty", "w_ori"),
+    RewardTerm("p_tau", p_tau, "penalty", "w_tau"),
+    RewardTerm("p_qddot", p_qddot, "penalty", "w_qddot"),
+    RewardTerm("p_da", p_da, "penalty", "w_da"),
+    RewardTerm("p_coll", p_coll, "penalty", "w_coll", ("collision_force",)),
+    RewardTerm("p_jl", p_jl, "penalty", "w_jl"),
+    RewardTerm("r_upright", r_upright, "stability", "w_upright", ("theta0",)),
+    RewardTerm("r_cop", r_cop, "stability", "w_cop", ("tau_cop",)),
+    RewardTerm("r_width", r_width, "stability", "w_width", ("eta", "v_th", "w_min_ratio", "sigma_w")),
+    RewardTerm("r_gaitF", r_gaitF, "task", "w_gaitF", ("sigma_F",)),
+    RewardTerm("r_gaitV", r_gaitV, "task", "w_gaitV", ("sigma_V",)),
+    RewardTerm("p_slip", p_slip, "penalty", "w_slip"),
+    RewardTerm("p_impact", p_impact, "penalty", "w_impact", ("impact_clip",)),
+    RewardTerm("p_f", p_f, "penalty", "w_f", ("f_max_factor",)),
+    RewardTerm("p_q", p_q, "penalty", "w_q"),
+    RewardTerm("p_qdot", p_qdot, "penalty", "w_qdot"),
+    RewardTerm("r_jump", r_jump, "task", "w_jump", ("h_cmd",)),
+    RewardTerm("r_raibert", r_raibert, "penalty", "w_raibert", ("gait_duty", "raibert_kv")),
+)
+"""Every term of the paper's Table "Reward terms", in its order."""
+
+TERMS_BY_NAME: dict[str, RewardTerm] = {t.name: t for t in TERMS}
+
+TRACKING_TERM = "r_lin"
+"""The term the command curriculum reads, unweighted (legged_gym's tracking rule; range [0, 4])."""
 
 
-def compute_rewards(state: EnvState, cfg: RewardCfg) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """The total reward, eq. (rews), and each term's weighted, signed contribution.
+def compute_rewards(
+    state: EnvState, cfg: RewardCfg
+) -> tuple[torch.Tensor, dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+    """The total reward, eq. (rews), each term's weighted, signed contribution, and each term's raw value.
 
-    contribution_k = sign(group_k) * w_k * term_k(state), and the total is their sum. No dt factor:
-    the env multiplies by the policy step dt. Terms with weight 0 are not evaluated; their
-    contribution is zeros so the logged keys are always the same.
+    contribution_k = sign(group_k) * w_k * raw_k with raw_k = term_k(state), and the total is the sum of the
+    contributions. No dt factor: the env multiplies by the policy step dt. Every term's raw value is computed
+    (so it is logged, and the curriculum reads r_lin, whatever the weights); a term of weight 0 contributes
+    zeros, so the logged keys are always the same.
 
     Args:
         state: The batched env state.
         cfg: Weights and parameters.
 
     Returns:
-        ``(total, contributions)``: total shape (N,); contributions maps every name of
+        ``(total, contributions, raw)``: total shape (N,); contributions and raw map every name of
         :data:`TERMS` to a tensor of shape (N,).
     """
     n = state.base_pos_w.shape[0]
     ref = state.base_pos_w
     total = torch.zeros(n, dtype=ref.dtype, device=ref.device)
     contributions: dict[str, torch.Tensor] = {}
-    for name, (fn, group) in TERMS.items():
-        w = weight(cfg, name)
+    raw: dict[str, torch.Tensor] = {}
+    for term in TERMS:
+        raw[term.name] = term.func(state, cfg)
+        w = term.weight_of(cfg)
         if w == 0.0:
-            contributions[name] = torch.zeros_like(total)
+            contributions[term.name] = torch.zeros_like(total)
             continue
-        value = GROUP_SIGN[group] * w * fn(state, cfg)
-        contributions[name] = value
+        value = term.sign() * w * raw[term.name]
+        contributions[term.name] = value
         total = total + value
-    return total, contributions
+    return total, contributions, raw

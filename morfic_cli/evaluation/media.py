@@ -48,11 +48,11 @@ def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: i
         fps = 1.0 / (rollout.dt * every)
         data, ext = encode_video(frames, fps)
         sheet = frame_grid_png(frames, n=6, fps=fps)
-        mid = store.put_manifest(
+        mid = store.publish(
             "media", config={"every": every, "fps": fps, "num_envs": len(rollout.models)},
             inputs={"rollout": inputs[role], "eval": result.id},
             files={f"video.{ext}": data, "frames.png": sheet},
-            meta={"robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx})
+            meta={"robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx}).id
         if out is None:
             written.append(mid)
             continue

@@ -1,4 +1,4 @@
-"""Zero-shot transfer metrics (SPEC section 5; paper tables "Zero-shot cross-morphology transfer" and v_x^max).
+"""Zero-shot transfer metrics (docs/eval.md; paper tables "Zero-shot cross-morphology transfer" and v_x^max).
 
 Pure functions on recorded arrays, T policy steps x N envs. ``alive[t, i]`` is True when env i has not
 terminated at or before step t: the step on which an env terminates is not alive (its post-step state is

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 from morfic_cli import __version__
 from morfic_cli.evaluation.metrics import paper_cell
 from morfic_cli.evaluation.rollout import Rollout, run_rollout
+from morfic_cli.runs import run_of
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
@@ -34,7 +35,7 @@ EVALS_PREFIX = "evals/"
 
 @dataclass(frozen=True)
 class EvalCfg:
-    """An evaluation (defaults: the paper's protocol, SPEC section 5)."""
+    """An evaluation (defaults: the paper's protocol, docs/eval.md)."""
 
     robots: tuple[str, ...]
     modes: tuple[str, ...] = ("descriptor",)
@@ -110,7 +111,7 @@ def evaluate(
     if trained is None:
         trained = load_trained(store, spec)
     distances = {r.robot: r.d for r in distance_table(list_robots())}  # span over the whole library, as `distance`
-    run_name = trained.meta.get("run") or spec.split("@")[0].removeprefix("runs/")
+    run_name = run_of(spec, trained.meta)
     rows, rollouts, inputs = [], {}, {"checkpoint": trained.checkpoint_id}
     with tempfile.TemporaryDirectory(prefix="morfic-eval-") as tmp:
         for robot in cfg.robots:
@@ -130,19 +131,16 @@ def evaluate(
                             "term_names": rollout.term_names}
                     path = Path(tmp) / f"{robot}-{mode}-vx{vx:g}.mcap"
                     write_rollout_log(path, rollout, meta)
-                    inputs[role] = store.put_manifest(
+                    inputs[role] = store.publish(
                         "rollout", config={"robot": robot, "mode": mode, "command_vx": vx, "num_envs": cfg.num_envs,
                                            "steps": cfg.steps, "seed": cfg.seed},
                         inputs={"checkpoint": trained.checkpoint_id}, files={"rollout.mcap": path},
-                        meta={k: v for k, v in meta.items() if k != "term_names"})
+                        meta={k: v for k, v in meta.items() if k != "term_names"}).id
         config = {"spec": spec, **dataclasses.asdict(cfg)}
-        with store.writing():
-            mid = store.put_manifest("eval", config=config, inputs=inputs,
-                                     files={"eval.csv": rows_to_csv(rows, EVAL_COLUMNS)},
-                                     meta={"run": run_name, "iteration": trained.meta.get("iteration")})
-            ref = EVALS_PREFIX + run_name
-            version = store.set_ref(ref, mid)
-    return EvalResult(rows, mid, ref, version, rollouts)
+        pub = store.publish("eval", EVALS_PREFIX + run_name, config=config, inputs=inputs,
+                            files={"eval.csv": rows_to_csv(rows, EVAL_COLUMNS)},
+                            meta={"run": run_name, "iteration": trained.meta.get("iteration")})
+    return EvalResult(rows, pub.id, pub.ref, pub.version, rollouts)
 
 
 def parse_commands(text: str) -> tuple[float, ...]:

@@ -1,4 +1,4 @@
-"""Roll a trained policy out on one robot and command (SPEC section 5), recording every step.
+"""Roll a trained policy out on one robot and command (docs/eval.md), recording every step.
 
 Reuses the training env (:class:`~morfic_cli.envs.locomotion.LocomotionEnv`) in its evaluation
 configuration (:func:`~morfic_cli.config.eval_env_cfg`: no randomisation, pushes, latency or sensor noise)

@@ -8,6 +8,6 @@
 - :mod:`~morfic_cli.export.artifact`: ``morfic export`` and ``--check`` on the artifact store.
 
 ``examples/deploy_loop.py`` is the 50 Hz control loop that consumes an export (docs/deploy.md).
-One package rather than the single ``export.py`` of ARCHITECTURE.md: model, metadata, runtimes and store glue
-are separate concerns, and the metadata builder is used without torch export machinery by the checks.
+One package rather than one module: model, metadata, runtimes and store glue are separate concerns, and the
+metadata builder is used without torch export machinery by the checks.
 """

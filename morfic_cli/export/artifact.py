@@ -34,6 +34,7 @@ from morfic_cli.export.runtime import (
 from morfic_cli.export.verify import TOLERANCE, Verification, model_mismatches, verify_outputs
 from morfic_cli.morphology.robots import list_robots, load_robot
 from morfic_cli.rl.runner import TrainedModels, load_trained
+from morfic_cli.runs import run_of
 from morfic_cli.store import Store
 from morfic_cli.store.manifest import safe_join
 
@@ -231,26 +232,13 @@ def export_policy(
     if problems:
         raise MorficError("export metadata disagrees with the robot model, nothing stored: " + "; ".join(problems))
     files = {model_file: model_bytes, METADATA_FILE: metadata_bytes(meta)}
-    run = meta["run"] or spec.split("@")[0].removeprefix("runs/")
+    run = run_of(spec, meta)
     ref = export_ref(run, cfg.robot, cfg.fmt)
     config = {"spec": spec, **dataclasses.asdict(cfg)}
-    with store.writing():
-        mid = store.put_manifest(
-            "export",
-            config=config,
-            inputs={"checkpoint": trained.checkpoint_id},
-            files=files,
-            meta={
-                "run": run,
-                "robot": cfg.robot,
-                "format": cfg.fmt,
-                "targets": cfg.targets,
-                "model_sha256": meta["model_sha256"],
-                "verification": verification.to_dict(),
-            },
-        )
-        version = store.set_ref(ref, mid)
-    result = ExportResult(mid, f"{ref}@{version}", files, meta, verification)
+    pub = store.publish("export", ref, config=config, inputs={"checkpoint": trained.checkpoint_id}, files=files,
+                        meta={"run": run, "robot": cfg.robot, "format": cfg.fmt, "targets": cfg.targets,
+                              "model_sha256": meta["model_sha256"], "verification": verification.to_dict()})
+    result = ExportResult(pub.id, f"{ref}@{pub.version}", files, meta, verification)
     if out is not None:
         result.written = write_files(out, files)
     return result

@@ -1,4 +1,4 @@
-"""The metadata JSON that travels beside an exported policy (SPEC section 1, ``morfic export``).
+"""The metadata JSON that travels beside an exported policy (docs/cli.md, ``morfic export``).
 
 Everything a robot stack needs to run the policy and nothing it has to guess: the model's inputs and outputs,
 the joint order, how actions become joint targets, the PD gains and limits, the observation layout with its
@@ -98,7 +98,7 @@ def robot_section(spec: RobotSpec) -> dict[str, Any]:
 
 
 def observation_section(env: EnvCfg) -> dict[str, Any]:
-    """Layout, scales and history of o_t (SPEC section 3), as the env builds it without noise."""
+    """Layout, scales and history of o_t (docs/concepts.md), as the env builds it without noise."""
     scales = _float32s(O.obs_scales(env.obs))
     terms = []
     for name, start, stop in O.POLICY_LAYOUT:
@@ -145,7 +145,7 @@ def control_section(env: EnvCfg) -> dict[str, Any]:
 
 
 def descriptor_section() -> dict[str, Any]:
-    """Names, units and normalisation of the 11-D descriptor (SPEC section 2)."""
+    """Names, units and normalisation of the 11-D descriptor (docs/robots.md)."""
     return {
         "names": list(DESCRIPTOR_NAMES),
         "units": list(DESCRIPTOR_UNITS),

@@ -1,4 +1,4 @@
-"""Apply an 11-D morphology descriptor to a compiled model (SPEC section 2).
+"""Apply an 11-D morphology descriptor to a compiled model (docs/robots.md).
 
 Pure functions on one :class:`mujoco.MjModel` plus a scratch :class:`mujoco.MjData`. A
 :class:`TemplateInfo`, made once from the template model, remembers the nominal masses, inertias
@@ -107,19 +107,6 @@ def descriptor_ranges(descriptor: np.ndarray) -> np.ndarray:
 def joint_ranges(descriptor: np.ndarray) -> np.ndarray:
     """The descriptor's joint ranges for all 12 joints (every leg alike), model order. Shape: (12, 2)."""
     return np.tile(descriptor_ranges(descriptor), (len(LEGS), 1))
-
-
-def reset_morphology(model: mujoco.MjModel, base: TemplateInfo) -> None:
-    """Restore the nominal masses, inertias, joint ranges and control ranges (no ``mj_setConst``).
-
-    Args:
-        model: A model compiled from the same spec as ``base`` (modified in place).
-        base: The template's nominal values.
-    """
-    model.body_mass[:] = base.body_mass
-    model.body_inertia[:] = base.body_inertia
-    model.jnt_range[:] = base.jnt_range
-    model.actuator_ctrlrange[:] = base.ctrlrange
 
 
 @dataclass(frozen=True)

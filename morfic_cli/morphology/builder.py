@@ -43,7 +43,7 @@ import numpy as np
 from morfic_cli.morphology.robots import JOINTS, LEGS, RobotSpec
 
 TIMESTEP = 0.005
-"""Physics time step, s (SPEC section 3)."""
+"""Physics time step, s (docs/concepts.md)."""
 
 JOINT_AXES: dict[str, tuple[float, float, float]] = {"hip": (1.0, 0.0, 0.0), "thigh": (0.0, 1.0, 0.0),
                                                      "calf": (0.0, 1.0, 0.0)}

@@ -1,6 +1,6 @@
 """The paper's 11-D morphology descriptor, its training support, sampling and distance.
 
-Order (SPEC section 2; the paper's Table "Morphology randomization parameters"):
+Order (docs/robots.md; the paper's Table "Morphology randomization parameters"):
 
 ====  =================  =====
  i     name               unit

@@ -6,8 +6,6 @@ import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
 from morfic_cli.morphology.descriptor import (
     DESCRIPTOR_NAMES,
     distance_bounds,
@@ -81,7 +79,3 @@ def robot_file_digests(names: Sequence[str]) -> dict[str, str]:
     """sha256 of each robot's TOML file, recorded in table manifests as provenance."""
     return {n: hashlib.sha256(load_robot(n).source_path.read_bytes()).hexdigest() for n in names}
 
-
-def descriptor_matrix(names: Sequence[str]) -> np.ndarray:
-    """Stack the robots' descriptors. Shape: (len(names), 11)."""
-    return np.vstack([load_robot(n).descriptor for n in names])

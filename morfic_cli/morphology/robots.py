@@ -64,7 +64,7 @@ LEG_SIGNS: dict[str, np.ndarray] = {
 }
 
 TEMPLATE_NAME = "go2"
-"""The training template (SPEC section 2)."""
+"""The training template (docs/robots.md)."""
 
 SCHEMA_VERSION = 1
 """Version of the robot TOML schema this module reads."""
@@ -108,7 +108,7 @@ class Fact:
 
 @dataclass(frozen=True)
 class Conflict:
-    """A disagreement between the paper's descriptor and a public source (robot_facts.md section 3).
+    """A disagreement between the paper's descriptor and a public source (docs/robots.md lists them).
 
     Attributes:
         field: The descriptor dimension or fact concerned.

@@ -4,20 +4,14 @@ from __future__ import annotations
 
 import io
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from morfic_cli.store import Published
 
 DISTANCE_COLUMNS: tuple[str, ...] = ("robot", "d", "reference", "normalize", "n_outside", "outside")
 """Columns of the distance table (``morfic distance``)."""
-
-
-@dataclass(frozen=True)
-class WrittenArtifact:
-    """An artifact a command wrote: manifest id, the ref it advanced, and that ref's new version."""
-
-    id: str
-    ref: str
-    version: int
 
 
 def rows_to_csv(rows: Sequence[dict], columns: Sequence[str]) -> bytes:
@@ -31,7 +25,7 @@ def rows_to_csv(rows: Sequence[dict], columns: Sequence[str]) -> bytes:
 
 def write_distance_table(
     store_root: Path, rows: Sequence[dict], names: Sequence[str], reference: str, normalize: str
-) -> WrittenArtifact:
+) -> Published:
     """Store the distance table as a ``table`` manifest and advance ref ``tables/distance``.
 
     Args:
@@ -49,15 +43,9 @@ def write_distance_table(
 
     store = Store(store_root)
     config = {"table": "distance", "robots": list(names), "reference": reference, "normalize": normalize}
-    with store.writing():
-        mid = store.put_manifest(
-            "table",
-            config=config,
-            files={"distance.csv": rows_to_csv(rows, DISTANCE_COLUMNS)},
-            meta={"robot_toml_sha256": robot_file_digests(sorted({*names, reference}))},
-        )
-        version = store.set_ref("tables/distance", mid)
-    return WrittenArtifact(mid, "tables/distance", version)
+    return store.publish("table", "tables/distance", config=config,
+                         files={"distance.csv": rows_to_csv(rows, DISTANCE_COLUMNS)},
+                         meta={"robot_toml_sha256": robot_file_digests(sorted({*names, reference}))})
 
 
 BENCH_ENV_COLUMNS: tuple[str, ...] = (
@@ -65,21 +53,6 @@ BENCH_ENV_COLUMNS: tuple[str, ...] = (
     "floor_env_steps_per_s", "ratio", "cpu_model", "cores",
 )
 """Columns of the env benchmark table (``morfic bench env``)."""
-
-
-def write_bench_table(store_root: Path, rows: Sequence[dict]) -> WrittenArtifact:
-    """Store a ``morfic bench env`` table as a ``table`` manifest and advance ref ``tables/bench-env``."""
-    from morfic_cli.store import Store
-
-    store = Store(store_root)
-    with store.writing():
-        mid = store.put_manifest(
-            "table",
-            config={"table": "bench-env", "num_envs": [r["num_envs"] for r in rows]},
-            files={"bench_env.csv": rows_to_csv(rows, BENCH_ENV_COLUMNS)},
-        )
-        version = store.set_ref("tables/bench-env", mid)
-    return WrittenArtifact(mid, "tables/bench-env", version)
 
 
 BENCH_TRAIN_COLUMNS: tuple[str, ...] = (
@@ -90,16 +63,17 @@ BENCH_TRAIN_COLUMNS: tuple[str, ...] = (
 """Columns of the training benchmark table (``morfic bench train``)."""
 
 
-def write_bench_train_table(store_root: Path, rows: Sequence[dict]) -> WrittenArtifact:
-    """Store a ``morfic bench train`` table as a ``table`` manifest and advance ref ``tables/bench-train``."""
+BENCH_KEYS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "env": ("num_envs", BENCH_ENV_COLUMNS), "train": ("preset", BENCH_TRAIN_COLUMNS),
+}
+"""Per benchmark: the column its config lists, and the table's columns."""
+
+
+def write_bench_table(store_root: Path, what: str, rows: Sequence[dict]) -> Published:
+    """Store a ``morfic bench env|train`` table as a ``table`` manifest and advance ref ``tables/bench-<what>``."""
     from morfic_cli.store import Store
 
-    store = Store(store_root)
-    with store.writing():
-        mid = store.put_manifest(
-            "table",
-            config={"table": "bench-train", "preset": [r["preset"] for r in rows]},
-            files={"bench_train.csv": rows_to_csv(rows, BENCH_TRAIN_COLUMNS)},
-        )
-        version = store.set_ref("tables/bench-train", mid)
-    return WrittenArtifact(mid, "tables/bench-train", version)
+    key, columns = BENCH_KEYS[what]
+    return Store(store_root).publish("table", f"tables/bench-{what}",
+                                     config={"table": f"bench-{what}", key: [r[key] for r in rows]},
+                                     files={f"bench_{what}.csv": rows_to_csv(rows, columns)})

@@ -23,9 +23,11 @@ from morfic_cli import __version__
 from morfic_cli.report import paper
 from morfic_cli.report import tables as T
 from morfic_cli.report.compare import COMPARE_REF, compare_tables, store_comparison
-from morfic_cli.report.gather import Provenance, StoreData, find_manifest, gather, read_csv_rows, resolve_runs
+from morfic_cli.report.gather import Provenance, StoreData, gather, read_csv_rows, resolve_runs
 from morfic_cli.report.model import Table
+from morfic_cli.rl.variants import STOCK
 from morfic_cli.store import Store
+from morfic_cli.store.publish import find_manifest
 
 REPORTS_PREFIX = "reports/"
 
@@ -104,7 +106,7 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
     sec = _Section("Ablation", [t for t in [abl] if t] + P(paper.CRITIC_CONDITIONING_ABLATION,
                                                             paper.FILM_MORPH_RANGE_ABLATION))
     if not abl:
-        sec.text = "No evaluated film-scaled / hyper / adaln runs in the store."
+        sec.text = f"No evaluated {' / '.join(T.ABLATION_VARIANTS[1:])} runs in the store."
     out.append(sec)
 
     fast = T.transfer_table(transfer, key="transfer_25", title="Transfer at a higher commanded speed",
@@ -140,9 +142,8 @@ def _intro(data: StoreData, with_paper: bool) -> str:
     unfinished = [r.name for r in data.runs if not r.finished]
     text = (f"Built by morfic {__version__} from {len(data.runs)} training run(s) ({', '.join(presets)} preset) and "
             f"the results stored for them; every number traces to an artifact id listed under Provenance "
-            f"(`morfic store show ID`). Variant names follow the paper: PPO = ppo, Actor-only = actor-only, "
-            f"Actor+Critic = concat, MorFiC-F = film, MorFiC-F(Scaled) = film-scaled, MorFiC-H = hyper, "
-            f"MorFiC-A = adaln.")
+            f"(`morfic store show ID`). Variant names follow the paper: "
+            + ", ".join(f"{v.label} = {name}" for name, v in STOCK.items()) + ".")
     if "smoke" in presets:
         text += (" The smoke preset trains for seconds to exercise the pipeline: its numbers are not results.")
     if unfinished:
@@ -271,16 +272,11 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
             else:
                 pdf_error = "pdflatex is not installed; report.tex is written, report.pdf is not"
         n_tables = sum(len(s.tables) for s in sections)
-        with store.writing():
-            existing = store.put_manifest("report", config=config, inputs=inputs, files=files,
-                                          meta={"tables": n_tables, "runs": [r.name for r in runs],
-                                                "pdf_error": pdf_error})
-            version = store.set_ref(ref, existing)
-        reused = False
+        pub = store.publish("report", ref, config=config, inputs=inputs, files=files,
+                            meta={"tables": n_tables, "runs": [r.name for r in runs], "pdf_error": pdf_error})
     else:
-        with store.writing():
-            version = store.set_ref(ref, existing)
-        reused = True
+        pub = store.publish("report", ref, config=config, inputs=inputs, reuse=True)
+    existing, version, reused = pub.id, pub.version, pub.reused
     manifest = store.read_manifest(existing)
     result = ReportResult(existing, ref, version, sorted(manifest.files), reused,
                           int(manifest.meta.get("tables", 0)), prov, pdf_error=manifest.meta.get("pdf_error"))

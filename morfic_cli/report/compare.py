@@ -30,10 +30,10 @@ from typing import TYPE_CHECKING, Any
 
 from morfic_cli.report import paper
 from morfic_cli.report.gather import StoreData
+from morfic_cli.rl.variants import variant_order
 
 if TYPE_CHECKING:
-    from morfic_cli.recording.tables import WrittenArtifact
-    from morfic_cli.store import Store
+    from morfic_cli.store import Published, Store
 
 TABLE_ORDER: tuple[str, ...] = ("transfer", "calibration", "fixed_rollout", "compute")
 TRANSITIONS_400M = 400e6
@@ -41,12 +41,6 @@ TRANSITIONS_400M = 400e6
 
 CALIBRATION_METRICS: tuple[str, ...] = ("ev", "abs_nvb", "nve", "asa", "flip", "cos_grad")
 
-
-def variant_order(variant: str) -> int:
-    """Sort key: the paper's variant order, then anything else."""
-    from morfic_cli.rl.models import VARIANTS
-
-    return VARIANTS.index(variant) if variant in VARIANTS else len(VARIANTS)
 
 
 def robot_order(robot: str) -> int:
@@ -274,27 +268,20 @@ COMPARE_REF = "tables/compare-baselines"
 
 
 def store_comparison(store: Store, data: StoreData, tables: dict[str, list[dict[str, Any]]],
-                     with_paper: bool) -> tuple[WrittenArtifact, bool]:
+                     with_paper: bool) -> tuple[Published, bool]:
     """Store the comparison as a ``table`` manifest (a CSV per table), or find the identical one already stored.
 
     Inputs are every artifact the rows came from (:attr:`StoreData.provenance`), so the same runs and results
     give the same comparison and nothing new is written. Advances ref ``tables/compare-baselines``.
 
     Returns:
-        ``(WrittenArtifact, reused)``.
+        ``(Published, reused)``.
     """
-    from morfic_cli.recording.tables import WrittenArtifact, rows_to_csv
-    from morfic_cli.report.gather import find_manifest
+    from morfic_cli.recording.tables import rows_to_csv
 
-    config = compare_config(data, with_paper)
-    inputs = data.input_ids()
-    with store.writing():
-        mid = find_manifest(store, "table", config, inputs)
-        reused = mid is not None
-        if mid is None:
-            files = {f"{name}.csv": rows_to_csv(rows, list(flat_rows({name: rows})[0])) for name, rows in
-                     tables.items()}
-            mid = store.put_manifest("table", config=config, inputs=inputs, files=files,
-                                     meta={"tables": list(tables), "runs": [r.name for r in data.runs]})
-        version = store.set_ref(COMPARE_REF, mid)
-    return WrittenArtifact(mid, COMPARE_REF, version), reused
+    pub = store.publish(
+        "table", COMPARE_REF, config=compare_config(data, with_paper), inputs=data.input_ids(), reuse=True,
+        files=lambda: {f"{name}.csv": rows_to_csv(rows, list(flat_rows({name: rows})[0]))
+                       for name, rows in tables.items()},
+        meta={"tables": list(tables), "runs": [r.name for r in data.runs]})
+    return pub, pub.reused

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from morfic_cli.report import paper
-from morfic_cli.report.compare import variant_order
+from morfic_cli.rl.variants import variant_order
 
 
 def _plt():

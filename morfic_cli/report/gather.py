@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from morfic_cli.errors import MorficError
+from morfic_cli.runs import RUNS_PREFIX, run_of
 from morfic_cli.store import Store
-
-RUNS_PREFIX = "runs/"
 
 
 @dataclass(frozen=True)
@@ -106,7 +105,7 @@ def run_info(store: Store, spec: str) -> RunInfo:
         raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training run; pass run refs such as "
                           "runs/film-s0 (see `morfic store ls --kind checkpoint`).")
     meta, cfg = manifest.meta, manifest.config
-    name = meta.get("run") or spec.split("@")[0].removeprefix(RUNS_PREFIX)
+    name = run_of(spec, meta)
     return RunInfo(
         spec=spec, name=str(name), checkpoint=manifest.id, variant=str(meta.get("variant") or cfg.get("variant")),
         seed=int(meta.get("seed", cfg.get("seed", 0))), preset=str(meta.get("preset") or cfg.get("preset") or "?"),
@@ -254,23 +253,3 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                 data.curves[run.name] = read_curve_csv(store.read_file(run.checkpoint, "curve.csv"))
     data.provenance = list(used.values())
     return data
-
-
-def find_manifest(store: Store, kind: str, config: dict[str, Any], inputs: dict[str, str] | None = None,
-                  *, inputs_subset: dict[str, str] | None = None, files: Iterable[str] = ()) -> str | None:
-    """The newest manifest of ``kind`` with exactly this config (and inputs, or at least ``inputs_subset``).
-
-    This is how a step knows the store already holds its result: same config and inputs give the same result.
-    """
-    found = None
-    want_files = set(files)
-    for item in store.ls(kind):
-        manifest = store.read_manifest(item["id"])
-        if manifest.config != config or not want_files <= set(manifest.files):
-            continue
-        if inputs is not None and manifest.inputs != inputs:
-            continue
-        if inputs_subset is not None and any(manifest.inputs.get(k) != v for k, v in inputs_subset.items()):
-            continue
-        found = manifest.id
-    return found

@@ -1,4 +1,4 @@
-r"""The paper's published numbers, once, as data (``reference/morfic_paper.tex``), for side-by-side comparison.
+r"""The paper's published numbers, once, as data (the paper's LaTeX source), for side-by-side comparison.
 
 Every table of the paper that reports results is here, named after its ``\label``: zero-shot transfer,
 external baselines at 2.0 and 2.5 m/s, the conditioning ablation, the expanded morphology range, the critic
@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from morfic_cli.morphology.descriptor import DESCRIPTOR_LABELS, DESCRIPTOR_NAMES
+from morfic_cli.rl.variants import STOCK
 
 #: The paper's robot order and names (its tables' row labels).
 ROBOTS: tuple[str, ...] = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")
@@ -30,10 +31,10 @@ ROBOT_LABELS: dict[str, str] = {
     "anymal_c": "ANYmal-C",
 }
 
-#: Method keys: morfic's variant names for the paper's own variants, and the external baselines.
+#: Method keys: morfic's variant names for the paper's own variants (labels from the variant registry), the
+#: Monte-Carlo reference and the external baselines.
 METHOD_LABELS: dict[str, str] = {
-    "ppo": "PPO", "actor-only": "Actor-only", "concat": "Actor+Critic", "film": "MorFiC-F",
-    "film-scaled": "MorFiC-F(Scaled)", "hyper": "MorFiC-H", "adaln": "MorFiC-A", "mc": "MC",
+    **{name: v.label for name, v in STOCK.items()}, "mc": "MC",
     "expanded-range": "Expanded range", "urma": "URMA", "bodytransformer": "BodyTrans.", "genloco": "GenLoco",
     "embodiment-scaling": "Embod.",
 }

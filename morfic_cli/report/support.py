@@ -40,16 +40,10 @@ def ensure_support_table(store: Store, robots: Sequence[str] | None = None) -> t
     """
     from morfic_cli.morphology.distance import robot_file_digests
     from morfic_cli.recording.tables import rows_to_csv
-    from morfic_cli.report.gather import find_manifest
     from morfic_cli.report.paper import ROBOTS
 
     names = list(robots or ROBOTS)
     config = {"table": "morphology-support", "robots": names, "robot_toml_sha256": robot_file_digests(names)}
-    with store.writing():
-        mid = find_manifest(store, "table", config, {}, files=("support.csv",))
-        reused = mid is not None
-        if mid is None:
-            mid = store.put_manifest("table", config=config,
-                                     files={"support.csv": rows_to_csv(support_rows(names), SUPPORT_COLUMNS)})
-        store.set_ref(SUPPORT_REF, mid)
-    return mid, reused
+    pub = store.publish("table", SUPPORT_REF, config=config, reuse=True,
+                        files={"support.csv": rows_to_csv(support_rows(names), SUPPORT_COLUMNS)})
+    return pub.id, pub.reused

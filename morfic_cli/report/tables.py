@@ -13,12 +13,13 @@ from collections.abc import Sequence
 from typing import Any
 
 from morfic_cli.report import paper
-from morfic_cli.report.compare import robot_order, variant_order
+from morfic_cli.report.compare import robot_order
 from morfic_cli.report.model import Part, Row, Table, bold_best
+from morfic_cli.rl.variants import table_variants, variant_order
 
-MAIN_VARIANTS: tuple[str, ...] = ("ppo", "actor-only", "concat", "film")
+MAIN_VARIANTS: tuple[str, ...] = table_variants("main")
 """The zero-shot transfer table's variants (paper Table "Zero-shot cross-morphology transfer")."""
-ABLATION_VARIANTS: tuple[str, ...] = ("film", "film-scaled", "hyper", "adaln")
+ABLATION_VARIANTS: tuple[str, ...] = table_variants("ablation")
 """The ablation table's variants (paper Table "Ablation")."""
 
 

@@ -1,7 +1,8 @@
 """Reinforcement learning: rsl-rl 5.x plug-ins for the MorFiC actor-critic variants.
 
 - :mod:`morfic_cli.rl.models`: ``MorficActor`` and ``MorficCritic`` (rsl-rl ``MLPModel`` subclasses resolved by
-  ``class_name``), the variant table ``VARIANTS`` and the config factory ``model_cfgs``.
+  ``class_name``).
+- :mod:`morfic_cli.rl.variants`: the variant registry (the paper's seven, a user's class by import path).
 - :mod:`morfic_cli.rl.ppo`: ``MorficPPO`` (rsl-rl ``PPO`` plus the adaptation-module regression and the per-update
   critic metrics) and ``explained_variance``.
 

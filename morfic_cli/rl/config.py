@@ -16,9 +16,9 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any
 
-from morfic_cli.config import CommandCfg, EnvCfg
+from morfic_cli.config import EnvCfg
 from morfic_cli.errors import MorficError, UnknownNameError
-from morfic_cli.rl.models import VARIANTS
+from morfic_cli.rl.variants import resolve_variant
 from morfic_cli.validation import validate_train_cfg
 
 PRESETS: tuple[str, ...] = ("smoke", "cpu", "paper")
@@ -60,10 +60,10 @@ class ModelCfg:
 
 @dataclass(frozen=True)
 class TrainCfg:
-    """One training run (SPEC section 4)."""
+    """One training run (docs/training.md)."""
 
     variant: str = "film"
-    """One of :data:`~morfic_cli.rl.models.VARIANTS`."""
+    """A stock name of :data:`~morfic_cli.rl.variants.VARIANTS`, or a user critic class as ``module:Class``."""
     preset: str = "cpu"
     seed: int = 0
     max_iterations: int = 1000
@@ -120,11 +120,11 @@ def preset_cfg(preset: str, variant: str = "film", seed: int = 0) -> TrainCfg:
 
     Raises:
         UnknownNameError: Unknown preset or variant.
+        MorficError: A user variant that cannot be imported.
     """
     if preset not in _PRESET_FNS:
         raise UnknownNameError("preset", preset, PRESETS)
-    if variant not in VARIANTS:
-        raise UnknownNameError("variant", variant, VARIANTS)
+    resolve_variant(variant)
     return _PRESET_FNS[preset](variant, seed)
 
 
@@ -144,7 +144,7 @@ def train_cfg_from_dict(doc: dict[str, Any]) -> TrainCfg:
 
 
 def _build(cls: type, doc: dict[str, Any], prefix: str) -> Any:
-    hints = typing.get_type_hints(cls, globalns=_type_namespace())
+    hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(doc) - names)
     if unknown:
@@ -153,16 +153,6 @@ def _build(cls: type, doc: dict[str, Any], prefix: str) -> Any:
     for name, value in doc.items():
         kwargs[name] = _coerce(hints[name], value, f"{prefix}{name}")
     return cls(**kwargs)
-
-
-def _type_namespace() -> dict[str, Any]:
-    from morfic_cli import config as env_config
-    from morfic_cli.envs.gait import GaitCfg
-    from morfic_cli.envs.rewards import RewardCfg
-
-    ns = dict(vars(env_config))
-    ns.update(GaitCfg=GaitCfg, RewardCfg=RewardCfg, PPOCfg=PPOCfg, ModelCfg=ModelCfg, CommandCfg=CommandCfg)
-    return ns
 
 
 def _coerce(tp: Any, value: Any, key: str) -> Any:
@@ -268,7 +258,6 @@ def apply_overrides(cfg: TrainCfg, items: list[str]) -> TrainCfg:
             node = node[part]
         node[leaf] = value
     out = train_cfg_from_dict(doc)
-    if out.variant not in VARIANTS:
-        raise UnknownNameError("variant", out.variant, VARIANTS)
+    resolve_variant(out.variant)
     validate_train_cfg(out)  # ranges, finiteness, known schedules, env count vs memory (morfic_cli/validation.py)
     return out

@@ -1,8 +1,9 @@
-"""Actor and critic models of the MorFiC variants (SPEC section 4; paper Sec. "MorFiC").
+"""Actor and critic models of the MorFiC variants (docs/training.md; paper Sec. "MorFiC").
 
 Sizes follow the paper's Tables "architecture" and "conditioning variants". Both classes subclass rsl-rl's
 :class:`~rsl_rl.models.MLPModel`, so PPO, the rollout storage and the runner use them unchanged; rsl-rl resolves them
-from ``class_name`` strings (``"morfic_cli.rl.models:MorficActor"``). Observation groups (N = batch):
+from ``class_name`` strings (``"morfic_cli.rl.models:MorficActor"``); which variant uses which configuration is
+the registry's (:mod:`morfic_cli.rl.variants`). Observation groups (N = batch):
 
 - ``history`` (N, 15, 48): noisy o_{t-14..t}, flattened to (N, 720) — the actor's state.
 - ``critic`` (N, 15, 48): the same history, clean — the critic's state.
@@ -45,79 +46,8 @@ from tensordict import TensorDict
 
 from morfic_cli.errors import UnknownNameError
 
-#: The ``--variant`` names (SPEC section 4), in the paper's order.
-VARIANTS: tuple[str, ...] = ("ppo", "actor-only", "concat", "film", "film-scaled", "adaln", "hyper")
-
-#: Critic conditioning kinds (``MorficCritic(conditioning=...)``).
+#: Critic conditioning kinds of :class:`MorficCritic` (a subclass may add its own by overriding ``make_modulator``).
 CONDITIONINGS: tuple[str, ...] = ("none", "concat", "film", "adaln", "hyper")
-
-ACTOR_CLASS = "morfic_cli.rl.models:MorficActor"
-CRITIC_CLASS = "morfic_cli.rl.models:MorficCritic"
-
-# variant -> (actor gets z_m, critic conditioning, scale s, critic trunk widths); SPEC section 4.
-_VARIANT_TABLE: dict[str, tuple[bool, str, float, tuple[int, ...]]] = {
-    "ppo": (False, "none", 1.0, (512, 256, 128)),
-    "actor-only": (True, "none", 1.0, (512, 256, 128)),
-    "concat": (True, "concat", 1.0, (512, 256, 128)),
-    "film": (True, "film", 1.0, (512, 256, 128)),
-    "film-scaled": (True, "film", 0.1, (1024, 512, 256)),
-    "adaln": (True, "adaln", 1.0, (512, 256, 128)),
-    "hyper": (True, "hyper", 0.1, (512, 256, 128)),
-}
-
-
-def model_cfgs(variant: str) -> tuple[dict, dict, dict[str, list[str]]]:
-    """The rsl-rl ``actor``, ``critic`` and ``obs_groups`` config entries of one variant (paper sizes).
-
-    Every call returns fresh dicts, so a caller may edit them (e.g. tiny widths in tests).
-
-    Args:
-        variant: One of :data:`VARIANTS`.
-
-    Returns:
-        ``(actor_cfg, critic_cfg, obs_groups)`` for the runner config's ``actor``, ``critic`` and ``obs_groups``.
-
-    Raises:
-        UnknownNameError: ``variant`` is not one of :data:`VARIANTS`.
-    """
-    if variant not in _VARIANT_TABLE:
-        raise UnknownNameError("variant", variant, VARIANTS)
-    actor_has_z, conditioning, scale, critic_dims = _VARIANT_TABLE[variant]
-    critic_has_z = conditioning != "none"
-    actor_cfg = {
-        "class_name": ACTOR_CLASS,
-        "hidden_dims": [512, 256, 128],
-        "activation": "elu",
-        "obs_normalization": False,
-        "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": 1.0, "std_type": "scalar"},
-        "morphology_group": "morphology" if actor_has_z else None,
-        "morphology_hidden_dims": [128],
-        "morphology_latent_dim": 64,
-        "adaptation_hidden_dims": [256, 128],
-        "privileged_latent_dim": 16,
-        "latent_dropout": 0.2,
-    }
-    critic_cfg = {
-        "class_name": CRITIC_CLASS,
-        "hidden_dims": list(critic_dims),
-        "activation": "elu",
-        "obs_normalization": False,
-        "privileged_group": "privileged",
-        "privileged_hidden_dims": [64],
-        "privileged_latent_dim": 16,
-        "morphology_group": "morphology" if critic_has_z else None,
-        "morphology_hidden_dims": [128],
-        "morphology_latent_dim": 64,
-        "conditioning": conditioning,
-        "conditioning_scale": scale,
-        "hyper_rank": 16,
-        "generator_hidden_dim": 128,
-    }
-    obs_groups = {
-        "actor": ["history", "morphology"] if actor_has_z else ["history"],
-        "critic": ["critic", "privileged", "morphology"] if critic_has_z else ["critic", "privileged"],
-    }
-    return actor_cfg, critic_cfg, obs_groups
 
 
 def flatten_groups(obs: TensorDict, groups: list[str]) -> torch.Tensor:
@@ -418,12 +348,12 @@ class MorficCritic(MLPModel):
             morphology_group: Group holding m (N, 11); required by every conditioning but ``none``, which forbids it.
             morphology_hidden_dims: Hidden widths of the morphology encoder (11 -> 128 -> 64).
             morphology_latent_dim: Size of z_m.
-            conditioning: One of :data:`CONDITIONINGS`.
+            conditioning: One of :data:`CONDITIONINGS`, or a subclass's own (with its ``make_modulator``).
             conditioning_scale: s in the FiLM / AdaLN / hyper update.
             hyper_rank: Rank r of the hyper adapter.
             generator_hidden_dim: Hidden width of the FiLM / hyper generators (64 -> 128 -> ...).
         """
-        if conditioning not in CONDITIONINGS:
+        if conditioning not in CONDITIONINGS and type(self).make_modulator is MorficCritic.make_modulator:
             raise UnknownNameError("conditioning", conditioning, CONDITIONINGS)
         if (conditioning == "none") != (morphology_group is None):
             raise ValueError(
@@ -445,27 +375,32 @@ class MorficCritic(MLPModel):
             if morphology_group is not None
             else None
         )
+        self.modulator_cfg = {"latent_dim": morphology_latent_dim, "generator_hidden_dim": generator_hidden_dim,
+                              "scale": conditioning_scale, "rank": hyper_rank, "activation": activation}
         self.modulators: nn.ModuleList | None = None
-        linears = [m for m in self.mlp if isinstance(m, nn.Linear)][:-1]
-        if conditioning in ("film", "adaln"):
-            cls = FiLM if conditioning == "film" else AdaLN
-            self.modulators = nn.ModuleList(
-                cls(morphology_latent_dim, lin.out_features, generator_hidden_dim, conditioning_scale, activation)
-                for lin in linears
-            )
-        elif conditioning == "hyper":
-            self.modulators = nn.ModuleList(
-                LowRankAdapter(
-                    morphology_latent_dim,
-                    lin.in_features,
-                    lin.out_features,
-                    hyper_rank,
-                    generator_hidden_dim,
-                    conditioning_scale,
-                    activation,
-                )
-                for lin in linears
-            )
+        if conditioning not in ("none", "concat"):
+            linears = [m for m in self.mlp if isinstance(m, nn.Linear)][:-1]
+            self.modulators = nn.ModuleList(self.make_modulator(lin) for lin in linears)
+
+    def make_modulator(self, linear: nn.Linear) -> nn.Module:
+        """The conditioning module of one hidden trunk layer (called once per layer, input to output).
+
+        A user variant overrides this (docs/extending.md). The module is called as ``modulator(linear, x, z_m)``
+        with x the layer input (N, D_in) and z_m (N, 64), and returns the modulated pre-activation (N, H);
+        the trunk activation follows. ``self.modulator_cfg`` holds ``latent_dim``, ``generator_hidden_dim``,
+        ``scale``, ``rank`` and ``activation``.
+
+        Args:
+            linear: The trunk layer (W, b); its ``in_features`` / ``out_features`` size the module.
+        """
+        c = self.modulator_cfg
+        if self.conditioning in ("film", "adaln"):
+            cls = FiLM if self.conditioning == "film" else AdaLN
+            return cls(c["latent_dim"], linear.out_features, c["generator_hidden_dim"], c["scale"], c["activation"])
+        if self.conditioning == "hyper":
+            return LowRankAdapter(c["latent_dim"], linear.in_features, linear.out_features, c["rank"],
+                                  c["generator_hidden_dim"], c["scale"], c["activation"])
+        raise ValueError(f"conditioning '{self.conditioning}' has no modulator; override make_modulator.")
 
     def forward(
         self,

@@ -1,4 +1,4 @@
-"""MorFiC's PPO: rsl-rl PPO plus the adaptation-module regression and per-update critic metrics (SPEC section 4).
+"""MorFiC's PPO: rsl-rl PPO plus the adaptation-module regression and per-update critic metrics (docs/training.md).
 
 PPO's loss, its mini-batch loop, the adaptive learning rate and the rollout storage are rsl-rl's, untouched.
 :class:`MorficPPO` adds, per PPO mini-batch and right after PPO's optimiser step on it:
@@ -9,7 +9,8 @@ PPO's loss, its mini-batch loop, the adaptive learning rate and the rollout stor
 - the KL and clip-fraction diagnostics of that mini-batch, read from the distribution PPO's loss just used.
 
 It hooks in by wrapping the storage's mini-batch generator for the duration of ``update()`` (the code after each
-``yield`` runs when PPO asks for the next mini-batch), so no line of PPO's loss is copied here.
+``yield`` runs when PPO asks for the next mini-batch), so no line of PPO's loss is copied here; that wrap and the
+other reaches into rsl-rl internals are in :mod:`morfic_cli.rl.rsl_rl_patches`.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from rsl_rl.storage import RolloutStorage
 from rsl_rl.utils import reduce_gradients_in_buckets, resolve_optimizer
 
 from morfic_cli.rl.models import MorficActor, MorficCritic
+from morfic_cli.rl.rsl_rl_patches import raw_models, tapped_mini_batches
 
 ALGORITHM_CLASS = "morfic_cli.rl.ppo:MorficPPO"
 
@@ -164,7 +166,7 @@ class MorficPPO(PPO):
             adaptation_learning_rate if adaptation_learning_rate is not None else self.learning_rate
         )
         self.adaptation_optimizer = resolve_optimizer(kwargs.get("optimizer", "adam"))(
-            self._raw_actor.adaptation.parameters(), lr=self.adaptation_learning_rate
+            raw_models(self)[0].adaptation.parameters(), lr=self.adaptation_learning_rate
         )
 
     def update(self) -> dict[str, float]:
@@ -177,13 +179,8 @@ class MorficPPO(PPO):
         # Raw returns and the values stored at collection time; PPO only normalises the advantages.
         ev = explained_variance(storage.returns, storage.values)
         stats = _UpdateStats()
-        storage.mini_batch_generator = functools.partial(  # type: ignore[method-assign]
-            self._tap_mini_batches, storage.mini_batch_generator, stats
-        )
-        try:
+        with tapped_mini_batches(storage, functools.partial(self._tap_mini_batches, stats=stats)):
             loss_dict = super().update()
-        finally:
-            del storage.mini_batch_generator  # back to the class method
         loss_dict.update(stats.means())
         loss_dict["explained_variance"] = ev
         loss_dict["value_loss"] = loss_dict["value"]
@@ -205,9 +202,9 @@ class MorficPPO(PPO):
     def _tap_mini_batches(
         self,
         generator: Callable[[int, int], Iterator[RolloutStorage.Batch]],
-        stats: _UpdateStats,
         num_mini_batches: int,
         num_epochs: int,
+        stats: _UpdateStats,
     ) -> Iterator[RolloutStorage.Batch]:
         """Yield PPO's mini-batches; after PPO has stepped on one, record its metrics and step the adaptation loss."""
         for batch in generator(num_mini_batches, num_epochs):
@@ -234,12 +231,13 @@ class MorficPPO(PPO):
         with torch.autocast(
             device_type=torch.device(self.device).type, enabled=self.use_mixed_precision, dtype=torch.bfloat16
         ):
+            actor, critic = raw_models(self)
             with torch.no_grad():
-                z_priv = self._raw_critic.encode_privileged(obs)  # target: no gradient reaches the critic
-            z_priv_hat = self._raw_actor.estimate_privileged(obs)
+                z_priv = critic.encode_privileged(obs)  # target: no gradient reaches the critic
+            z_priv_hat = actor.estimate_privileged(obs)
             error = (z_priv_hat.float() - z_priv.float()).pow(2).mean()
         if self.adaptation_loss_coef > 0.0:
-            params = list(self._raw_actor.adaptation.parameters())
+            params = list(actor.adaptation.parameters())
             self.adaptation_optimizer.zero_grad()
             (self.adaptation_loss_coef * error).backward()
             if self.is_multi_gpu:

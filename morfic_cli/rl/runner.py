@@ -1,4 +1,4 @@
-"""Training runs: rsl-rl's OnPolicyRunner with checkpoints in the artifact store (SPEC sections 4 and 8).
+"""Training runs: rsl-rl's OnPolicyRunner with checkpoints in the artifact store (docs/training.md, docs/concepts.md).
 
 rsl-rl does the PPO loop (:class:`~rsl_rl.runners.OnPolicyRunner.learn`); morfic plugs in through its
 ``Logger``: :class:`CurveLogger` turns each iteration's metrics into a training-curve row and calls
@@ -40,21 +40,27 @@ from tensordict import TensorDict
 
 from morfic_cli.envs import observations as O
 from morfic_cli.errors import ArtifactNotFoundError, MorficError
+from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.rl import trainer_state
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
-from morfic_cli.rl.models import model_cfgs
 from morfic_cli.rl.ppo import ALGORITHM_CLASS
+from morfic_cli.rl.rsl_rl_patches import raw_models, replace_logger
+from morfic_cli.rl.variants import resolve_variant
+from morfic_cli.runs import RESUME_PREFIX, RUNS_PREFIX, run_of
+from morfic_cli.sim.args import NUM_JOINTS
 from morfic_cli.store import Store
 
-RUNS_PREFIX = "runs/"
-RESUME_PREFIX = "resume/"
-"""Legacy: where runs written before the one-ref checkpoint layout kept their trainer state."""
 TRAINER_STATE_ROLE = "trainer_state"
+"""The checkpoint manifest's input role naming its trainer state (one ref update per checkpoint)."""
 
 
 def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
-    """The rsl-rl runner config (``obs_groups``, ``algorithm``, ``actor``, ``critic``, ...) of a TrainCfg."""
-    actor, critic, obs_groups = model_cfgs(cfg.variant)
+    """The rsl-rl runner config (``obs_groups``, ``algorithm``, ``actor``, ``critic``, ...) of a TrainCfg.
+
+    Raises:
+        MorficError: A user variant whose module cannot be imported (:func:`~morfic_cli.rl.variants.resolve_variant`).
+    """
+    actor, critic, obs_groups = resolve_variant(cfg.variant).model_cfgs()
     actor["hidden_dims"] = list(cfg.model.actor_hidden_dims)
     actor["distribution_cfg"]["init_std"] = cfg.model.init_std
     if cfg.model.critic_hidden_dims is not None:
@@ -82,7 +88,7 @@ def dummy_observations(cfg: TrainCfg, batch: int = 1) -> TensorDict:
             "history": torch.zeros(batch, h, O.POLICY_DIM),
             "critic": torch.zeros(batch, h, O.POLICY_DIM),
             "privileged": torch.zeros(batch, O.PRIVILEGED_DIM),
-            "morphology": torch.zeros(batch, 11),
+            "morphology": torch.zeros(batch, DESCRIPTOR_DIM),
         },
         batch_size=[batch],
     )
@@ -99,7 +105,7 @@ def build_models(cfg: TrainCfg) -> tuple[torch.nn.Module, torch.nn.Module]:
         groups = resolve_obs_groups(obs, rcfg["obs_groups"], ["actor", "critic"])
     actor_class, actor_kwargs = resolve_class(rcfg["actor"])
     critic_class, critic_kwargs = resolve_class(rcfg["critic"])
-    actor = actor_class(obs, groups, "actor", 12, **actor_kwargs)
+    actor = actor_class(obs, groups, "actor", NUM_JOINTS, **actor_kwargs)
     critic = critic_class(obs, groups, "critic", 1, **critic_kwargs)
     return actor, critic
 
@@ -120,7 +126,8 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
 
     Raises:
         ArtifactNotFoundError: Nothing by that name.
-        MorficError: It is not a training checkpoint.
+        MorficError: It is not a training checkpoint, or its user variant cannot be imported or its weights do
+            not fit that class.
     """
     manifest = store.read_manifest(spec)
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
@@ -129,11 +136,30 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
     cfg = train_cfg_from_dict(manifest.config)
     actor, critic = build_models(cfg)
     state = _load_weights(store, manifest.id, "cpu")
-    actor.load_state_dict(state["actor"])
-    critic.load_state_dict(state["critic"])
+    variant = resolve_variant(cfg.variant)
+    try:
+        actor.load_state_dict(state["actor"])
+        critic.load_state_dict(state["critic"])
+    except RuntimeError as exc:
+        if variant.stock:
+            raise  # the paper's classes: a mismatch is a bug in morfic
+        first = str(exc).strip().splitlines()[0]
+        raise MorficError(f"checkpoint '{spec}' does not fit variant '{cfg.variant}' ({variant.critic_class}) as "
+                          f"it is installed now ({first}); install the version of the class it was trained "
+                          "with.") from exc
     actor.eval()
     critic.eval()
     return TrainedModels(actor, critic, cfg, manifest.id, dict(manifest.meta))
+
+
+def variant_record(cfg: TrainCfg) -> dict[str, Any]:
+    """What a checkpoint's meta records of its variant: the actor and critic configs it was built from.
+
+    The variant itself (a stock name or a user's import path) is ``meta.variant``; ``model`` keeps the classes
+    and their config as rsl-rl received them, so a reader can see what a user variant's class was given.
+    """
+    rcfg = rsl_rl_cfg(cfg)
+    return {"model": {"actor": rcfg["actor"], "critic": rcfg["critic"], "obs_groups": rcfg["obs_groups"]}}
 
 
 def git_commit() -> str | None:
@@ -246,13 +272,12 @@ class TrainingRun:
         self.env = LocomotionEnv(cfg.env, mode="train", seed=cfg.seed + self.dist.rank)
         with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the models on stdout
             self.runner = _StoreRunner(self.env, rsl_rl_cfg(cfg), log_dir=None, device=self.device)
-        old = self.runner.logger
-        self.runner.logger = CurveLogger(
+        replace_logger(self.runner, lambda old: CurveLogger(
             log_dir="", cfg=old.cfg, env_cfg=old.env_cfg, num_envs=old.num_envs,
             is_distributed=self.runner.is_distributed, gpu_world_size=self.runner.gpu_world_size,
             gpu_global_rank=self.runner.gpu_global_rank, device=old.device, dt=self.env.dt,
             on_iteration=self._on_iteration,
-        )
+        ))
         self.rows: list[dict[str, float]] = []
         self.iteration = 0
         self.parent: str | None = None
@@ -294,7 +319,8 @@ class TrainingRun:
         from morfic_cli.recording.curves import curve_csv, curve_png
 
         alg = self.runner.alg
-        model = _to_bytes({"actor": alg._raw_actor.state_dict(), "critic": alg._raw_critic.state_dict()})
+        actor, critic = raw_models(alg)
+        model = _to_bytes({"actor": actor.state_dict(), "critic": critic.state_dict()})
         saved = alg.save()
         saved.pop("actor_state_dict"), saved.pop("critic_state_dict")
         trainer = trainer_state.encode({
@@ -311,7 +337,7 @@ class TrainingRun:
             "max_iterations": self.cfg.max_iterations, "env_steps": logger.tot_timesteps,
             "wall_time_s": round(logger.wall_time_s, 3), "git_commit": self.git_commit, "finished": finished,
             "interrupted": interrupted, "parent": self.parent, "device": self.device, "run": self.name,
-            "vx_max": float(self.env.command_ranges.vx[1]),
+            "vx_max": float(self.env.command_ranges.vx[1]), **variant_record(self.cfg),
         }
         with self.store.writing():
             state = self.store.put_manifest("checkpoint", config={"role": "trainer-state"}, files=trainer,
@@ -475,7 +501,7 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
             raise
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-s0.")
-    name = str(manifest.meta.get("run") or spec.removeprefix(RUNS_PREFIX).split("@")[0])
+    name = run_of(spec, manifest.meta)
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
     if state_id is not None:
         state = store.read_manifest(state_id)

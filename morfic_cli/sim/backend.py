@@ -1,4 +1,4 @@
-"""The protocol every simulation backend implements, and the factory that picks one.
+"""The protocol every simulation backend implements (the factory that picks one is :mod:`morfic_cli.sim.factory`).
 
 The environment (``envs/``) talks only to this protocol, so the warp backend (mujoco_warp, on a GPU
 or on warp's CPU device) replaces the CPU one without touching env code. Everything crossing the
@@ -15,12 +15,6 @@ from typing import TYPE_CHECKING, Protocol
 if TYPE_CHECKING:
     import torch
 
-    from morfic_cli.config import SimCfg
-    from morfic_cli.morphology.robots import RobotSpec
-
-#: Simulation backends: ``cpu`` (MuJoCo C) and ``warp`` (MuJoCo Warp on ``SimCfg.device``); ``gpu`` is an alias of
-#: ``warp``.
-BACKENDS: tuple[str, ...] = ("cpu", "warp", "gpu")
 
 #: Bodies whose ground contact ``SimFrame.body_contact_force`` reports, in this order.
 CONTACT_BODIES: tuple[str, ...] = (
@@ -158,7 +152,7 @@ class SimBackend(Protocol):
         ...
 
     def set_morphology(self, env_ids: torch.Tensor, descriptors: torch.Tensor) -> None:
-        """Apply 11-D descriptors (raw units) to some envs' models (SPEC section 2).
+        """Apply 11-D descriptors (raw units) to some envs' models (docs/robots.md).
 
         Link masses are set with inertia scaled by the same factor, joint ranges and actuator
         control ranges follow the new limits, and derived constants are recomputed. Raises
@@ -196,30 +190,3 @@ class SimBackend(Protocol):
     def close(self) -> None:
         """Release threads and memory."""
         ...
-
-
-def make_backend(cfg: SimCfg, robot: RobotSpec, num_envs: int, *, template: bool) -> SimBackend:
-    """Create the backend named by ``cfg.backend``.
-
-    Args:
-        cfg: Simulation config (backend name, threads, physics dt, device). ``warp`` (alias ``gpu``)
-            runs MuJoCo Warp on ``cfg.device`` ("cpu" or "cuda").
-        robot: The robot to build: the Go2 template (training and ``descriptor`` mode) or the
-            target's own spec (``full`` mode).
-        num_envs: Number of parallel envs N.
-        template: True when per-env morphology may be applied (``set_morphology``).
-
-    Returns:
-        A :class:`SimBackend`.
-    """
-    from morfic_cli.errors import MorficError
-
-    if cfg.backend == "cpu":
-        from morfic_cli.sim.cpu import CpuBackend
-
-        return CpuBackend(cfg, robot, num_envs, template=template)
-    if cfg.backend in ("warp", "gpu"):
-        from morfic_cli.sim.warp import WarpBackend
-
-        return WarpBackend(cfg, robot, num_envs, template=template)
-    raise MorficError(f"unknown simulation backend '{cfg.backend}'; valid backends are: {', '.join(BACKENDS)}.")

@@ -1,4 +1,4 @@
-"""The CPU backend: MuJoCo C on every core, one ``MjModel`` per env (SPEC section 3).
+"""The CPU backend: MuJoCo C on every core, one ``MjModel`` per env (docs/concepts.md).
 
 Each env owns a copy of the robot model, so its morphology (template mode) and its randomised
 dynamics can differ from every other env. All envs are stepped in C by
@@ -335,7 +335,7 @@ class CpuBackend:
         self._refresh_sensors(ids)
 
     def set_morphology(self, env_ids: torch.Tensor, descriptors: torch.Tensor) -> None:
-        """Apply 11-D descriptors (raw units) to some envs' models (SPEC section 2).
+        """Apply 11-D descriptors (raw units) to some envs' models (docs/robots.md).
 
         Args:
             env_ids: Envs to change. Shape: (k,).

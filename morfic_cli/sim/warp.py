@@ -1,4 +1,4 @@
-"""The warp backend: MuJoCo Warp (``mujoco_warp``) on a CUDA GPU, or on warp's CPU device (SPEC section 3).
+"""The warp backend: MuJoCo Warp (``mujoco_warp``) on a CUDA GPU, or on warp's CPU device (docs/concepts.md).
 
 Optional: ``pip install 'morfic[gpu]'`` (mujoco-warp, warp-lang). All N envs are the N *worlds* of one
 ``mujoco_warp`` model and data. Everything the morphology and the randomisation change is a
@@ -534,7 +534,7 @@ class WarpBackend:
             self._refresh(ids)
 
     def set_morphology(self, env_ids: torch.Tensor, descriptors: torch.Tensor) -> None:
-        """Apply 11-D descriptors (raw units) to some worlds' model fields (SPEC section 2).
+        """Apply 11-D descriptors (raw units) to some worlds' model fields (docs/robots.md).
 
         Args:
             env_ids: Envs to change. Shape: (k,).

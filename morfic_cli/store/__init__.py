@@ -1,4 +1,4 @@
-"""The artifact store: content-addressed objects, manifests and refs (SPEC section 8).
+"""The artifact store: content-addressed objects, manifests and refs (docs/concepts.md).
 
 :class:`Store` is the one entry point; the modules beside it do the file work:
 ``objects`` (immutable blobs), ``manifest`` (manifest schema and index), ``refs`` (named, versioned
@@ -44,6 +44,7 @@ from morfic_cli.store.manifest import (
     utc_now,
 )
 from morfic_cli.store.objects import ObjectDB, store_os_error
+from morfic_cli.store.publish import Published, publish
 from morfic_cli.store.refs import RefDB, RefEntry, check_ref_name, pick_version, split_spec
 from morfic_cli.store.transfer import ExportReport, ImportReport, export_tar, import_tar
 
@@ -55,6 +56,7 @@ __all__ = [
     "GcReport",
     "ImportReport",
     "Manifest",
+    "Published",
     "RefEntry",
     "Store",
     "VerifyReport",
@@ -254,6 +256,10 @@ class Store:
                 raise StoreError(f"refs name manifests, but {target} is not one; give the id of a manifest "
                                  "(see `morfic store ls`).")
             return self.refs.append(name, target, utc_now())
+
+    def publish(self, kind: str, ref: str | None = None, **kwargs: Any) -> Published:
+        """Store a result as one manifest and advance ``ref`` (see :func:`morfic_cli.store.publish.publish`)."""
+        return publish(self, kind, ref, **kwargs)
 
     def ref_history(self, name: str) -> list[RefEntry]:
         """Every version of ref ``name``, oldest first.

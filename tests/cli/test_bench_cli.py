@@ -30,12 +30,12 @@ def test_bench_bad_input_is_an_error(run_cli):
     code, _, err = run_cli("bench", "env", "--envs", "many")
     assert code == 1 and err.startswith("Error: ") and "--envs" in err
     code, _, err = run_cli("bench", "physics")
-    assert code == 1 and "valid benchmarks" in err
+    assert code == 1 and "'physics' is not one of 'env', 'train'" in err
 
 
 def test_bench_backend_and_device_errors(run_cli):
     code, _, err = run_cli("bench", "env", "--envs", "8", "--backend", "physx")
-    assert code == 1 and err.startswith("Error: ") and "valid backends are: cpu, warp" in err
+    assert code == 1 and err.startswith("Error: ") and "'physx' is not one of 'cpu', 'warp', 'gpu'" in err
     code, _, err = run_cli("bench", "env", "--envs", "8", "--backend", "cpu", "--device", "cuda")
     assert code == 1 and "--backend warp" in err
 

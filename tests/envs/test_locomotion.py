@@ -11,7 +11,6 @@ from paper_facts import PAPER_DESCRIPTORS
 
 from morfic_cli.config import EnvCfg, SimCfg, eval_env_cfg
 from morfic_cli.envs.locomotion import LocomotionEnv
-from morfic_cli.errors import MorficError
 from morfic_cli.morphology.robots import list_robots, load_robot
 
 ROBOTS = list_robots()
@@ -123,7 +122,7 @@ def test_same_seed_gives_identical_rollouts():
 
 
 def test_unknown_mode_is_an_error():
-    with pytest.raises(MorficError, match="valid modes"):
+    with pytest.raises(ValueError, match="valid modes"):
         LocomotionEnv(_cfg(n=1), mode="sideways")  # type: ignore[arg-type]
 
 
@@ -146,4 +145,22 @@ def test_nan_in_one_envs_state_resets_that_env_only():
         obs, rew, dones, _ = env.step(zeros)
         assert not dones.any() and torch.isfinite(rew).all()
     finally:
+        env.close()
+
+
+def test_the_curriculum_reads_the_raw_tracking_term_whatever_its_weight():
+    # --set env.rewards.w_lin=0 must not freeze the curriculum: the tracking it accumulates is r_lin unweighted,
+    # the same numbers as with the default weight (rewards do not act on the dynamics).
+    base = _cfg(n=3)
+    zero = dataclasses.replace(base, rewards=dataclasses.replace(base.rewards, w_lin=0.0))
+    envs = [LocomotionEnv(c, mode="train", seed=3) for c in (base, zero)]
+    logs = []
+    for env in envs:
+        for _ in range(5):
+            _, _, _, extras = env.step(torch.zeros(3, 12))
+        logs.append(extras["log"])
+    assert torch.equal(envs[0].episode_lin_tracking, envs[1].episode_lin_tracking)
+    assert (envs[1].episode_lin_tracking > 0).all()
+    assert logs[1]["/reward/r_lin"] == 0.0 and logs[1]["/reward_raw/r_lin"] == logs[0]["/reward_raw/r_lin"] > 0
+    for env in envs:
         env.close()

@@ -10,8 +10,9 @@ from pathlib import Path
 import pytest
 import torch
 
+from morfic_cli.config import RewardCfg
 from morfic_cli.envs import rewards as R
-from morfic_cli.envs.rewards import TERMS, RewardCfg, compute_rewards
+from morfic_cli.envs.rewards import TERMS, TERMS_BY_NAME, compute_rewards
 from morfic_cli.envs.state import EnvState
 from morfic_cli.sim.backend import CONTACT_BODIES
 
@@ -104,22 +105,34 @@ PAPER_TABLE = [
 
 
 def test_terms_are_the_paper_table_in_order():
-    assert list(TERMS) == PAPER_TABLE
-    for name, (fn, group) in TERMS.items():
-        assert fn.__name__ == name
-        assert group in ("task", "penalty", "stability")
-        assert R.weight(CFG, name) >= 0.0
-    assert {n for n, (_, g) in TERMS.items() if g == "stability"} == {"r_upright", "r_cop", "r_width"}
-    assert TERMS["r_raibert"][1] == "penalty"  # non-negative distance -> subtracted
-    assert TERMS["r_jump"][1] == "task"  # non-positive -> added
+    assert [t.name for t in TERMS] == PAPER_TABLE
+    for term in TERMS:
+        assert term.func.__name__ == term.name
+        assert term.group in ("task", "penalty", "stability")
+        assert term.weight_of(CFG) >= 0.0
+    assert {t.name for t in TERMS if t.group == "stability"} == {"r_upright", "r_cop", "r_width"}
+    assert TERMS_BY_NAME["r_raibert"].group == "penalty"  # non-negative distance -> subtracted
+    assert TERMS_BY_NAME["r_jump"].group == "task"  # non-positive -> added
 
 
-def test_every_term_has_a_weight_field():
+def test_every_config_field_belongs_to_a_term():
+    # each RewardCfg field is one term's weight or a parameter a term reads: no orphan, no weight used twice
     names = {f.name for f in dataclasses.fields(RewardCfg)}
-    weights = {n for n in names if n.startswith("w_") and n != "w_min_ratio"}
-    assert weights == {"w_" + name[2:] for name in TERMS}
+    weights = [t.weight for t in TERMS]
+    params = {p for t in TERMS for p in t.params}
+    assert len(set(weights)) == len(TERMS) and set(weights) <= names
+    assert params <= names and not params & set(weights)
+    assert set(weights) | params == names
     with pytest.raises(dataclasses.FrozenInstanceError):
         CFG.w_lin = 2.0  # type: ignore[misc]
+
+
+def test_the_parameter_a_term_names_is_the_one_it_reads():
+    term = TERMS_BY_NAME["r_lin"]
+    assert term.params == ("sigma_lin",)
+    s = make_state(base_lin_vel_b=t([0.5, 0.0, 0.0]))  # vx error 0.5 against a zero command: err^2 = 0.25
+    close(term.func(s, CFG), [4 * math.exp(-1.0)])  # sigma_lin 0.25
+    close(term.func(s, dataclasses.replace(CFG, sigma_lin=0.5)), [4 * math.exp(-0.5)])
 
 
 def test_docs_table_matches_the_defaults():
@@ -128,20 +141,20 @@ def test_docs_table_matches_the_defaults():
     rows = {}
     for line in doc.splitlines():
         m = re.match(r"\| `(\w+)` \|", line)
-        if m and m.group(1) in TERMS:
+        if m and m.group(1) in TERMS_BY_NAME:
             cells = [c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]]
             rows[m.group(1)] = cells
-    assert set(rows) == set(TERMS)
-    for name, (_, group) in TERMS.items():
-        assert rows[name][2] == group, name
-        assert rows[name][3] == format(R.weight(CFG, name), "g"), name
+    assert set(rows) == set(TERMS_BY_NAME)
+    for term in TERMS:
+        assert rows[term.name][2] == term.group, term.name
+        assert rows[term.name][3] == format(term.weight_of(CFG), "g"), term.name
 
 
 def test_standing_state_is_a_quiet_baseline():
     s = make_state()
     for name in ["p_vz", "p_omega_xy", "p_ori", "p_tau", "p_qddot", "p_da", "p_coll", "p_jl", "p_slip",
                  "p_impact", "p_f", "p_q", "p_qdot", "r_jump", "r_raibert", "r_gaitV"]:  # fmt: skip
-        close(TERMS[name][0](s, CFG), [0.0])
+        close(TERMS_BY_NAME[name].func(s, CFG), [0.0])
     close(R.r_upright(s, CFG), [1.0])
     close(R.r_cop(s, CFG), [1.0])  # equal loads: CoP = centroid
     close(R.r_width(s, CFG), [1.0])
@@ -389,7 +402,7 @@ def _busy_state(n: int = 3, seed: int = 0) -> EnvState:
 
 def test_total_is_the_hand_weighted_sum_with_penalties_subtracted():
     s, c = _busy_state(), CFG
-    total, parts = compute_rewards(s, c)
+    total, parts, raw = compute_rewards(s, c)
     # eq. (rews), written out term by term (no dt: the env applies it)
     expected = (
         c.w_lin * R.r_lin(s, c) + c.w_yaw * R.r_yaw(s, c) + c.w_gaitF * R.r_gaitF(s, c)
@@ -404,35 +417,36 @@ def test_total_is_the_hand_weighted_sum_with_penalties_subtracted():
     close(total, expected, atol=1e-5)
     assert list(parts) == PAPER_TABLE
     close(sum(parts.values()), total, atol=1e-5)
-    for name, (_, group) in TERMS.items():
-        if group == "penalty":
-            assert (parts[name] <= 0).all(), name
+    for term in TERMS:
+        if term.group == "penalty":
+            assert (parts[term.name] <= 0).all(), term.name
+        close(raw[term.name], term.func(s, c))  # raw = before weighting
+        close(parts[term.name], term.sign() * term.weight_of(c) * raw[term.name])
 
 
 def test_total_small_hand_example():
     # Only w_lin = 2, w_vz = 3, w_upright = 1: perfect tracking (r_lin = 4), v_z = 0.1 (p_vz = 0.01), upright (1):
     # 2 * 4 - 3 * 0.01 + 1 * 1 = 8.97
-    zero = {f"w_{name[2:]}": 0.0 for name in TERMS}
+    zero = {t.weight: 0.0 for t in TERMS}
     cfg = dataclasses.replace(CFG, **{**zero, "w_lin": 2.0, "w_vz": 3.0, "w_upright": 1.0})
     s = make_state(base_lin_vel_b=t([0.0, 0.0, 0.1]))
-    total, parts = compute_rewards(s, cfg)
+    total, parts, raw = compute_rewards(s, cfg)
     close(total, [8.97], atol=1e-5)
+    close(raw["p_tau"], [0.0])  # raw values whatever the weight: no torque, perfect yaw tracking
+    close(raw["r_yaw"], [1.0])
     close(parts["r_lin"], [8.0])  # 2 * 4
     close(parts["p_vz"], [-0.03])  # -3 * 0.01
     close(parts["r_upright"], [1.0])
 
 
-def test_zero_weight_skips_the_term(monkeypatch):
-    def boom(state, cfg):
-        raise AssertionError("evaluated a zero-weight term")
-
-    monkeypatch.setitem(TERMS, "p_tau", (boom, "penalty"))
+def test_zero_weight_contributes_nothing_but_its_raw_value_is_kept():
     s = make_state(joint_torque=torch.full((1, 12), 3.0))
-    total, parts = compute_rewards(s, dataclasses.replace(CFG, w_tau=0.0))
-    close(parts["p_tau"], [0.0])
-    assert "p_tau" in parts and torch.isfinite(total).all()
-    with pytest.raises(AssertionError, match="zero-weight"):
-        compute_rewards(s, CFG)  # w_tau != 0 -> evaluated
+    total0, parts0, raw0 = compute_rewards(s, dataclasses.replace(CFG, w_tau=0.0))
+    total, parts, raw = compute_rewards(s, CFG)
+    close(parts0["p_tau"], [0.0])
+    close(raw0["p_tau"], [12 * 9.0])  # ||tau||^2 = 12 joints x 3^2
+    close(raw["p_tau"], [12 * 9.0])
+    close(total0 - total, [CFG.w_tau * 108.0], atol=1e-6)  # the penalty, no longer subtracted
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -455,7 +469,7 @@ def test_finite_for_random_finite_states(seed):
         nominal_foot_pos_b=r(n, 4, 2, scale=0.2), nominal_height=r(n).abs(), total_mass=r(n).abs() * 20,
         dt=0.02,
     )  # fmt: skip
-    total, parts = compute_rewards(s, CFG)
+    total, parts, _ = compute_rewards(s, CFG)
     assert total.shape == (n,)
     assert torch.isfinite(total).all()
     for name, value in parts.items():
@@ -465,6 +479,6 @@ def test_finite_for_random_finite_states(seed):
 
 def test_default_weights_give_a_positive_reward_when_standing_on_command():
     # Standing still with a zero command: tracking and stability earn, the gait terms cost a little.
-    total, parts = compute_rewards(make_state(), CFG)
+    total, parts, _ = compute_rewards(make_state(), CFG)
     assert total.item() > 0
     assert parts["r_lin"].item() == pytest.approx(4 * CFG.w_lin)

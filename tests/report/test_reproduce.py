@@ -79,7 +79,7 @@ def test_rerun_does_no_work(run_cli, store):
 
 def test_reproduce_continues_after_ctrl_c(tmp_path):
     """A Ctrl-C during training checkpoints and stops; the next run resumes that run instead of restarting it."""
-    from morfic_cli.report.pipeline import Pipeline, ReproduceCfg
+    from morfic_cli.pipeline import Pipeline, ReproduceCfg
 
     store = Store(tmp_path / "store")
     cfg = ReproduceCfg(preset="smoke", variants=("film",), robots=("go2",), command_vx=(2.0,), modes=("descriptor",),
@@ -118,7 +118,7 @@ def test_reproduce_continues_after_ctrl_c(tmp_path):
 
 def test_a_run_of_the_same_name_with_another_config_is_refused(tmp_path):
     from morfic_cli.errors import MorficError
-    from morfic_cli.report.pipeline import Pipeline, ReproduceCfg
+    from morfic_cli.pipeline import Pipeline, ReproduceCfg
     from morfic_cli.rl.config import apply_overrides, preset_cfg
     from morfic_cli.rl.runner import new_run
 

@@ -138,7 +138,7 @@ def test_several_presets_are_labelled_apart():
 
 
 def test_where_a_run_executed_is_not_part_of_its_identity():
-    from morfic_cli.report.pipeline import experiment_config
+    from morfic_cli.pipeline import experiment_config
     from morfic_cli.rl.config import apply_overrides, preset_cfg, train_cfg_to_dict
 
     base = preset_cfg("smoke", "film")

@@ -8,7 +8,8 @@ from rsl_rl.utils import resolve_class
 from tensordict import TensorDict
 
 from morfic_cli.errors import MorficError, UnknownNameError
-from morfic_cli.rl.models import VARIANTS, MorficActor, MorficCritic, model_cfgs
+from morfic_cli.rl.models import MorficActor, MorficCritic
+from morfic_cli.rl.variants import VARIANTS, model_cfgs
 
 N = 8
 CONDITIONED = ("concat", "film", "film-scaled", "adaln", "hyper")

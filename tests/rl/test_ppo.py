@@ -10,8 +10,8 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from tensordict import TensorDict
 
-from morfic_cli.rl.models import VARIANTS, model_cfgs
 from morfic_cli.rl.ppo import EXTRA_LOSS_KEYS, MorficPPO, algorithm_cfg, explained_variance
+from morfic_cli.rl.variants import VARIANTS, model_cfgs
 
 NUM_ENVS = 8
 STEPS = 4

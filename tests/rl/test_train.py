@@ -16,8 +16,8 @@ import torch
 
 from morfic_cli.recording.curves import read_curve_csv
 from morfic_cli.rl.config import smoke_preset
-from morfic_cli.rl.models import VARIANTS
 from morfic_cli.rl.runner import dummy_observations, load_trained, new_run, resume_run
+from morfic_cli.rl.variants import VARIANTS
 from morfic_cli.store import Store
 
 TIMING = {"wall_time_s", "steps_per_s", "collect_s", "learn_s"}

@@ -10,7 +10,7 @@ import torch
 from morfic_cli.config import SimCfg
 from morfic_cli.errors import MorficError
 from morfic_cli.morphology.robots import load_robot
-from morfic_cli.sim.backend import make_backend
+from morfic_cli.sim.factory import make_backend
 
 
 def test_unknown_backend_lists_the_valid_ones():

@@ -1,7 +1,7 @@
 """``morfic reproduce``: train every variant (x seeds) -> evaluate -> diagnose -> fixed-rollout -> compare -> report.
 
 Every step is idempotent through the store: before it runs, it looks for a result of the same inputs and config
-(:func:`~morfic_cli.report.gather.find_manifest`) and, when there is one, is skipped. Training is keyed by its run
+(:func:`~morfic_cli.store.publish.find_manifest`) and, when there is one, is skipped. Training is keyed by its run
 ref ``runs/<variant>-<preset>-s<seed>``: a finished run is skipped, an interrupted one (Ctrl-C) is resumed from its
 last checkpoint, a run of that name trained with another config is an error. So a second ``reproduce`` does no
 work, and one after a Ctrl-C continues where the first stopped.
@@ -21,12 +21,11 @@ from typing import Any, Protocol
 
 from morfic_cli.errors import MorficError
 from morfic_cli.report.build import ReportCfg, ReportResult, build_report
-from morfic_cli.report.gather import find_manifest
 from morfic_cli.report.paper import ROBOTS
+from morfic_cli.rl.variants import VARIANTS, resolve_variant
+from morfic_cli.runs import RUNS_PREFIX, run_name, run_of
 from morfic_cli.store import Store
-
-PIPELINE_VARIANTS: tuple[str, ...] = ("ppo", "actor-only", "concat", "film", "film-scaled", "hyper", "adaln")
-"""Every conditioning variant, in the paper's table order."""
+from morfic_cli.store.publish import find_manifest
 
 
 @dataclass(frozen=True)
@@ -54,7 +53,7 @@ class ReproduceCfg:
     """
 
     preset: str = "smoke"
-    variants: tuple[str, ...] = PIPELINE_VARIANTS
+    variants: tuple[str, ...] = VARIANTS
     seeds: int = 1
     train_overrides: tuple[str, ...] = ()
     robots: tuple[str, ...] = ROBOTS
@@ -89,11 +88,10 @@ def reproduce_cfg(preset: str, *, seeds: int = 1, variants: tuple[str, ...] | No
     if preset not in PRESETS:
         raise UnknownNameError("preset", preset, PRESETS)
     for v in variants or ():
-        if v not in PIPELINE_VARIANTS:
-            raise UnknownNameError("variant", v, PIPELINE_VARIANTS)
+        resolve_variant(v)
     if seeds < 1:
         raise MorficError(f"--seeds must be at least 1, got {seeds}.")
-    base = ReproduceCfg(preset=preset, seeds=seeds, variants=tuple(variants or PIPELINE_VARIANTS), device=device)
+    base = ReproduceCfg(preset=preset, seeds=seeds, variants=tuple(variants or VARIANTS), device=device)
     if preset == "smoke":
         return dataclasses.replace(base, eval_envs=2, eval_steps=25, diagnose_envs=2, diagnose_steps=80,
                                    trunc_eps=0.5, torch_threads=1)
@@ -177,11 +175,6 @@ def experiment_config(doc: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def run_name(variant: str, preset: str, seed: int) -> str:
-    """The run of a variant and seed in a preset's pipeline: ``<variant>-<preset>-s<seed>``."""
-    return f"{variant}-{preset}-s{seed}"
-
-
 class Pipeline:
     """The steps of one ``reproduce`` over a store. Use :meth:`run`; :meth:`interrupt` handles a Ctrl-C.
 
@@ -203,7 +196,7 @@ class Pipeline:
     # ------------------------------------------------------------------ plan
     def run_specs(self) -> list[tuple[str, int, str]]:
         """(variant, seed, ``runs/NAME``) of every training run, variant-major."""
-        return [(v, s, f"runs/{run_name(v, self.cfg.preset, s)}") for v in self.cfg.variants
+        return [(v, s, RUNS_PREFIX + run_name(v, s, self.cfg.preset)) for v in self.cfg.variants
                 for s in range(self.cfg.seeds)]
 
     def plan(self) -> list[tuple[str, str, Callable[[], StepResult]]]:
@@ -281,7 +274,7 @@ class Pipeline:
         from morfic_cli.rl.runner import new_run, resume_run
 
         cfg = self.train_cfg(variant, seed)
-        name = spec.removeprefix("runs/")
+        name = run_of(spec)
         self._start("train", spec, cfg.max_iterations, "it")
         status = "done"
         if self.store.has_ref(spec):
