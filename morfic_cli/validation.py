@@ -409,7 +409,7 @@ def _robot_list(text: str, flag: str) -> list[str]:
 
 def _variant_list(text: str) -> list[str]:
     from morfic_cli.errors import UnknownNameError
-    from morfic_cli.rl.models import VARIANTS
+    from morfic_cli.rl.variants import VARIANTS, is_import_path, resolve_variant
 
     if text.strip().lower() == "all":
         return list(VARIANTS)
@@ -417,6 +417,8 @@ def _variant_list(text: str) -> list[str]:
     if not names:
         raise MorficError("--variants is empty; give 'all' or variants such as film,concat.")
     for name in names:
-        if name not in VARIANTS:
+        if is_import_path(name):
+            resolve_variant(name)  # a user's variant (module:Class): Error: when it cannot be imported
+        elif name not in VARIANTS:
             raise UnknownNameError("variant", name, VARIANTS)
     return names
