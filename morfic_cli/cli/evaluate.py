@@ -33,10 +33,15 @@ def evaluate(
     envs: Annotated[int, typer.Option("--envs", help="Parallel envs per robot.")] = 64,
     steps: Annotated[int, typer.Option("--steps", help="Policy steps per rollout (50 per second).")] = 500,
     seed: SeedOpt = 0,
+    scene_envs: Annotated[
+        str, typer.Option("--scene-envs", help="Envs (the first ones) whose 3D scene (geoms, body frames) goes in "
+                          "each MCAP log for Foxglove: a number, or all. Frames roughly double a log's size.")
+    ] = "4",
     video: Annotated[bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")]
     = False,
     out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Also write the table CSV (and videos next to it) here.")
+        Path | None, typer.Option("--out", "-o", help="Also write the table CSV here, and beside it a "
+                                       "speed/survival figure per robot and command (and videos).")
     ] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -69,7 +74,11 @@ def evaluate(
             from exc
     if envs < 1 or steps < 1:
         raise MorficError("--envs and --steps must be positive integers.")
-    cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed)
+    if scene_envs != "all" and not (scene_envs.isdigit()):
+        raise MorficError(f"--scene-envs takes a number of envs (0 for none) or 'all', got '{scene_envs}'.")
+    n_scene = envs if scene_envs == "all" else min(int(scene_envs), envs)
+    cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed,
+                  scene_envs=n_scene)
     st = Store(store)
     from morfic_cli.rl.runner import load_trained
 
@@ -90,6 +99,10 @@ def evaluate(
 
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_bytes(rows_to_csv(result.rows, EVAL_COLUMNS))
+        from morfic_cli.evaluation.figures import write_figures
+
+        for path in write_figures(st, result.id, out):
+            info(f"figure: {path}")
     if not quiet:
         info(f"stored {result.ref}@{result.version} ({result.id[:12]}) with {len(result.rollouts)} MCAP rollout logs")
     emit_rows(

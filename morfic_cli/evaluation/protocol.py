@@ -2,7 +2,8 @@
 
 One evaluation = one ``eval`` manifest (ref ``evals/<run name>``) holding ``eval.csv`` (a row per robot and
 command), with inputs ``checkpoint`` (the evaluated weights) and ``rollout/<robot>/<mode>/vx<cmd>`` (one
-``rollout`` manifest per robot and command, holding that rollout's MCAP log; see docs/mcap.md).
+``rollout`` manifest per robot and command, holding that rollout's MCAP log, see docs/mcap.md, and its figure
+``speed.png`` / ``speed.pdf``, forward speed and survival over time, see :mod:`morfic_cli.evaluation.figures`).
 """
 
 from __future__ import annotations
@@ -29,6 +30,9 @@ EVAL_COLUMNS: tuple[str, ...] = (
 )
 
 EVALS_PREFIX = "evals/"
+
+FIGURE_PNG, FIGURE_PDF = "speed.png", "speed.pdf"
+"""Files of a rollout manifest with its figure (forward speed and survival over time)."""
 
 
 @dataclass(frozen=True)
@@ -108,6 +112,7 @@ def evaluate(
     Raises:
         ArtifactNotFoundError / MorficError: ``spec`` is not a training checkpoint.
     """
+    from morfic_cli.evaluation.figures import rollout_figure
     from morfic_cli.morphology.distance import distance_table
     from morfic_cli.morphology.robots import list_robots
     from morfic_cli.recording.tables import rows_to_csv
@@ -136,10 +141,13 @@ def evaluate(
                             "term_names": rollout.term_names}
                     path = Path(tmp) / f"{robot}-{mode}-vx{vx:g}.mcap"
                     write_rollout_log(path, rollout, meta, cfg.scene_envs)
+                    png, pdf = rollout_figure(rollout.arrays["base_lin_vel"][..., 0], rollout.terminated,
+                                              rollout.dt, vx, f"{robot}, {mode} mode, command {vx:g} m/s")
                     inputs[role] = store.put_manifest(
                         "rollout", config={"robot": robot, "mode": mode, "command_vx": vx, "num_envs": cfg.num_envs,
                                            "steps": cfg.steps, "seed": cfg.seed},
-                        inputs={"checkpoint": trained.checkpoint_id}, files={"rollout.mcap": path},
+                        inputs={"checkpoint": trained.checkpoint_id},
+                        files={"rollout.mcap": path, FIGURE_PNG: png, FIGURE_PDF: pdf},
                         meta={k: v for k, v in meta.items() if k != "term_names"})
         config = {"spec": spec, **dataclasses.asdict(cfg)}
         with store.writing():

@@ -13,6 +13,12 @@ One message per policy step, env-major, so Foxglove plots ``/rollout/step.envs[0
 ``FileDescriptorSet``, the MCAP ``protobuf`` schema encoding) and the message class is made from it with
 ``google.protobuf``'s descriptor pool. float32 values travel as protobuf ``float`` (IEEE binary32, bit-exact,
 NaN and inf included); ``time_s`` as ``double``. Shapes: N = envs, K = reward terms.
+
+Speed: a packed ``repeated float`` field is, on the wire, a length-delimited field holding the little-endian float32
+values, exactly what a ``bytes`` field with those bytes is. So the codec encodes and decodes with a *wire twin* of
+the schema in which the vector fields are ``bytes`` (``array.tobytes()`` in, ``np.frombuffer`` out), through the
+protobuf library, instead of converting every float to a Python object; the schema written to the log (what
+Foxglove and any protobuf reader use) has them as ``repeated float``.
 """
 
 from __future__ import annotations
@@ -35,8 +41,12 @@ _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _F = descriptor_pb2.FieldDescriptorProto
 
 
-def _file_proto(fields: Mapping[str, tuple[tuple[int | str, ...], str]], term_names: Sequence[str]):
-    """The FileDescriptorProto of the three messages for these fields ({name: (shape, dtype)}) and terms."""
+def _file_proto(fields: Mapping[str, tuple[tuple[int | str, ...], str]], term_names: Sequence[str],
+                wire_twin: bool = False):
+    """The FileDescriptorProto of the three messages for these fields ({name: (shape, dtype)}) and terms.
+
+    ``wire_twin``: vector fields as ``bytes`` (the same wire format as packed ``repeated float``).
+    """
     fdp = descriptor_pb2.FileDescriptorProto(name="morfic/rollout_step.proto", package=PACKAGE, syntax="proto3")
     terms = fdp.message_type.add(name="RewardTerms")
     for i, name in enumerate(term_names):
@@ -48,9 +58,12 @@ def _file_proto(fields: Mapping[str, tuple[tuple[int | str, ...], str]], term_na
                           label=_F.LABEL_OPTIONAL)
         elif dtype == "bool":
             env.field.add(name=name, number=i + 1, type=_F.TYPE_BOOL, label=_F.LABEL_OPTIONAL)
-        else:
-            label = _F.LABEL_OPTIONAL if shape == () else _F.LABEL_REPEATED
-            env.field.add(name=name, number=i + 1, type=_F.TYPE_FLOAT, label=label)
+        elif shape == ():
+            env.field.add(name=name, number=i + 1, type=_F.TYPE_FLOAT, label=_F.LABEL_OPTIONAL)
+        elif wire_twin:
+            env.field.add(name=name, number=i + 1, type=_F.TYPE_BYTES, label=_F.LABEL_OPTIONAL)
+        else:  # proto3 packs repeated scalars by default
+            env.field.add(name=name, number=i + 1, type=_F.TYPE_FLOAT, label=_F.LABEL_REPEATED)
     step = fdp.message_type.add(name="RolloutStep")
     step.field.add(name="step", number=1, type=_F.TYPE_UINT32, label=_F.LABEL_OPTIONAL)
     step.field.add(name="time_s", number=2, type=_F.TYPE_DOUBLE, label=_F.LABEL_OPTIONAL)
@@ -73,6 +86,7 @@ class StepCodec:
     term_names: list[str]
     schema_data: bytes
     message_class: Any
+    """The wire twin's step message class (vector fields as bytes)."""
 
     @classmethod
     def build(cls, fields: Mapping[str, tuple[tuple[int, ...], str]], term_names: Sequence[str]) -> StepCodec:
@@ -86,7 +100,7 @@ class StepCodec:
             raise ValueError(f"term_names must be identifiers ([A-Za-z_][A-Za-z0-9_]*), got {bad}")
         fdp = _file_proto(fields, term_names)
         pool = descriptor_pool.DescriptorPool()
-        pool.Add(fdp)
+        pool.Add(_file_proto(fields, term_names, wire_twin=True))
         klass = message_factory.GetMessageClass(pool.FindMessageTypeByName(STEP_MESSAGE))
         fds = descriptor_pb2.FileDescriptorSet(file=[fdp])
         return cls(dict(fields), list(term_names), fds.SerializeToString(), klass)
@@ -108,18 +122,19 @@ class StepCodec:
             arrays: Field -> (N, *suffix) array, float32 or bool (``check_step_data``'s output).
         """
         msg = self.message_class(step=step, time_s=time_s)
-        cols = {name: arrays[name].tolist() for name in self.fields}
         vectors = [n for n, (shape, _) in self.fields.items() if shape != () and n != "reward_terms"]
         scalars = [n for n, (shape, _) in self.fields.items() if shape == ()]
-        terms = self.term_names
-        for i in range(len(cols[scalars[0]])):
+        blobs = {name: [row.tobytes() for row in np.ascontiguousarray(arrays[name], dtype="<f4")] for name in vectors}
+        cols = {name: arrays[name].tolist() for name in scalars}
+        terms, term_rows = self.term_names, arrays["reward_terms"].tolist()
+        for i in range(len(term_rows)):
             env = msg.envs.add()
             for name in vectors:
-                getattr(env, name).extend(cols[name][i])
+                setattr(env, name, blobs[name][i])
             for name in scalars:
                 setattr(env, name, cols[name][i])
             rt = env.reward_terms
-            for name, v in zip(terms, cols["reward_terms"][i], strict=True):
+            for name, v in zip(terms, term_rows[i], strict=True):
                 setattr(rt, name, v)
         return msg.SerializeToString()
 
@@ -153,8 +168,7 @@ class StepCodec:
         out: dict[str, np.ndarray] = {}
         for name, rows in zip(vectors, rows_v, strict=True):
             shape = (t, num_envs, *self.fields[name][0])
-            out[name] = np.fromiter(itertools.chain.from_iterable(rows), np.float32,
-                                    count=int(np.prod(shape))).reshape(shape)
+            out[name] = np.frombuffer(b"".join(rows), dtype="<f4").astype(np.float32).reshape(shape)
         sc = np.array(rows_s, dtype=np.float64).reshape(t, num_envs, len(scalars))
         for k, name in enumerate(scalars):
             out[name] = sc[..., k].astype(bool if self.fields[name][1] == "bool" else np.float32)

@@ -113,6 +113,7 @@ class RolloutScene:
         self.moving = np.flatnonzero(np.asarray(m.body_jntnum) > 0)  # bodies with a joint, parent-relative pose
         self.fixed = np.array([b for b in range(1, m.nbody) if m.body_jntnum[b] == 0], dtype=np.int64)
         self._data = [mujoco.MjData(model) for model in self.models]
+        self._names: dict[tuple[int, ...], list[list[tuple[str, str]]]] = {}
 
     @property
     def num_envs(self) -> int:
@@ -163,14 +164,17 @@ class RolloutScene:
         p = self.parent[bodies]
         rel_pos = rotate_inverse(xquat[:, p], xpos[:, bodies] - xpos[:, p])  # (E, B, 3)
         rel_quat = quat_conj_mul(xquat[:, p], xquat[:, bodies])  # (E, B, 4)
+        key = tuple(bodies.tolist())
+        if key not in self._names:  # (parent, child) frame ids per env
+            self._names[key] = [[(env_frame(env, self.body_names[pk]), env_frame(env, self.body_names[b]))
+                                 for pk, b in zip(p.tolist(), key, strict=True)] for env in self.env_ids]
+        names = self._names[key]
         out = []
-        for e, env in enumerate(self.env_ids):
-            for k, b in enumerate(bodies):
-                t, q = rel_pos[e, k], rel_quat[e, k]
-                out.append(FrameTransform(
-                    timestamp=stamp, parent_frame_id=env_frame(env, self.body_names[p[k]]),
-                    child_frame_id=env_frame(env, self.body_names[b]),
-                    translation=Vector3(x=t[0], y=t[1], z=t[2]), rotation=Quaternion(w=q[0], x=q[1], y=q[2], z=q[3])))
+        for env_names, ts, qs in zip(names, rel_pos.tolist(), rel_quat.tolist(), strict=True):
+            out += [FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
+                                   translation={"x": t[0], "y": t[1], "z": t[2]},
+                                   rotation={"w": q[0], "x": q[1], "y": q[2], "z": q[3]})
+                    for (parent, child), t, q in zip(env_names, ts, qs, strict=True)]
         return out
 
     def static_transforms(self, log_time_ns: int) -> FrameTransforms:
