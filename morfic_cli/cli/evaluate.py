@@ -52,7 +52,8 @@ def evaluate(
     Per robot and command: v_x mean ± std over envs (alive steps only), v_x^max (best 1 s moving average),
     survival S (no termination in --steps), tracking ratio and a validity verdict (a survivor that stands
     still, lies down or drags its feet is not a transfer). Actions are the policy mean; no pushes or
-    randomisation. Stores the table (ref evals/<run>) and one MCAP log per robot and command.
+    randomisation. Stores the table (ref evals/<run>) and, per robot and command, an MCAP log (numbers and a 3D
+    scene for Foxglove, docs/mcap.md) and a figure of speed and survival over time.
 
     Example: morfic eval runs/film-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
     """
