@@ -29,6 +29,7 @@ FIELDS = ("base_pos", "base_quat", "base_lin_vel", "base_ang_vel", "command", "j
 
 
 def main() -> None:
+    """Run the rollout once, then write and read it in each layout."""
     from morfic_cli.evaluation.protocol import write_rollout_log
     from morfic_cli.evaluation.rollout import run_rollout
     from morfic_cli.recording.rollout_log import read_rollout
