@@ -71,30 +71,32 @@ def rollout_figure(vx: np.ndarray, terminated: np.ndarray, dt: float, command_vx
 
     c = speed_survival(vx, terminated, dt)
     n = vx.shape[1]
-    fig, (ax, ax_s) = plt.subplots(2, 1, figsize=(6.0, 4.2), sharex=True, height_ratios=(2.2, 1.0),
+    fig, (ax, ax_s) = plt.subplots(2, 1, figsize=(4.4, 3.3), sharex=True, height_ratios=(2.2, 1.0),
                                    constrained_layout=True)
     ax.fill_between(c["t"], c["low"], c["high"], color="C0", alpha=0.25, lw=0,
-                    label=f"{BAND[0]:g}-{BAND[1]:g}th percentile")
-    ax.plot(c["t"], c["mean"], color="C0", lw=1.4, label=f"mean over alive envs (of {n})")
-    ax.axhline(command_vx, color="black", ls="--", lw=1.0, label=f"command {command_vx:g} m/s")
+                    label=f"{BAND[0]:g}\u2013{BAND[1]:g}th pct.")
+    ax.plot(c["t"], c["mean"], color="C0", lw=1.4, label=f"mean, alive of {n}")
+    ax.axhline(command_vx, color="black", ls="--", lw=1.0, label=f"command {command_vx:g}")
     if len(c["fall_t"]):
         ax.plot(c["fall_t"], np.zeros_like(c["fall_t"]), "|", color="C3", ms=10, mew=1.5,
                 label=f"falls ({len(c['fall_t'])})", transform=ax.get_xaxis_transform(), clip_on=False)
     top = np.nanmax([command_vx, *(c["high"][np.isfinite(c["high"])] if np.isfinite(c["high"]).any() else [0])])
     bottom = min(0.0, np.nanmin(c["low"]) if np.isfinite(c["low"]).any() else 0.0)
     ax.set_ylim(bottom - 0.1, 1.15 * top + 0.1)
-    ax.set_ylabel("forward speed v_x (m/s)")
-    ax.set_title(title, fontsize=10)
+    ax.set_ylabel("v_x (m/s)", fontsize=9)
+    ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right", ncol=2)
+    ax.tick_params(labelsize=8)
+    ax.legend(fontsize=7, loc="lower right", ncol=2, handlelength=1.2, columnspacing=0.8, borderpad=0.3)
     ax_s.plot(c["t"], 100.0 * c["survival"], color="C2", lw=1.4, drawstyle="steps-post")
     ax_s.set_ylim(-5, 105)
-    ax_s.set_ylabel("survival (%)")
-    ax_s.set_xlabel("time (s)")
+    ax_s.set_ylabel("alive (%)", fontsize=9)
+    ax_s.set_xlabel("time (s)", fontsize=9)
+    ax_s.tick_params(labelsize=8)
     ax_s.grid(alpha=0.3)
     ax_s.set_xlim(0, c["t"][-1] if len(c["t"]) else 1.0)
     png, pdf = io.BytesIO(), io.BytesIO()
-    fig.savefig(png, format="png", dpi=110)
+    fig.savefig(png, format="png", dpi=150)
     fig.savefig(pdf, format="pdf", metadata={"CreationDate": None})
     plt.close(fig)
     return png.getvalue(), pdf.getvalue()

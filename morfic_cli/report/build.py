@@ -43,7 +43,7 @@ SPEED_PREFIX = "speed-"
 
 SPEED_CAPTION = ("Forward speed over time of {run} on each robot at a commanded 2.0 m/s (descriptor mode), as "
                  "`morfic eval` drew it: the mean over alive envs, the 10-90th percentile band, the command dashed "
-                 "and falls as red ticks; below, the fraction of envs alive.")
+                 "and falls as red ticks (their count in the legend); below, the percentage of envs alive.")
 
 
 def eval_figures(store: Store, evals: list[dict[str, Any]]) -> dict[str, tuple[bytes, bytes]]:
@@ -253,7 +253,7 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
             tex.append((s.heading, body or escape("Nothing in the store for this section.")))
         if figures:
             fixed = [figure_latex(f"figures/{n}.pdf", FIGURES[n]) for n in figures if not n.startswith(SPEED_PREFIX)]
-            grids = [figure_grid_latex([f"figures/{n}.pdf" for n in names], SPEED_CAPTION.format(run=run))
+            grids = [figure_grid_latex([f"figures/{n}.pdf" for n in names], SPEED_CAPTION.format(run=run), per_row=2)
                      for run, names in _speed_groups([n for n in figures if n.startswith(SPEED_PREFIX)],
                                                      run_names).items()]
             tex.append(("Figures", "\n\n".join(fixed + grids)))

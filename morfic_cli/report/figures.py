@@ -83,10 +83,11 @@ def distance_plot(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0
                 xs, ys = zip(*pts, strict=True)
                 ax.scatter(xs, ys, marker="x" if j else "+", s=40, color="black", lw=1.0,
                            label=f"paper: {paper.METHOD_LABELS[variant]}")
-    for r in {r["robot"]: r for r in sel}.values():
+    robots = sorted({r["robot"]: r for r in sel}.values(), key=lambda r: float(r["d"]))
+    for k, r in enumerate(robots):  # alternate above / below so neighbours in d do not overlap
         best = max((x["vx"] for x in sel if x["robot"] == r["robot"] and x["vx"] is not None), default=0.0)
         ax.annotate(paper.ROBOT_LABELS.get(r["robot"], r["robot"]), (float(r["d"]), best), fontsize=8,
-                    xytext=(5, 4), textcoords="offset points")
+                    xytext=(5, 5 if k % 2 == 0 else -11), textcoords="offset points")
     ax.axhline(command_vx, color="grey", lw=0.8, ls=":", label=f"command {command_vx:g} m/s")
     ax.set_xlabel("normalised morphology distance d to Go2", fontsize=9)
     ax.set_ylabel("forward speed v_x (m/s)", fontsize=9)
@@ -117,7 +118,7 @@ def compute_plot(compute: Sequence[dict[str, Any]], *, with_paper: bool = False)
     multi = len({r["preset"] for r in compute}) > 1
     for r in compute:
         if r["transitions"] and r["device_hours_400m"]:
-            label = (f"{_label(r['preset'], r['variant'], multi)}, {r['preset']} on {r['device']} "
+            label = (f"{_label(r['preset'], r['variant'], multi)}, {r['preset']} on {r['device']}\n"
                      f"({r['transitions'] / 1e6:.1f}M transitions)")
             v = float(r["device_hours_400m"])
             bars.append((label, v, v, v, "C0"))
@@ -125,10 +126,10 @@ def compute_plot(compute: Sequence[dict[str, Any]], *, with_paper: bool = False)
         for row in paper.TRAINING_COMPUTE:
             lo, hi = row.gpu_hours_400m
             bars.append((f"paper: {row.label} (GPU)", (lo + hi) / 2, lo, hi, "grey"))
-    fig, ax = plt.subplots(figsize=(6.4, max(2.0, 0.45 * len(bars) + 1.2)), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(6.4, max(1.8, 0.4 * len(bars) + 1.2)), constrained_layout=True)
     ys = list(range(len(bars)))[::-1]
     for y, (_label_text, v, lo, hi, colour) in zip(ys, bars, strict=True):
-        ax.barh(y, v, color=colour, height=0.6, xerr=[[v - lo], [hi - v]] if hi > lo else None, capsize=3)
+        ax.barh(y, v, color=colour, height=0.5, xerr=[[v - lo], [hi - v]] if hi > lo else None, capsize=3)
         ax.annotate(f"{v:.1f} h" if v >= 1 else f"{v:.2f} h", (v, y), xytext=(4, 0), textcoords="offset points",
                     va="center", fontsize=8)
     ax.set_yticks(ys, [b[0] for b in bars], fontsize=8)
@@ -138,7 +139,7 @@ def compute_plot(compute: Sequence[dict[str, Any]], *, with_paper: bool = False)
         ax.set_xlim(min(values) / 2, max(values) * 4)
     elif values:
         ax.set_xlim(0, max(b[3] for b in bars) * 1.25)
-    ax.set_xlabel("device-hours for 400M transitions (the run's device: CPU threads or one GPU)", fontsize=9)
+    ax.set_xlabel("device-hours per 400M transitions (CPU threads or one GPU)", fontsize=9)
     ax.set_title("Training compute", fontsize=10)
     ax.grid(axis="x", alpha=0.3, which="both")
     if not bars:

@@ -105,6 +105,11 @@ def _caption_text(caption: str) -> str:
     return "".join(out)
 
 
+NEED_SPACE = r"\par\vspace{0pt plus 0.2\textheight}\penalty-250\vspace{0pt plus -0.2\textheight}"
+"""A conditional page break (what the needspace package does): a new page when less than about a fifth of the
+page is left, so a section heading is never stranded at the foot of a page."""
+
+
 def document_latex(title: str, sections: Sequence[tuple[str, str]], *, preamble_note: str = "") -> str:
     """A standalone article: ``sections`` are (heading, LaTeX body) pairs."""
     parts = [
@@ -125,6 +130,7 @@ def document_latex(title: str, sections: Sequence[tuple[str, str]], *, preamble_
     if preamble_note:
         parts.append(escape(preamble_note))
     for heading, body in sections:
+        parts.append(NEED_SPACE)  # a heading never ends a page: break first when little room is left
         parts.append(rf"\section*{{{escape(heading)}}}")
         parts.append(body)
     parts.append(r"\end{document}")
