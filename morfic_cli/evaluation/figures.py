@@ -76,7 +76,7 @@ def rollout_figure(vx: np.ndarray, terminated: np.ndarray, dt: float, command_vx
     ax.fill_between(c["t"], c["low"], c["high"], color="C0", alpha=0.25, lw=0,
                     label=f"{BAND[0]:g}\u2013{BAND[1]:g}th pct.")
     ax.plot(c["t"], c["mean"], color="C0", lw=1.4, label=f"mean, alive of {n}")
-    ax.axhline(command_vx, color="black", ls="--", lw=1.0, label=f"command {command_vx:g}")
+    ax.axhline(command_vx, color="black", ls="--", lw=1.0, label=f"command {command_vx:g} m/s")
     if len(c["fall_t"]):
         ax.plot(c["fall_t"], np.zeros_like(c["fall_t"]), "|", color="C3", ms=10, mew=1.5,
                 label=f"falls ({len(c['fall_t'])})", transform=ax.get_xaxis_transform(), clip_on=False)
