@@ -10,7 +10,9 @@ channels as ``morfic eval``'s logs) and/or MuJoCo's passive viewer (``--viewer``
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,7 +53,10 @@ def has_display() -> bool:
 
 def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None] | None = None,
          on_step: Callable[[int], None] | None = None) -> int:
-    """Run the policy until ``cfg.steps`` steps or Ctrl-C (KeyboardInterrupt ends the loop cleanly).
+    """Run the policy until ``cfg.steps`` steps or Ctrl-C.
+
+    Ctrl-C (SIGINT) only asks the loop to stop after the current step, so the simulation, the server and the
+    recording close cleanly whatever the step was doing; a second Ctrl-C interrupts at once.
 
     Args:
         trained: The checkpoint (:func:`~morfic_cli.rl.runner.load_trained`).
@@ -80,6 +85,15 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
     env = LocomotionEnv(env_cfg, mode=cfg.mode, robot=cfg.robot, seed=cfg.seed)
     live = log = viewer = None
     steps_run = 0
+    stop = threading.Event()
+
+    def on_sigint(signum, frame) -> None:
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, on_sigint) if in_main else None
     try:
         models, info = env.backend.models[:cfg.num_envs], env.backend.info
         scene = RolloutScene(models, range(len(models)), info.qpos_adr)
@@ -88,7 +102,7 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
         term_names = None
         start = time.perf_counter()
         with torch.no_grad():
-            while cfg.steps <= 0 or steps_run < cfg.steps:
+            while not stop.is_set() and (cfg.steps <= 0 or steps_run < cfg.steps):
                 action = trained.actor(obs)
                 value = trained.critic(obs).reshape(-1)
                 obs, reward, done, extras = env.step(action)
@@ -126,10 +140,12 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
                     on_step(steps_run - 1)
                 delay = start + steps_run * env.dt - time.perf_counter()
                 if delay > 0:
-                    time.sleep(delay)
+                    stop.wait(delay)
     except KeyboardInterrupt:
         pass
     finally:
+        if in_main:
+            signal.signal(signal.SIGINT, previous)
         for closer in (live, log):
             if closer is not None:
                 closer.close()
