@@ -41,6 +41,9 @@ FIGURES: dict[str, str] = {
 SPEED_PREFIX = "speed-"
 """Figure names ``speed-<run>-<robot>``: the eval figure of that run on that robot (descriptor mode, 2.0 m/s)."""
 
+SPEED_PER_FIGURE = 6
+"""Eval figures per LaTeX figure (three rows of two fit a page at a legible size)."""
+
 SPEED_CAPTION = ("Forward speed over time of {run} on each robot at a commanded 2.0 m/s (descriptor mode), as "
                  "`morfic eval` drew it: the mean over alive envs, the 10-90th percentile band, the command dashed "
                  "and falls as red ticks (their count in the legend); below, the percentage of envs alive.")
@@ -253,9 +256,13 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
             tex.append((s.heading, body or escape("Nothing in the store for this section.")))
         if figures:
             fixed = [figure_latex(f"figures/{n}.pdf", FIGURES[n]) for n in figures if not n.startswith(SPEED_PREFIX)]
-            grids = [figure_grid_latex([f"figures/{n}.pdf" for n in names], SPEED_CAPTION.format(run=run), per_row=2)
-                     for run, names in _speed_groups([n for n in figures if n.startswith(SPEED_PREFIX)],
-                                                     run_names).items()]
+            grids = []
+            for run, names in _speed_groups([n for n in figures if n.startswith(SPEED_PREFIX)], run_names).items():
+                chunks = [names[i:i + SPEED_PER_FIGURE] for i in range(0, len(names), SPEED_PER_FIGURE)]
+                for k, chunk in enumerate(chunks):
+                    part = f" (part {k + 1} of {len(chunks)})" if len(chunks) > 1 else ""
+                    grids.append(figure_grid_latex([f"figures/{n}.pdf" for n in chunk],
+                                                   SPEED_CAPTION.format(run=run) + part, per_row=2))
             tex.append(("Figures", "\n\n".join(fixed + grids)))
         tex.append(("Provenance", escape("Every artifact this report was built from (`morfic store show ID`):")
                     + "\n\n" + longtable_latex(("kind", "ref", "id", "role"),
