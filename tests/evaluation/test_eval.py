@@ -130,13 +130,17 @@ def test_video_is_stored_and_written_next_to_out(run_cli, store, tmp_path, gl_ba
     assert code == 0, err
     videos = sorted(p.name for p in out.parent.iterdir())
     ext = "mp4" if any(n.endswith(".mp4") for n in videos) else "gif"
-    assert videos == ["go2-go2-descriptor-vx1-frames.png", f"go2-go2-descriptor-vx1.{ext}", "go2.csv"]
+    assert videos == sorted(["go2-go2-descriptor-vx1-frames.png", f"go2-go2-descriptor-vx1.{ext}", "go2.csv",
+                             "go2-go2-descriptor-vx1-speed.png", "go2-go2-descriptor-vx1-speed.pdf"])
     media = store.ls("media")
     assert len(media) == 1
     manifest = store.read_manifest(media[0]["id"])
     assert manifest.inputs["eval"] == store.resolve("evals/film-s0")
     assert store.read_manifest(manifest.inputs["rollout"]).kind == "rollout"
     assert store.read_file(manifest.id, f"video.{ext}") == (out.parent / f"go2-go2-descriptor-vx1.{ext}").read_bytes()
+    # the eval figure beside --out is the one stored with the rollout
+    speed = (out.parent / "go2-go2-descriptor-vx1-speed.png").read_bytes()
+    assert speed.startswith(b"\x89PNG") and store.read_file(manifest.inputs["rollout"], "speed.png") == speed
 
 
 def _compose(transforms: dict, frame: str, stop: str) -> tuple[np.ndarray, np.ndarray]:
