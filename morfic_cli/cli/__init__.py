@@ -26,6 +26,7 @@ from morfic_cli.cli import (
     distance,
     evaluate,
     export,
+    play,
     report,
     reproduce,
     robots,
@@ -65,6 +66,7 @@ def _root(
 
 app.command("train")(train.train)
 app.command("eval")(evaluate.evaluate)
+app.command("play")(play.play)
 app.command("diagnose")(diagnose.diagnose)
 app.command("compare-baselines")(compare_baselines.compare_baselines)
 app.command("distance")(distance.distance)

@@ -39,10 +39,15 @@ def evaluate(
         int | None, typer.Option("--steps", min=1, help="Policy steps per rollout (50 per second) [default: 500].")
     ] = None,
     seed: SeedOpt = 0,
+    scene_envs: Annotated[
+        str, typer.Option("--scene-envs", help="Envs (the first ones) whose 3D scene (geoms, body frames) goes in "
+                          "each MCAP log for Foxglove: a number, or all. Frames roughly double a log's size.")
+    ] = "4",
     video: Annotated[bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")]
     = False,
     out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Also write the table CSV (and videos next to it) here.")
+        Path | None, typer.Option("--out", "-o", help="Also write the table CSV here, and beside it a "
+                                       "speed/survival figure per robot and command (and videos).")
     ] = None,
     training_conditions: Annotated[
         bool,
@@ -64,7 +69,8 @@ def evaluate(
     vx_env_std in JSON), survival S (no termination in --steps), the best 1 s moving average (peak, an extra; the
     paper's v_x^max is the v_x at 2.5 m/s), tracking ratio and a validity verdict (a survivor that stands still,
     lies down or drags its feet is not a transfer). Actions are the policy mean; no pushes or
-    randomisation. Stores the table (ref evals/<run>) and one MCAP log per robot and command.
+    randomisation. Stores the table (ref evals/<run>) and, per robot and command, an MCAP log (numbers and a 3D
+    scene for Foxglove, docs/mcap.md) and a figure of speed and survival over time.
 
     With --training-conditions: does evaluation agree with training? (docs/eval.md, "Training conditions").
 
@@ -91,7 +97,11 @@ def evaluate(
     except ValueError as exc:
         raise MorficError(f"--command-vx takes comma-separated numbers in m/s (e.g. 2.0,2.5), got '{command_vx}'.") \
             from exc
-    cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed)
+    if scene_envs != "all" and not (scene_envs.isdigit()):
+        raise MorficError(f"--scene-envs takes a number of envs (0 for none) or 'all', got '{scene_envs}'.")
+    n_scene = envs if scene_envs == "all" else min(int(scene_envs), envs)
+    cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed,
+                  scene_envs=n_scene)
     st = Store(store)
     from morfic_cli.rl.runner import load_trained
 
@@ -112,6 +122,10 @@ def evaluate(
 
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_bytes(rows_to_csv(result.rows, EVAL_COLUMNS))
+        from morfic_cli.evaluation.figures import write_figures
+
+        for path in write_figures(st, result.id, out):
+            info(f"figure: {path}")
     if not quiet:
         info(f"stored {result.ref}@{result.version} ({result.id[:12]}) with {len(result.rollouts)} MCAP rollout logs")
     emit_rows(

@@ -15,6 +15,9 @@ from morfic_cli.store import Store
 VIDEO_EVERY = 2
 """Render every second policy step: 25 frames per second of a 50 Hz policy."""
 
+VIDEO_ENVS = 4
+"""Envs shown in a video (the first ones; a rollout may keep more models for its 3D scene)."""
+
 
 def media_name(role: str) -> str:
     """File stem of a rollout's media: ``rollout/go1/descriptor/vx2`` -> ``go1-descriptor-vx2``."""
@@ -44,12 +47,13 @@ def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: i
     for role, rollout in result.rollouts.items():
         if not rollout.models:
             continue
-        frames = render_frames(rollout.models, rollout.qpos(len(rollout.models)), every=every)
+        models = rollout.models[:VIDEO_ENVS]
+        frames = render_frames(models, rollout.qpos(len(models)), every=every)
         fps = 1.0 / (rollout.dt * every)
         data, ext = encode_video(frames, fps)
         sheet = frame_grid_png(frames, n=6, fps=fps)
         mid = store.publish(
-            "media", config={"every": every, "fps": fps, "num_envs": len(rollout.models)},
+            "media", config={"every": every, "fps": fps, "num_envs": len(models)},
             inputs={"rollout": inputs[role], "eval": result.id},
             files={f"video.{ext}": data, "frames.png": sheet},
             meta={"robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx}).id

@@ -2,7 +2,8 @@
 
 One evaluation = one ``eval`` manifest (ref ``evals/<run name>``) holding ``eval.csv`` (a row per robot and
 command), with inputs ``checkpoint`` (the evaluated weights) and ``rollout/<robot>/<mode>/vx<cmd>`` (one
-``rollout`` manifest per robot and command, holding that rollout's MCAP log; see docs/mcap.md).
+``rollout`` manifest per robot and command, holding that rollout's MCAP log, see docs/mcap.md, and its figure
+``speed.png`` / ``speed.pdf``, forward speed and survival over time, see :mod:`morfic_cli.evaluation.figures`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ EVAL_COLUMNS: tuple[str, ...] = (
 
 EVALS_PREFIX = "evals/"
 
+FIGURE_PNG, FIGURE_PDF = "speed.png", "speed.pdf"
+"""Files of a rollout manifest with its figure (forward speed and survival over time)."""
+
 
 @dataclass(frozen=True)
 class EvalCfg:
@@ -43,6 +47,8 @@ class EvalCfg:
     num_envs: int = 64
     steps: int = 500
     seed: int = 0
+    scene_envs: int = 4
+    """How many envs (the first ones) carry a 3D scene (geoms and body frames) in each MCAP log."""
 
 
 @dataclass
@@ -72,15 +78,19 @@ def metrics_row(rollout: Rollout, distance: float | None) -> dict[str, Any]:
     }
 
 
-def write_rollout_log(path: Path, rollout: Rollout, metadata: dict[str, Any]) -> None:
-    """The rollout as an MCAP log (docs/mcap.md)."""
+def write_rollout_log(path: Path, rollout: Rollout, metadata: dict[str, Any], scene_envs: int = 0) -> None:
+    """The rollout as an MCAP log (docs/mcap.md), with a 3D scene of its first ``scene_envs`` envs (kept models)."""
     from morfic_cli.recording.rollout_log import RolloutLogWriter
+    from morfic_cli.recording.scene import RolloutScene
 
+    n = min(scene_envs, len(rollout.models))
+    scene = RolloutScene(rollout.models[:n], range(n), rollout.qpos_adr) if n > 0 else None
     a = rollout.arrays
     fields = ("base_pos", "base_quat", "base_lin_vel", "base_ang_vel", "command", "joint_pos", "joint_vel", "action",
               "reward", "reward_terms", "value", "done", "time_out")
     num_steps, num_envs = a["done"].shape
-    with RolloutLogWriter(path, num_envs=num_envs, term_names=rollout.term_names, metadata=metadata) as log:
+    with RolloutLogWriter(path, num_envs=num_envs, term_names=rollout.term_names, metadata=metadata,
+                          scene=scene) as log:
         for t in range(num_steps):
             log.write_step(t, (t + 1) * rollout.dt, {k: a[k][t] for k in fields})
 
@@ -97,12 +107,14 @@ def evaluate(
 ) -> EvalResult:
     """Evaluate checkpoint ``spec`` on every robot x mode x command of ``cfg`` and store the results.
 
-    ``keep_models`` > 0 keeps that many envs' MjModels in each returned rollout (for ``--video``). ``trained``:
+    ``keep_models`` > 0 keeps that many envs' MjModels in each returned rollout (for ``--video``; at least
+    ``cfg.scene_envs`` are kept, for the logs' 3D scene). ``trained``:
     the checkpoint already loaded with :func:`~morfic_cli.rl.runner.load_trained` (else it is loaded here).
 
     Raises:
         ArtifactNotFoundError / MorficError: ``spec`` is not a training checkpoint.
     """
+    from morfic_cli.evaluation.figures import rollout_figure
     from morfic_cli.morphology.distance import distance_table
     from morfic_cli.morphology.robots import list_robots
     from morfic_cli.recording.tables import rows_to_csv
@@ -121,7 +133,7 @@ def evaluate(
                         on_rollout_start(robot, mode, vx)
                     rollout = run_rollout(trained.actor, trained.critic, trained.cfg.env, robot=robot, mode=mode,
                                           command_vx=vx, num_envs=cfg.num_envs, steps=cfg.steps, seed=cfg.seed,
-                                          on_step=on_step, keep_models=keep_models)
+                                          on_step=on_step, keep_models=max(keep_models, cfg.scene_envs))
                     role = rollout_role(robot, mode, vx)
                     rollouts[role] = rollout
                     rows.append(metrics_row(rollout, distances.get(robot)))
@@ -130,11 +142,14 @@ def evaluate(
                             "command": [vx, 0.0, 0.0], "seed": cfg.seed, "morfic_version": __version__,
                             "term_names": rollout.term_names}
                     path = Path(tmp) / f"{robot}-{mode}-vx{vx:g}.mcap"
-                    write_rollout_log(path, rollout, meta)
+                    write_rollout_log(path, rollout, meta, cfg.scene_envs)
+                    png, pdf = rollout_figure(rollout.arrays["base_lin_vel"][..., 0], rollout.terminated,
+                                              rollout.dt, vx, f"{robot}, {mode} mode, command {vx:g} m/s")
                     inputs[role] = store.publish(
                         "rollout", config={"robot": robot, "mode": mode, "command_vx": vx, "num_envs": cfg.num_envs,
                                            "steps": cfg.steps, "seed": cfg.seed},
-                        inputs={"checkpoint": trained.checkpoint_id}, files={"rollout.mcap": path},
+                        inputs={"checkpoint": trained.checkpoint_id},
+                        files={"rollout.mcap": path, FIGURE_PNG: png, FIGURE_PDF: pdf},
                         meta={k: v for k, v in meta.items() if k != "term_names"}).id
         config = {"spec": spec, **dataclasses.asdict(cfg)}
         pub = store.publish("eval", EVALS_PREFIX + run_name, config=config, inputs=inputs,

@@ -80,6 +80,37 @@ class Rollout:
                                 tilt=a["tilt"], height_ratio=a["height_ratio"], foot_slip=a["foot_slip"])
 
 
+def step_record(env, action: torch.Tensor, value: torch.Tensor, reward: torch.Tensor, done: torch.Tensor,
+                extras: dict, nominal: torch.Tensor, term_names: list[str]) -> dict[str, torch.Tensor]:
+    """What a rollout records of one ``env.step``: :data:`RECORDED` plus ``reward_terms``, each (N, ...).
+
+    Args:
+        env: The :class:`~morfic_cli.envs.locomotion.LocomotionEnv` just stepped (its ``last_state`` and
+            ``last_reward_terms`` are read).
+        action: The action given to the step. Shape: (N, 12).
+        value: Critic value of the state the action was taken in. Shape: (N,).
+        reward: The step's reward. Shape: (N,).
+        done: The step's episode ends. Shape: (N,).
+        extras: The step's extras (``time_outs``).
+        nominal: Nominal base height per env (m), for ``height_ratio``. Shape: (N,).
+        term_names: Reward-term columns of ``reward_terms``.
+    """
+    s = env.last_state
+    terms = env.last_reward_terms
+    contact = s.foot_contact.float()  # (N, 4)
+    speed = torch.linalg.norm(s.foot_vel_w[..., :2], dim=-1)  # (N, 4)
+    slip = (contact * speed).sum(1) / contact.sum(1).clamp(min=1.0)
+    return {
+        "base_pos": s.base_pos_w, "base_quat": s.base_quat_w, "base_lin_vel": s.base_lin_vel_b,
+        "base_ang_vel": s.base_ang_vel_b, "command": s.command.clone(), "joint_pos": s.joint_pos,
+        "joint_vel": s.joint_vel, "action": action, "reward": reward, "value": value,
+        "done": done.bool(), "time_out": extras["time_outs"].bool(),
+        "tilt": torch.arccos((-s.projected_gravity_b[:, 2]).clamp(-1.0, 1.0)),
+        "height_ratio": s.base_pos_w[:, 2] / nominal, "foot_slip": slip,
+        "reward_terms": torch.stack([terms[k] * env.dt for k in term_names], dim=1),
+    }
+
+
 def rollout_env_cfg(train_env: EnvCfg, num_envs: int, steps: int, command_vx: float) -> EnvCfg:
     """The evaluation env config: the run's env, evaluation settings, fixed command, no time-out inside ``steps``."""
     cfg = eval_env_cfg(train_env)
@@ -149,22 +180,9 @@ def run_rollout(
                     action = action + actor.output_std * noise
                 value = critic(obs).reshape(-1)
                 obs, reward, done, extras = env.step(action)
-                s = env.last_state
-                terms = env.last_reward_terms
                 if term_names is None:
-                    term_names = list(terms)
-                contact = s.foot_contact.float()  # (N, 4)
-                speed = torch.linalg.norm(s.foot_vel_w[..., :2], dim=-1)  # (N, 4)
-                slip = (contact * speed).sum(1) / contact.sum(1).clamp(min=1.0)
-                step = {
-                    "base_pos": s.base_pos_w, "base_quat": s.base_quat_w, "base_lin_vel": s.base_lin_vel_b,
-                    "base_ang_vel": s.base_ang_vel_b, "command": s.command.clone(), "joint_pos": s.joint_pos,
-                    "joint_vel": s.joint_vel, "action": action, "reward": reward, "value": value,
-                    "done": done.bool(), "time_out": extras["time_outs"].bool(),
-                    "tilt": torch.arccos((-s.projected_gravity_b[:, 2]).clamp(-1.0, 1.0)),
-                    "height_ratio": s.base_pos_w[:, 2] / nominal, "foot_slip": slip,
-                    "reward_terms": torch.stack([terms[k] * env.dt for k in term_names], dim=1),
-                }
+                    term_names = list(env.last_reward_terms)
+                step = step_record(env, action, value, reward, done, extras, nominal, term_names)
                 for key, value_t in step.items():
                     arr = value_t.detach().cpu().numpy()
                     rec[key].append(arr if arr.dtype == np.bool_ else arr.astype(np.float32))

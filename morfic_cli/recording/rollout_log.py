@@ -1,20 +1,18 @@
-"""MCAP rollout logs: one file per robot and command of ``morfic eval``, readable in Foxglove Studio.
+"""MCAP rollout logs: one file per robot and command of ``morfic eval``, with a 3D scene Foxglove draws.
 
-A log holds one JSON message per policy step on channel :data:`ROLLOUT_TOPIC`, described by a JSON
-Schema (schema encoding ``jsonschema``, message encoding ``json``), in zstd-compressed chunks, plus one
-MCAP metadata record named :data:`METADATA_NAME` with the run's metadata. Each message is env-major::
+A log holds, in zstd-compressed chunks (see ``docs/mcap.md``):
 
-    {"step": 17, "time_s": 0.34, "envs": [{"base_pos": [x, y, z], ..., "reward_terms": {"r_lin": 0.07, ...},
-                                           "value": 1.9, "done": false, "time_out": false}, ...]}
+* ``/rollout/step`` (:data:`ROLLOUT_TOPIC`): one protobuf ``morfic.RolloutStep`` per policy step, env-major, every
+  field of :data:`ROLLOUT_FIELDS` for every env (:mod:`morfic_cli.recording.rollout_proto`), so Foxglove plots e.g.
+  ``/rollout/step.envs[0].base_pos[2]`` or ``/rollout/step.envs[3].reward_terms.r_lin``;
+* with a :class:`~morfic_cli.recording.scene.RolloutScene` (the first few envs by default): ``/scene``, one
+  ``foxglove.SceneUpdate`` with every geom of those envs, and ``/tf``, ``foxglove.FrameTransforms``: the fixed frames
+  once, the moving bodies per policy step, so Foxglove's 3D panel shows the robots walk;
+* one MCAP metadata record named :data:`METADATA_NAME` with the run's metadata.
 
-so Foxglove plots e.g. ``/rollout/step.envs[0].base_pos[2]`` or ``/rollout/step.envs[3].reward_terms.r_lin``
-(its JSON Schema support has arrays of numbers and arrays of objects, but no arrays of arrays). The log time of
-a message is the step's time in ns.
-
-Numbers are stored as float32: the writer casts every numeric field to float32 and prints the shortest decimal
-that reads back to the same float32, so :func:`read_rollout` returns exactly the float32 values written.
-Non-finite values (NaN, +-inf) are written as JSON ``null`` (JSON has no NaN) and read back as NaN.
-Shapes use T = steps, N = num_envs, K = number of reward terms. See ``docs/mcap.md``.
+The log time of a step's messages is the step's time in ns; the scene and the fixed frames are logged at time 0.
+Numbers are float32 (protobuf ``float``), bit-exact, NaN and inf included, so :func:`read_rollout` returns exactly
+the float32 values written. Shapes use T = steps, N = num_envs, K = number of reward terms, E = scene envs.
 """
 
 from __future__ import annotations
@@ -25,20 +23,34 @@ import operator
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-ROLLOUT_FORMAT = "morfic.rollout/1"
-"""Value of the ``format`` metadata key; bumped when the message layout changes."""
+from morfic_cli.recording.rollout_proto import STEP_MESSAGE, StepCodec
+
+if TYPE_CHECKING:
+    from morfic_cli.recording.scene import RolloutScene
+
+ROLLOUT_FORMAT = "morfic.rollout/2"
+"""Value of the ``format`` metadata key; bumped when the message layout changes (1: JSON messages, read still)."""
 
 ROLLOUT_TOPIC = "/rollout/step"
 """Topic of the channel carrying one message per policy step."""
 
-ROLLOUT_SCHEMA_NAME = "morfic.RolloutStep"
-"""Name of the JSON Schema of the step messages (Foxglove's datatype name)."""
+ROLLOUT_SCHEMA_NAME = STEP_MESSAGE
+"""Name of the protobuf message of the numeric channel (the MCAP schema name, Foxglove's datatype)."""
+
+SCENE_TOPIC = "/scene"
+"""Topic of the ``foxglove.SceneUpdate`` with the geoms of the scene envs (one message, log time 0)."""
+
+TF_TOPIC = "/tf"
+"""Topic of the ``foxglove.FrameTransforms``: fixed frames at log time 0, moving bodies every step."""
+
+DEFAULT_SCENE_ENVS = 4
+"""How many envs (the first ones) carry a 3D scene in a log unless asked otherwise."""
 
 METADATA_NAME = "morfic"
 """Name of the MCAP metadata record holding the log's metadata."""
@@ -46,7 +58,7 @@ METADATA_NAME = "morfic"
 NUM_TERMS = "K"
 """Placeholder in a field's shape for the number of reward terms."""
 
-RESERVED_KEYS: tuple[str, ...] = ("format", "num_envs", "term_names", "json_keys")
+RESERVED_KEYS: tuple[str, ...] = ("format", "num_envs", "term_names", "scene_envs", "json_keys")
 """Metadata keys the writer sets itself (``num_envs`` and ``term_names`` may be passed if they agree)."""
 
 
@@ -148,116 +160,6 @@ def check_step_data(data: Mapping[str, Any], num_envs: int, num_terms: int) -> d
     return out
 
 
-def shortest_decimals(a: np.ndarray) -> np.ndarray:
-    """For each float32 value, the double nearest to the shortest decimal that reads back to it.
-
-    Vectorised: for k = 1..9 significant digits, round to k digits (m / 10^j, a correctly rounded division, so
-    ``repr`` of the double prints those k digits) and keep the first k whose float32 equals the value. 9 digits
-    always suffice for float32; anything left (non-finite values, rare rounding corners) keeps the exact double of
-    the float32, which also reads back exactly.
-
-    Args:
-        a: float32 array, any shape.
-
-    Returns:
-        float64 array of the same shape.
-    """
-    x = a.astype(np.float64)
-    out = x.copy()
-    todo = np.isfinite(x) & (x != 0.0)
-    if not todo.any():
-        return out
-    with np.errstate(all="ignore"):
-        exp10 = np.floor(np.log10(np.abs(np.where(todo, x, 1.0))))
-        for k in range(1, 10):
-            j = k - 1 - exp10  # decimal places of k significant digits
-            scale = 10.0 ** np.abs(j)
-            r = np.where(j >= 0, np.round(x * scale) / scale, np.round(x / scale) * scale)
-            ok = todo & (r.astype(np.float32) == a)
-            out[ok] = r[ok]
-            todo &= ~ok
-            if not todo.any():
-                break
-    return out
-
-
-def json_floats(a: np.ndarray) -> list:
-    """A float32 array as nested lists of floats that JSON prints as the shortest decimal reading back to it.
-
-    Each element becomes :func:`shortest_decimals`' double (so ``json.dumps`` writes e.g. ``0.1``, not
-    ``0.10000000149011612``); non-finite values become None (JSON ``null``).
-
-    Args:
-        a: float32 array, any shape.
-
-    Returns:
-        ``a.tolist()``-shaped nested lists.
-    """
-    d = shortest_decimals(a)
-    finite = np.isfinite(a)
-    return d.tolist() if finite.all() else np.where(finite, d, None).tolist()
-
-
-def step_message(step: int, time_s: float, arrays: Mapping[str, np.ndarray], term_names: Sequence[str]) -> dict:
-    """The JSON message of one step, env-major (see the module docstring).
-
-    Args:
-        step: Policy step index.
-        time_s: Step time (s).
-        arrays: Output of :func:`check_step_data`.
-        term_names: K reward-term names, the columns of ``arrays["reward_terms"]``.
-
-    Returns:
-        ``{"step", "time_s", "envs": [N x {field: value}]}`` with ``reward_terms`` a {term name: value} object.
-    """
-    cols = {name: a.tolist() if a.dtype == bool else json_floats(a) for name, a in arrays.items()}
-    envs = []
-    for i in range(len(cols["reward"])):
-        env = {name: cols[name][i] for name in ROLLOUT_FIELDS}
-        env["reward_terms"] = dict(zip(term_names, env["reward_terms"], strict=True))
-        envs.append(env)
-    return {"step": step, "time_s": time_s, "envs": envs}
-
-
-def _field_json_schema(name: str, term_names: Sequence[str]) -> dict:
-    """JSON Schema of one per-env field (a number, a boolean, an array of numbers or the reward-term object)."""
-    spec = ROLLOUT_FIELDS[name]
-    desc = spec.description + (f" [{', '.join(spec.components)}]" if spec.components else "")
-    desc += f" ({spec.unit})" if spec.unit else ""
-    if name == "reward_terms":
-        return {
-            "type": "object", "description": desc, "properties": {k: {"type": "number"} for k in term_names},
-            "required": list(term_names), "additionalProperties": False,
-        }
-    if spec.dtype == "bool":
-        return {"type": "boolean", "description": desc}
-    if spec.shape == ():
-        return {"type": "number", "description": desc}
-    (n,) = spec.shape
-    return {"type": "array", "description": desc, "items": {"type": "number"}, "minItems": n, "maxItems": n}
-
-
-def rollout_json_schema(term_names: Sequence[str], num_envs: int) -> dict:
-    """The JSON Schema of a step message, for ``num_envs`` envs and the given reward terms."""
-    env = {
-        "type": "object", "properties": {name: _field_json_schema(name, term_names) for name in ROLLOUT_FIELDS},
-        "required": list(ROLLOUT_FIELDS), "additionalProperties": False,
-    }
-    return {
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "title": ROLLOUT_SCHEMA_NAME,
-        "description": "One policy step of a morfic evaluation rollout; envs[i] is env i.",
-        "type": "object",
-        "properties": {
-            "step": {"type": "integer", "minimum": 0, "description": "Policy step index"},
-            "time_s": {"type": "number", "description": "Step time (s); the message log time is this in ns"},
-            "envs": {"type": "array", "items": env, "minItems": num_envs, "maxItems": num_envs},
-        },
-        "required": ["step", "time_s", "envs"],
-        "additionalProperties": False,
-    }
-
-
 def _json_default(value: Any) -> Any:
     """``json.dumps`` hook for numpy scalars and arrays in metadata."""
     if isinstance(value, (np.ndarray, np.generic)):
@@ -265,11 +167,13 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def encode_metadata(metadata: Mapping[str, Any], term_names: Sequence[str], num_envs: int) -> dict[str, str]:
+def encode_metadata(metadata: Mapping[str, Any], term_names: Sequence[str], num_envs: int,
+                    scene_envs: Sequence[int] = ()) -> dict[str, str]:
     """The str -> str map of the metadata record.
 
     Strings are stored as they are; every other value as JSON, its key listed in the JSON list ``json_keys``
-    so that :func:`decode_metadata` gives it back typed. Adds ``format``, ``num_envs`` and ``term_names``.
+    so that :func:`decode_metadata` gives it back typed. Adds ``format``, ``num_envs``, ``term_names`` and
+    ``scene_envs`` (the env indices with a 3D scene).
 
     Raises:
         ValueError: A key is not a string or is reserved, a value is not JSON-serialisable (or is NaN/inf), or
@@ -279,10 +183,11 @@ def encode_metadata(metadata: Mapping[str, Any], term_names: Sequence[str], num_
     for key, value in metadata.items():
         if not isinstance(key, str):
             raise ValueError(f"rollout metadata: keys must be strings, got {key!r}")
-        if key in ("format", "json_keys"):
+        if key in ("format", "json_keys", "scene_envs"):
             raise ValueError(f"rollout metadata: key {key!r} is reserved")
         values[key] = value
-    own = {"format": ROLLOUT_FORMAT, "num_envs": num_envs, "term_names": list(term_names)}
+    own = {"format": ROLLOUT_FORMAT, "num_envs": num_envs, "term_names": list(term_names),
+           "scene_envs": [int(i) for i in scene_envs]}
     for key in ("num_envs", "term_names"):
         if key in values and json.dumps(values[key], default=_json_default) != json.dumps(own[key]):
             raise ValueError(f"rollout metadata: {key}={values[key]!r} disagrees with the writer's {own[key]!r}")
@@ -308,12 +213,21 @@ def decode_metadata(record: Mapping[str, str]) -> dict[str, Any]:
     return {k: json.loads(v) if k in json_keys else v for k, v in record.items() if k != "json_keys"}
 
 
+def step_codec(term_names: Sequence[str]) -> StepCodec:
+    """The protobuf codec of :data:`ROLLOUT_FIELDS` with these reward terms."""
+    k = len(term_names)
+    fields = {name: (tuple(k if d == NUM_TERMS else int(d) for d in spec.shape), spec.dtype)
+              for name, spec in ROLLOUT_FIELDS.items()}
+    return StepCodec.build(fields, term_names)
+
+
 class RolloutLogWriter:
     """Writes a rollout log (MCAP) step by step; a context manager that closes the file on exit.
 
     Example::
 
-        with RolloutLogWriter(path, num_envs=64, term_names=names, metadata={"robot": "go2", "seed": 0}) as log:
+        with RolloutLogWriter(path, num_envs=64, term_names=names, metadata={"robot": "go2", "seed": 0},
+                              scene=RolloutScene(models[:4], range(4), qpos_adr)) as log:
             for step in range(T):
                 log.write_step(step, step * dt, {"base_pos": pos, ..., "time_out": time_out})
 
@@ -328,18 +242,20 @@ class RolloutLogWriter:
         num_envs: int,
         term_names: Sequence[str],
         metadata: Mapping[str, str | int | float | bool | list],
+        scene: RolloutScene | None = None,
     ) -> None:
-        """Open ``path`` and write the header, schema, channel and metadata record.
+        """Open ``path`` and write the header, schemas, channels, metadata record and (with a scene) the geoms.
 
         Args:
             path: Output file (conventionally ``*.mcap``); overwritten if it exists.
             num_envs: N, the leading dim of every array of :meth:`write_step`.
-            term_names: K distinct, non-empty reward-term names, the columns of ``reward_terms``.
+            term_names: K distinct reward-term names (identifiers), the columns of ``reward_terms``.
             metadata: Run metadata (see ``docs/mcap.md`` for the keys ``morfic eval`` sets); strings are
                 stored as is, other values as JSON and read back typed.
+            scene: The 3D scene of some envs (their env ids must be < N); None writes numbers only.
 
         Raises:
-            ValueError: Bad ``num_envs``, ``term_names`` or metadata (nothing is written then).
+            ValueError: Bad ``num_envs``, ``term_names``, scene env ids or metadata (nothing is written then).
         """
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
@@ -348,26 +264,46 @@ class RolloutLogWriter:
             raise ValueError(f"term_names must be a sequence of non-empty strings, got {term_names!r}")
         if len(set(names)) != len(names):
             raise ValueError(f"term_names must be distinct, got {names}")
+        if scene is not None and not all(0 <= i < num_envs for i in scene.env_ids):
+            raise ValueError(f"scene env ids {scene.env_ids} must lie in 0..{num_envs - 1}")
         self.path = Path(path)
         self.num_envs = int(num_envs)
         self.term_names = names
-        record = encode_metadata(metadata, names, self.num_envs)
+        self.scene = scene
+        self._codec = step_codec(names)
+        record = encode_metadata(metadata, names, self.num_envs, scene.env_ids if scene is not None else ())
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start()
-        schema = json.dumps(rollout_json_schema(names, self.num_envs)).encode()
-        schema_id = self._writer.register_schema(ROLLOUT_SCHEMA_NAME, "jsonschema", schema)
+        schema_id = self._writer.register_schema(ROLLOUT_SCHEMA_NAME, "protobuf", self._codec.schema_data)
         self._channel = self._writer.register_channel(
-            ROLLOUT_TOPIC, "json", schema_id, metadata={"num_envs": str(self.num_envs)}
+            ROLLOUT_TOPIC, "protobuf", schema_id, metadata={"num_envs": str(self.num_envs)}
         )
         self._writer.add_metadata(METADATA_NAME, record)
+        self._tf = None
+        if scene is not None:
+            from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+            from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+
+            scene_ch = self._register(SCENE_TOPIC, SceneUpdate)
+            self._tf = self._register(TF_TOPIC, FrameTransforms)
+            self._writer.add_message(scene_ch, 0, scene.scene_update(0).SerializeToString(), 0, sequence=0)
+            self._writer.add_message(self._tf, 0, scene.static_transforms(0).SerializeToString(), 0, sequence=0)
         self._count = 0
         self._last: tuple[int, float] | None = None
         self._closed = False
 
+    def _register(self, topic: str, message_class: Any) -> int:
+        """A protobuf channel for a foxglove schema (its FileDescriptorSet as the schema data)."""
+        from mcap_protobuf.schema import build_file_descriptor_set
+
+        data = build_file_descriptor_set(message_class).SerializeToString()
+        schema_id = self._writer.register_schema(message_class.DESCRIPTOR.full_name, "protobuf", data)
+        return self._writer.register_channel(topic, "protobuf", schema_id)
+
     def write_step(self, step: int, time_s: float, data: Mapping[str, np.ndarray]) -> None:
-        """Append one policy step.
+        """Append one policy step (and, with a scene, the scene envs' moving frames at that time).
 
         Args:
             step: Policy step index, >= 0 and increasing from call to call.
@@ -392,9 +328,13 @@ class RolloutLogWriter:
                 f"rollout step: step must increase and time_s not decrease; got ({step}, {time_s}) after {self._last}"
             )
         arrays = check_step_data(data, self.num_envs, len(self.term_names))
-        payload = json.dumps(step_message(step, time_s, arrays, self.term_names), separators=(",", ":"))
         log_time = round(time_s * 1e9)
-        self._writer.add_message(self._channel, log_time, payload.encode(), log_time, sequence=self._count)
+        payload = self._codec.encode(step, time_s, arrays)
+        self._writer.add_message(self._channel, log_time, payload, log_time, sequence=self._count)
+        if self.scene is not None:
+            qpos = self.scene.qpos(arrays["base_pos"], arrays["base_quat"], arrays["joint_pos"])
+            tf = self.scene.step_transforms(qpos, log_time).SerializeToString()
+            self._writer.add_message(self._tf, log_time, tf, log_time, sequence=self._count + 1)
         self._count += 1
         self._last = (step, time_s)
 
@@ -446,12 +386,8 @@ class RolloutLog:
         return int(self.metadata["num_envs"])
 
 
-def arrays_from_messages(messages: Sequence[dict], term_names: Sequence[str], num_envs: int) -> dict[str, np.ndarray]:
-    """Stack decoded step messages into per-field arrays of shape (T, N, *suffix) (see :class:`RolloutLog`).
-
-    Raises:
-        ValueError: A message has other than ``num_envs`` envs.
-    """
+def _arrays_from_json(messages: Sequence[dict], term_names: Sequence[str], num_envs: int) -> dict[str, np.ndarray]:
+    """Format 1 (JSON messages, env-major, null for non-finite): per-field (T, N, *suffix) arrays."""
     for m in messages:
         if len(m["envs"]) != num_envs:
             raise ValueError(f"rollout step {m['step']}: {len(m['envs'])} envs, metadata says {num_envs}")
@@ -462,15 +398,16 @@ def arrays_from_messages(messages: Sequence[dict], term_names: Sequence[str], nu
         else:
             rows = [[env[name] for env in m["envs"]] for m in messages]
         shape = (len(messages), *field_shape(name, num_envs, len(term_names)))
-        if spec.dtype == "bool":
-            arrays[name] = np.array(rows, dtype=bool).reshape(shape)
-        else:  # None (JSON null) -> NaN
-            arrays[name] = np.array(rows, dtype=np.float64).reshape(shape).astype(np.float32)
+        kind = bool if spec.dtype == "bool" else np.float64  # None (JSON null) -> NaN
+        arrays[name] = np.array(rows, dtype=kind).reshape(shape).astype(bool if kind is bool else np.float32)
     return arrays
 
 
 def read_rollout(path: Path) -> RolloutLog:
-    """Read a rollout log written by :class:`RolloutLogWriter`, with the ``mcap`` library's reader.
+    """Read the numbers of a rollout log written by :class:`RolloutLogWriter`, with the ``mcap`` library's reader.
+
+    Reads only the ``/rollout/step`` channel (the scene is for Foxglove). Logs of format 1 (JSON messages) read
+    to the same arrays.
 
     Raises:
         ValueError: The file has no ``morfic`` metadata record or an unknown ``format``.
@@ -481,17 +418,21 @@ def read_rollout(path: Path) -> RolloutLog:
         if not records:
             raise ValueError(f"{path}: no {METADATA_NAME!r} metadata record; not a morfic rollout log")
         metadata = decode_metadata(records[-1].metadata)
-        if metadata.get("format") != ROLLOUT_FORMAT:
-            raise ValueError(f"{path}: rollout format {metadata.get('format')!r}, expected {ROLLOUT_FORMAT!r}")
-        messages = [
-            json.loads(msg.data) for _, _, msg in reader.iter_messages(topics=[ROLLOUT_TOPIC], log_time_order=False)
-        ]
+        fmt = metadata.get("format")
+        if fmt not in (ROLLOUT_FORMAT, "morfic.rollout/1"):
+            raise ValueError(f"{path}: rollout format {fmt!r}, expected {ROLLOUT_FORMAT!r}")
+        schema, payloads = None, []
+        for sch, _, msg in reader.iter_messages(topics=[ROLLOUT_TOPIC], log_time_order=False):
+            schema = sch
+            payloads.append(msg.data)
     term_names = list(metadata["term_names"])
     num_envs = int(metadata["num_envs"])
-    return RolloutLog(
-        metadata=metadata,
-        term_names=term_names,
-        arrays=arrays_from_messages(messages, term_names, num_envs),
-        steps=np.array([m["step"] for m in messages], dtype=np.int64),
-        time_s=np.array([m["time_s"] for m in messages], dtype=np.float64),
-    )
+    if fmt == "morfic.rollout/1":
+        messages = [json.loads(p) for p in payloads]
+        return RolloutLog(metadata, term_names, _arrays_from_json(messages, term_names, num_envs),
+                          np.array([m["step"] for m in messages], dtype=np.int64),
+                          np.array([m["time_s"] for m in messages], dtype=np.float64))
+    codec = step_codec(term_names) if schema is None else StepCodec.from_schema(step_codec(term_names).fields,
+                                                                                  schema.data)
+    steps, times, arrays = codec.decode(payloads, num_envs)
+    return RolloutLog(metadata=metadata, term_names=term_names, arrays=arrays, steps=steps, time_s=times)

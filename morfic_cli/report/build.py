@@ -32,11 +32,52 @@ from morfic_cli.store.publish import find_manifest
 REPORTS_PREFIX = "reports/"
 
 FIGURES: dict[str, str] = {
-    "ev": "Explained variance of each variant's critic per robot (higher is better, 1 = perfect).",
-    "distance": "Forward velocity at 2.0 m/s against the normalised morphology distance to Go2.",
-    "compute": "Training hours against transitions.",
+    "ev": "Explained variance of each variant's critic per robot (higher is better, 1 = perfect); the axis is "
+          "logarithmic below -1, so no bar is cut.",
+    "distance": "Forward velocity at 2.0 m/s (error bars: std over envs) against the normalised morphology "
+                "distance to Go2, one point per robot.",
+    "compute": "Training device-hours normalised to 400M transitions, per run (and the paper's methods).",
     "curves": "Training curves: mean episode return and the critic's explained variance.",
 }
+
+SPEED_PREFIX = "speed-"
+"""Figure names ``speed-<run>-<robot>``: the eval figure of that run on that robot (descriptor mode, 2.0 m/s)."""
+
+SPEED_PER_FIGURE = 6
+"""Eval figures per LaTeX figure (three rows of two fit a page at a legible size)."""
+
+SPEED_CAPTION = ("Forward speed over time of {run} on each robot at a commanded 2.0 m/s (descriptor mode), as "
+                 "`morfic eval` drew it: the mean over alive envs, the 10-90th percentile band, the command dashed "
+                 "and falls as red ticks (their count in the legend); below, the percentage of envs alive.")
+
+
+def eval_figures(store: Store, evals: list[dict[str, Any]]) -> dict[str, tuple[bytes, bytes]]:
+    """The stored eval figures of the main protocol (descriptor mode, 2.0 m/s), ``speed-<run>-<robot>``."""
+    from morfic_cli.evaluation.protocol import FIGURE_PDF, FIGURE_PNG, rollout_role
+
+    out: dict[str, tuple[bytes, bytes]] = {}
+    for row in sorted(evals, key=lambda r: (r["run"], paper.ROBOTS.index(r["robot"])
+                                            if r["robot"] in paper.ROBOTS else len(paper.ROBOTS))):
+        if row["mode"] != "descriptor" or abs(float(row["command_vx"]) - 2.0) > 1e-9:
+            continue
+        rid = store.read_manifest(row["artifact"]).inputs.get(rollout_role(row["robot"], "descriptor", 2.0))
+        if rid is None:
+            continue
+        files = store.read_manifest(rid).files
+        if FIGURE_PNG in files and FIGURE_PDF in files:
+            out[f"{SPEED_PREFIX}{row['run']}-{row['robot']}"] = (store.read_file(rid, FIGURE_PNG),
+                                                                 store.read_file(rid, FIGURE_PDF))
+    return out
+
+
+def _speed_groups(names: list[str], runs: list[str]) -> dict[str, list[str]]:
+    """Speed figure names grouped by run (the longest run name that prefixes the figure name)."""
+    groups: dict[str, list[str]] = {}
+    for n in names:
+        rest = n.removeprefix(SPEED_PREFIX)
+        run = max((r for r in runs if rest.startswith(r + "-")), key=len, default=rest.rsplit("-", 1)[0])
+        groups.setdefault(run, []).append(n)
+    return groups
 
 
 @dataclass(frozen=True)
@@ -169,6 +210,7 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
     from morfic_cli.recording.tables import rows_to_csv
 
     prov_rows = _provenance_rows(prov)
+    run_names = [r.name for r in data.runs]
     files: dict[str, bytes] = {}
     doc = {"title": cfg.title, "morfic_version": __version__, "runs": [asdict(r) for r in data.runs],
            "sections": [{"heading": s.heading, "text": s.text, "tables": [t.to_dict() for t in s.tables]}
@@ -188,14 +230,25 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
             body = "\n\n".join(x for x in [s.text, *(table_markdown(_paper_title(t)) for t in s.tables)] if x)
             md.append((s.heading, body))
         if figures:
-            md.append(("Figures", "\n".join(f"![{FIGURES[n]}](figures/{n}.png)\n\n*{FIGURES[n]}*\n"
-                                            for n in figures)))
+            fixed = [n for n in figures if not n.startswith(SPEED_PREFIX)]
+            body = [f"![{FIGURES[n]}](figures/{n}.png)\n\n*{FIGURES[n]}*\n" for n in fixed]
+            for run, names in _speed_groups([n for n in figures if n.startswith(SPEED_PREFIX)], run_names).items():
+                body.append(" ".join(f"![{n}](figures/{n}.png)" for n in names)
+                            + f"\n\n*{SPEED_CAPTION.format(run=run)}*\n")
+            md.append(("Figures", "\n".join(body)))
         table = ["| kind | ref | id | role |", "|---|---|---|---|"]
         table += [f"| {p['kind']} | {p['ref'] or '-'} | `{p['id']}` | {p['role']} |" for p in prov_rows]
         md.append(("Provenance", "Every artifact this report was built from:\n\n" + "\n".join(table)))
         files["report.md"] = document_markdown(cfg.title, md, intro=intro).encode()
     if cfg.latex:
-        from morfic_cli.report.latex import document_latex, escape, figure_latex, longtable_latex, table_latex
+        from morfic_cli.report.latex import (
+            document_latex,
+            escape,
+            figure_grid_latex,
+            figure_latex,
+            longtable_latex,
+            table_latex,
+        )
 
         tex = []
         for s in sections:
@@ -203,7 +256,15 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
                                             *(table_latex(_paper_title(t)) for t in s.tables)] if x)
             tex.append((s.heading, body or escape("Nothing in the store for this section.")))
         if figures:
-            tex.append(("Figures", "\n\n".join(figure_latex(f"figures/{n}.pdf", FIGURES[n]) for n in figures)))
+            fixed = [figure_latex(f"figures/{n}.pdf", FIGURES[n]) for n in figures if not n.startswith(SPEED_PREFIX)]
+            grids = []
+            for run, names in _speed_groups([n for n in figures if n.startswith(SPEED_PREFIX)], run_names).items():
+                chunks = [names[i:i + SPEED_PER_FIGURE] for i in range(0, len(names), SPEED_PER_FIGURE)]
+                for k, chunk in enumerate(chunks):
+                    part = f" (part {k + 1} of {len(chunks)})" if len(chunks) > 1 else ""
+                    grids.append(figure_grid_latex([f"figures/{n}.pdf" for n in chunk],
+                                                   SPEED_CAPTION.format(run=run) + part, per_row=2))
+            tex.append(("Figures", "\n\n".join(fixed + grids)))
         tex.append(("Provenance", escape("Every artifact this report was built from (`morfic store show ID`):")
                     + "\n\n" + longtable_latex(("kind", "ref", "id", "role"),
                                                [(p["kind"], p["ref"] or "-", p["id"], p["role"]) for p in prov_rows],
@@ -256,6 +317,7 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
                 "distance": F.distance_figure(tables.get("transfer", []), with_paper=cfg.with_paper),
                 "compute": F.compute_figure(tables.get("compute", []), with_paper=cfg.with_paper),
                 "curves": F.curves_figure(data.curves, {r.name: r.variant for r in runs}),
+                **eval_figures(store, data.evals),
             }
         stage("writing the report")
         files = render(cfg, data, sections, prov, figures)

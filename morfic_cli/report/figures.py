@@ -1,7 +1,7 @@
-"""The report's figures (matplotlib, Agg); each returns ``(png, pdf)`` bytes.
+"""The report's figures (matplotlib, Agg); each ``*_figure`` returns ``(png, pdf)`` bytes, each ``*_plot`` the Figure.
 
-EV per variant and robot, v_x against the normalised morphology distance, training compute against transitions,
-and training curves.
+EV per variant and robot, v_x against the normalised morphology distance, training compute per run, and training
+curves; the eval figures (speed and survival over time per robot) come from the store as ``morfic eval`` drew them.
 """
 
 from __future__ import annotations
@@ -47,91 +47,150 @@ def ev_figure(calibration: Sequence[dict[str, Any]]) -> tuple[bytes, bytes]:
     return bars(rows)
 
 
-def distance_figure(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0,
-                    with_paper: bool = False) -> tuple[bytes, bytes]:
-    """Forward velocity v_x (± σ over envs) against the normalised distance d of each robot to Go2, per variant."""
+MARKERS = "osD^vP*X"
+"""Marker per variant (colour and marker both tell variants apart)."""
+
+
+def distance_plot(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0, with_paper: bool = False):
+    """v_x (± σ over envs) at ``command_vx`` against each robot's normalised distance d to Go2 (a Figure).
+
+    Robots are separate points, never joined by lines (d orders them, it is not a path); each point is labelled
+    with its robot. Variants are told apart by colour and marker, slightly offset along d when several share a
+    robot; the paper's values (``with_paper``) are black crosses.
+    """
     plt = _plt()
     sel = [r for r in transfer if r["mode"] == "descriptor" and abs(r["command_vx"] - command_vx) < 1e-9
            and r.get("d") is not None]
     multi = len({r["preset"] for r in sel}) > 1
-    fig, ax = plt.subplots(figsize=(6.4, 3.8), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), constrained_layout=True)
     groups = sorted({(r["preset"], r["variant"]) for r in sel}, key=lambda p: (p[0], variant_order(p[1])))
-    for preset, variant in groups:
+    span = max([float(r["d"]) for r in sel] + [0.1])
+    step = 0.012 * span
+    for k, (preset, variant) in enumerate(groups):
         pts = sorted((float(r["d"]), r["vx"], r["vx_std"] or 0.0) for r in sel
                      if (r["preset"], r["variant"]) == (preset, variant) and r["vx"] is not None)
         if pts:
             xs, ys, es = zip(*pts, strict=True)
-            ax.errorbar(xs, ys, yerr=es, marker="o", ms=4, capsize=2, lw=1.2, label=_label(preset, variant, multi))
+            shift = (k - (len(groups) - 1) / 2) * step
+            ax.errorbar([x + shift for x in xs], ys, yerr=es, ls="none", marker=MARKERS[k % len(MARKERS)], ms=6,
+                        capsize=3, color=f"C{k}", label=_label(preset, variant, multi))
     if with_paper:
         d_of = {r["robot"]: float(r["d"]) for r in sel}
-        for variant in ("ppo", "film"):
-            pts = sorted((d_of[robot], paper.transfer_values(variant, robot, command_vx)["vx"]) for robot in d_of
-                         if paper.transfer_values(variant, robot, command_vx)["vx"] is not None)
+        for j, variant in enumerate(("ppo", "film")):
+            pts = [(d_of[robot], paper.transfer_values(variant, robot, command_vx)["vx"]) for robot in d_of
+                   if paper.transfer_values(variant, robot, command_vx)["vx"] is not None]
             if pts:
                 xs, ys = zip(*pts, strict=True)
-                ax.plot(xs, ys, ls="--", marker="x", lw=0.9, label=f"paper: {paper.METHOD_LABELS[variant]}")
-    for r in {r["robot"]: r for r in sel}.values():
-        ax.annotate(paper.ROBOT_LABELS.get(r["robot"], r["robot"]), (float(r["d"]), 0), fontsize=6, rotation=90,
-                    va="bottom", ha="center", color="grey", xycoords=("data", "axes fraction"))
-    ax.axhline(command_vx, color="grey", lw=0.7, ls=":")
-    ax.set_xlabel("normalised morphology distance d to Go2")
-    ax.set_ylabel(f"v_x (m/s) at command {command_vx:g} m/s")
-    ax.set_title("Transfer against morphology distance", fontsize=9)
+                ax.scatter(xs, ys, marker="x" if j else "+", s=40, color="black", lw=1.0,
+                           label=f"paper: {paper.METHOD_LABELS[variant]}")
+    robots = sorted({r["robot"]: r for r in sel}.values(), key=lambda r: float(r["d"]))
+    for k, r in enumerate(robots):  # alternate above / below so neighbours in d do not overlap
+        best = max((x["vx"] for x in sel if x["robot"] == r["robot"] and x["vx"] is not None), default=0.0)
+        ax.annotate(paper.ROBOT_LABELS.get(r["robot"], r["robot"]), (float(r["d"]), best), fontsize=8,
+                    xytext=(5, 5 if k % 2 == 0 else -11), textcoords="offset points")
+    ax.axhline(command_vx, color="grey", lw=0.8, ls=":", label=f"command {command_vx:g} m/s")
+    ax.set_xlabel("normalised morphology distance d to Go2", fontsize=9)
+    ax.set_ylabel("forward speed v_x (m/s)", fontsize=9)
+    ax.set_xlim(-0.03 * span, 1.15 * span)
+    ax.set_ylim(bottom=min(0.0, ax.get_ylim()[0]), top=max(ax.get_ylim()[1], 1.2 * command_vx))
+    ax.set_title(f"Transfer against morphology distance (command {command_vx:g} m/s, descriptor mode)", fontsize=10)
     ax.grid(alpha=0.3)
-    if groups or with_paper:
-        ax.legend(fontsize=7, loc="upper right")
-    return _save(fig)
+    ax.legend(fontsize=8, loc="lower left")
+    return fig
+
+
+def distance_figure(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0,
+                    with_paper: bool = False) -> tuple[bytes, bytes]:
+    """:func:`distance_plot` as ``(png, pdf)`` bytes."""
+    return _save(distance_plot(transfer, command_vx=command_vx, with_paper=with_paper))
+
+
+def compute_plot(compute: Sequence[dict[str, Any]], *, with_paper: bool = False):
+    """Training device-hours per run, normalised to 400M transitions as the paper's table is (a Figure).
+
+    Horizontal bars, one per run (labelled with its variant, preset, device and transitions) and, with
+    ``with_paper``, one per paper method (its range's midpoint, the range as an error bar), on a log axis when
+    the hours span more than a factor of 20. A bar chart, not a scatter of hours against transitions: our runs
+    often share one budget, and one point on log-log axes says nothing.
+    """
+    plt = _plt()
+    bars: list[tuple[str, float, float, float, str]] = []  # label, value, low, high, colour
+    multi = len({r["preset"] for r in compute}) > 1
+    for r in compute:
+        if r["transitions"] and r["device_hours_400m"]:
+            label = (f"{_label(r['preset'], r['variant'], multi)}, {r['preset']} on {r['device']}\n"
+                     f"({r['transitions'] / 1e6:.1f}M transitions)")
+            v = float(r["device_hours_400m"])
+            bars.append((label, v, v, v, "C0"))
+    if with_paper:
+        for row in paper.TRAINING_COMPUTE:
+            lo, hi = row.gpu_hours_400m
+            bars.append((f"paper: {row.label} (GPU)", (lo + hi) / 2, lo, hi, "grey"))
+    fig, ax = plt.subplots(figsize=(6.4, max(1.8, 0.4 * len(bars) + 1.2)), constrained_layout=True)
+    ys = list(range(len(bars)))[::-1]
+    for y, (_label_text, v, lo, hi, colour) in zip(ys, bars, strict=True):
+        ax.barh(y, v, color=colour, height=0.5, xerr=[[v - lo], [hi - v]] if hi > lo else None, capsize=3)
+        ax.annotate(f"{v:.1f} h" if v >= 1 else f"{v:.2f} h", (v, y), xytext=(4, 0), textcoords="offset points",
+                    va="center", fontsize=8)
+    ax.set_yticks(ys, [b[0] for b in bars], fontsize=8)
+    values = [b[1] for b in bars]
+    if values and max(values) / max(min(values), 1e-9) > 20:
+        ax.set_xscale("log")
+        ax.set_xlim(min(values) / 2, max(values) * 4)
+    elif values:
+        ax.set_xlim(0, max(b[3] for b in bars) * 1.25)
+    ax.set_xlabel("device-hours per 400M transitions (CPU threads or one GPU)", fontsize=9)
+    ax.set_title("Training compute", fontsize=10)
+    ax.grid(axis="x", alpha=0.3, which="both")
+    if not bars:
+        ax.text(0.5, 0.5, "no training runs with timing", ha="center", va="center", transform=ax.transAxes)
+    return fig
 
 
 def compute_figure(compute: Sequence[dict[str, Any]], *, with_paper: bool = False) -> tuple[bytes, bytes]:
-    """Training hours against transitions (log-log), our runs and, with ``with_paper``, the paper's methods."""
+    """:func:`compute_plot` as ``(png, pdf)`` bytes."""
+    return _save(compute_plot(compute, with_paper=with_paper))
+
+
+def _has_values(series: Sequence[float]) -> bool:
+    return any(v is not None and not (isinstance(v, float) and math.isnan(v)) for v in series)
+
+
+def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, str]):
+    """Mean episode return and critic EV against env steps, one line per run, coloured by variant (a Figure).
+
+    A panel whose series are all missing (NaN) is not drawn.
+    """
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.0, 3.8), constrained_layout=True)
-    multi = len({r["preset"] for r in compute}) > 1
-    for r in compute:
-        if r["transitions"] and r["device_hours"]:
-            ax.scatter([r["transitions"]], [r["device_hours"]], s=30,
-                       label=f"{_label(r['preset'], r['variant'], multi)} on {r['device']}")
-    if with_paper:
-        for row in paper.TRAINING_COMPUTE:
-            hours = sum(row.gpu_hours) / 2
-            ax.scatter([row.transitions], [hours], marker="x", s=30, color="black")
-            ax.annotate(f"paper: {row.label}", (row.transitions, hours), fontsize=6, xytext=(3, 3),
-                        textcoords="offset points")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("transitions")
-    ax.set_ylabel("training hours (device of the run)")
-    ax.set_title("Training compute against transitions", fontsize=9)
-    ax.grid(alpha=0.3, which="both")
-    if compute:
-        ax.legend(fontsize=6, loc="lower right")
-    return _save(fig)
+    ordered = sorted(curves, key=lambda n: (variant_order(variants.get(n, "")), n))
+    colours = {v: f"C{i}" for i, v in enumerate(sorted(set(variants.values()), key=variant_order))}
+    panels = [(key, title) for key, title in (("mean_reward", "mean episode return"),
+                                              ("explained_variance", "critic explained variance (training)"))
+              if any(_has_values([r.get(key, math.nan) for r in curves[n]]) for n in ordered)]
+    fig, axes = plt.subplots(1, max(len(panels), 1), figsize=(4.5 * max(len(panels), 1), 3.4),
+                             constrained_layout=True, squeeze=False)
+    for ax, (key, title) in zip(axes[0], panels, strict=False):
+        for name in ordered:
+            rows = curves[name]
+            variant = variants.get(name, "")
+            ax.plot([r.get("env_steps", math.nan) for r in rows], [r.get(key, math.nan) for r in rows], lw=1.0,
+                    color=colours.get(variant), label=f"{paper.METHOD_LABELS.get(variant, variant)} ({name})",
+                    marker="." if len(rows) < 5 else None)
+        ax.set_title(title, fontsize=10)
+        ax.set_xlabel("env steps", fontsize=9)
+        ax.grid(alpha=0.3)
+    if not panels:
+        axes[0, 0].text(0.5, 0.5, "no training curves", ha="center", va="center", transform=axes[0, 0].transAxes)
+    elif ordered:
+        axes[0, 0].legend(fontsize=8)
+    return fig
 
 
 def curves_figure(curves: dict[str, list[dict[str, float]]], variants: dict[str, str]) -> tuple[bytes, bytes]:
-    """Mean episode return and critic EV against env steps, one line per run, coloured by variant.
+    """:func:`curves_plot` as ``(png, pdf)`` bytes.
 
     Args:
         curves: Run name -> training-curve rows.
         variants: Run name -> its variant.
     """
-    plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4), constrained_layout=True)
-    ordered = sorted(curves, key=lambda n: (variant_order(variants.get(n, "")), n))
-    colours = {v: f"C{i}" for i, v in enumerate(sorted(set(variants.values()), key=variant_order))}
-    for name in ordered:
-        rows = curves[name]
-        steps = [r.get("env_steps", math.nan) for r in rows]
-        variant = variants.get(name, "")
-        for ax, key in zip(axes, ("mean_reward", "explained_variance"), strict=True):
-            ax.plot(steps, [r.get(key, math.nan) for r in rows], lw=1.0, color=colours.get(variant),
-                    label=f"{paper.METHOD_LABELS.get(variant, variant)} ({name})",
-                    marker="." if len(rows) < 5 else None)
-    for ax, title in zip(axes, ("mean episode return", "critic explained variance (training)"), strict=True):
-        ax.set_title(title, fontsize=9)
-        ax.set_xlabel("env steps")
-        ax.grid(alpha=0.3)
-    if ordered:
-        axes[0].legend(fontsize=6)
-    return _save(fig)
+    return _save(curves_plot(curves, variants))

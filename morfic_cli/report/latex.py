@@ -2,7 +2,8 @@ r"""LaTeX output: booktabs tables in the paper's cell style and a standalone doc
 
 A result cell is set as the paper sets it, in math mode with bold parts: ``$\mathbf{2.04{\pm}0.37}/0.984$``.
 The document needs only packages of a basic TeX Live (``texlive-latex-base`` + ``texlive-latex-recommended``):
-geometry, booktabs, graphicx, longtable, array.
+geometry, booktabs, graphicx, longtable, array, float. Tables and figures are placed where they are written
+(``[H]``), so every table sits under its section heading.
 """
 
 from __future__ import annotations
@@ -59,7 +60,11 @@ def cell_latex(cell: Sequence[Part], math: bool) -> str:
 
 
 def table_latex(table: Table, *, float_env: bool = True) -> str:
-    """A booktabs ``table`` (caption, label, ``tabular``); wide tables are scaled to the line width."""
+    """A booktabs ``table`` (caption, label, ``tabular``), placed where it is written.
+
+    ``[H]`` (float package) keeps it under its section heading; a table wider than the text is shrunk to the line
+    width, never enlarged.
+    """
     n = len(table.columns)
     lines = [r"\begin{tabular}{l" + "c" * n + "}", r"\toprule"]
     if table.groups:
@@ -82,14 +87,14 @@ def table_latex(table: Table, *, float_env: bool = True) -> str:
         lines.append(" & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}"]
     body = "\n".join(lines)
-    if n >= 5:
-        body = "\\resizebox{\\linewidth}{!}{%\n" + body + "}"
+    if n >= 5:  # shrink a table wider than the text to fit; never enlarge one
+        body = "\\resizebox{\\ifdim\\width>\\linewidth\\linewidth\\else\\width\\fi}{!}{%\n" + body + "}"
     if not float_env:
         return body
     label = f"tab:paper-{table.key}" if table.source == "paper" else f"tab:{table.key}"
     caption = rf"\textbf{{{escape(table.title)}.}} {_caption_text(table.caption)}"
     notes = "".join(rf"\\[2pt]{{\footnotesize {escape(n)}}}" for n in table.notes)
-    return "\n".join([r"\begin{table}[htbp]", r"\centering", r"\small", rf"\caption{{{caption}}}",
+    return "\n".join([r"\begin{table}[H]", r"\centering", r"\small", rf"\caption{{{caption}}}",
                       rf"\label{{{label}}}", body + notes, r"\end{table}"])
 
 
@@ -99,6 +104,11 @@ def _caption_text(caption: str) -> str:
     for i, chunk in enumerate(caption.split("$")):
         out.append(f"${chunk}$" if i % 2 else escape(chunk))
     return "".join(out)
+
+
+NEED_SPACE = r"\par\vspace{0pt plus 0.2\textheight}\penalty-250\vspace{0pt plus -0.2\textheight}"
+"""A conditional page break (what the needspace package does): a new page when less than about a fifth of the
+page is left, so a section heading is never stranded at the foot of a page."""
 
 
 def document_latex(title: str, sections: Sequence[tuple[str, str]], *, preamble_note: str = "") -> str:
@@ -111,6 +121,7 @@ def document_latex(title: str, sections: Sequence[tuple[str, str]], *, preamble_
         r"\usepackage{graphicx}",
         r"\usepackage{longtable}",
         r"\usepackage{array}",
+        r"\usepackage{float}",
         r"\setlength{\tabcolsep}{4pt}",
         rf"\title{{{escape(title)}}}",
         r"\date{}",
@@ -120,6 +131,7 @@ def document_latex(title: str, sections: Sequence[tuple[str, str]], *, preamble_
     if preamble_note:
         parts.append(escape(preamble_note))
     for heading, body in sections:
+        parts.append(NEED_SPACE)  # a heading never ends a page: break first when little room is left
         parts.append(rf"\section*{{{escape(heading)}}}")
         parts.append(body)
     parts.append(r"\end{document}")
@@ -128,8 +140,17 @@ def document_latex(title: str, sections: Sequence[tuple[str, str]], *, preamble_
 
 def figure_latex(path: str, caption: str) -> str:
     """A figure float including ``path`` (relative to the .tex)."""
-    return "\n".join([r"\begin{figure}[htbp]", r"\centering",
+    return "\n".join([r"\begin{figure}[H]", r"\centering",
                       rf"\includegraphics[width=0.9\linewidth,height=0.4\textheight,keepaspectratio]{{{path}}}",
+                      rf"\caption{{{escape(caption)}}}", r"\end{figure}"])
+
+
+def figure_grid_latex(paths: Sequence[str], caption: str, per_row: int = 3) -> str:
+    """One figure float with ``paths`` side by side, ``per_row`` to a row (e.g. one eval figure per robot)."""
+    width = 0.97 / per_row
+    cells = [rf"\includegraphics[width={width:.3f}\linewidth]{{{p}}}" for p in paths]
+    rows = ["\n".join(cells[i:i + per_row]) for i in range(0, len(cells), per_row)]
+    return "\n".join([r"\begin{figure}[H]", r"\centering", "\\\\[4pt]\n".join(rows),
                       rf"\caption{{{escape(caption)}}}", r"\end{figure}"])
 
 

@@ -108,11 +108,15 @@ def _part_dict(p: Part) -> dict:
 def bold_best(values: Sequence[float | None], higher_is_better: bool, tol: float = 1e-12) -> list[bool]:
     """Which entries are the best (ties all best); None / NaN entries never are.
 
+    Nothing is best without at least two values to compare, so a one-method table is not bold everywhere.
+
     >>> bold_best([0.2, None, 0.5, 0.5], True)
     [False, False, True, True]
+    >>> bold_best([0.2, None], True)
+    [False, False]
     """
     finite = [v for v in values if v is not None and math.isfinite(v)]
-    if not finite:
+    if len(finite) < 2:
         return [False] * len(values)
     best = max(finite) if higher_is_better else min(finite)
     return [v is not None and math.isfinite(v) and abs(v - best) <= tol for v in values]

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 SUBCOMMANDS = [
-    "train", "eval", "diagnose", "compare-baselines", "distance", "export",
+    "train", "eval", "play", "diagnose", "compare-baselines", "distance", "export",
     "report", "reproduce", "store", "robots", "bench",
 ]
 

@@ -78,8 +78,8 @@ def test_stored_mcap_logs_read_back_to_the_rollout_arrays(store, tmp_path):
     assert log.metadata["robot"] == "a1" and log.metadata["mode"] == "descriptor"
     assert log.metadata["checkpoint"] == store.resolve("runs/film-s0")
     assert log.metadata["command"] == [1.5, 0.0, 0.0] and log.metadata["seed"] == 2
-    with open(path, "rb") as fh:  # the mcap library's own reader sees 7 step messages
-        assert sum(1 for _ in make_reader(fh).iter_messages()) == 7
+    with open(path, "rb") as fh:  # the mcap library's own reader sees 7 step messages (and 7 + 1 /tf, 1 /scene)
+        assert sum(1 for _ in make_reader(fh).iter_messages(topics=["/rollout/step"])) == 7
     # per-step rewards are the sum of the logged term contributions
     np.testing.assert_allclose(rollout.arrays["reward_terms"].sum(-1), rollout.arrays["reward"], atol=1e-5)
 
@@ -132,10 +132,128 @@ def test_video_is_stored_and_written_next_to_out(run_cli, store, tmp_path, gl_ba
     assert code == 0, err
     videos = sorted(p.name for p in out.parent.iterdir())
     ext = "mp4" if any(n.endswith(".mp4") for n in videos) else "gif"
-    assert videos == ["go2-go2-descriptor-vx1-frames.png", f"go2-go2-descriptor-vx1.{ext}", "go2.csv"]
+    assert videos == sorted(["go2-go2-descriptor-vx1-frames.png", f"go2-go2-descriptor-vx1.{ext}", "go2.csv",
+                             "go2-go2-descriptor-vx1-speed.png", "go2-go2-descriptor-vx1-speed.pdf"])
     media = store.ls("media")
     assert len(media) == 1
     manifest = store.read_manifest(media[0]["id"])
     assert manifest.inputs["eval"] == store.resolve("evals/film-s0")
     assert store.read_manifest(manifest.inputs["rollout"]).kind == "rollout"
     assert store.read_file(manifest.id, f"video.{ext}") == (out.parent / f"go2-go2-descriptor-vx1.{ext}").read_bytes()
+    # the eval figure beside --out is the one stored with the rollout
+    speed = (out.parent / "go2-go2-descriptor-vx1-speed.png").read_bytes()
+    assert speed.startswith(b"\x89PNG") and store.read_file(manifest.inputs["rollout"], "speed.png") == speed
+
+
+def _compose(transforms: dict, frame: str, stop: str) -> tuple[np.ndarray, np.ndarray]:
+    """World pose of ``frame`` relative to ``stop`` from parent-relative foxglove transforms (w, x, y, z)."""
+    import mujoco
+
+    pos, quat = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+    while frame != stop:
+        parent, t, q = transforms[frame]
+        # pose_in_parent o pose: p' = t + R(q) p, q' = q * quat
+        rotated = np.zeros(3)
+        mujoco.mju_rotVecQuat(rotated, pos, q)
+        new_q = np.zeros(4)
+        mujoco.mju_mulQuat(new_q, q, quat)
+        pos, quat, frame = t + rotated, new_q, parent
+    return pos, quat
+
+
+def test_eval_log_has_a_3d_scene_foxglove_reads(store, tmp_path):
+    """Read with the mcap library and the protobuf schemas in the file only: numbers, body frames and geoms."""
+    from collections import defaultdict
+
+    import mujoco
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    cfg = EvalCfg(robots=("a1",), modes=("full",), command_vx=(1.0,), num_envs=3, steps=6, seed=1, scene_envs=2)
+    result = evaluate(store, "runs/film-s0", cfg)
+    role = rollout_role("a1", "full", 1.0)
+    rollout = result.rollouts[role]
+    path = tmp_path / "a1.mcap"
+    path.write_bytes(store.read_file(store.read_manifest(result.id).inputs[role], "rollout.mcap"))
+
+    by_topic, schemas = defaultdict(list), {}
+    with open(path, "rb") as fh:
+        for schema, channel, message, decoded in make_reader(
+                fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            by_topic[channel.topic].append((message.log_time, decoded))
+            schemas[channel.topic] = (schema.name, schema.encoding, channel.message_encoding)
+    assert schemas == {"/rollout/step": ("morfic.RolloutStep", "protobuf", "protobuf"),
+                       "/scene": ("foxglove.SceneUpdate", "protobuf", "protobuf"),
+                       "/tf": ("foxglove.FrameTransforms", "protobuf", "protobuf")}
+    steps = by_topic["/rollout/step"]
+    assert len(steps) == 6 and len(by_topic["/scene"]) == 1 and len(by_topic["/tf"]) == 1 + 6
+
+    # the numbers are those the rollout produced
+    a = rollout.arrays
+    for k, (_, msg) in enumerate(steps):
+        assert msg.step == k and len(msg.envs) == 3
+        for i, env in enumerate(msg.envs):
+            for key in ("base_pos", "base_quat", "joint_pos", "joint_vel", "action", "command"):
+                np.testing.assert_array_equal(np.array(getattr(env, key), np.float32), a[key][k, i], key)
+            assert env.value == a["value"][k, i] and env.reward == a["reward"][k, i] and env.done == a["done"][k, i]
+            assert [getattr(env.reward_terms, n) for n in rollout.term_names] == a["reward_terms"][k, i].tolist()
+
+    # every body's frame at step k is MuJoCo's xpos / xquat at the logged qpos of that env and step
+    (t0, static), tf_steps = by_topic["/tf"][0], by_topic["/tf"][1:]
+    assert t0 == 0
+    fixed = {t.child_frame_id: t for t in static.transforms}
+    offsets = [fixed[f"env{i}/world"].translation for i in range(2)]
+    assert fixed["env0/world"].parent_frame_id == "world" and abs(offsets[1].y - offsets[0].y) >= 1.0
+    for k, ((t_step, msg), (t_tf, moving)) in enumerate(zip(steps, tf_steps, strict=True)):
+        assert t_tf == t_step
+        transforms = {}
+        for t in [*static.transforms, *moving.transforms]:
+            transforms[t.child_frame_id] = (t.parent_frame_id, np.array([t.translation.x, t.translation.y,
+                                                                         t.translation.z]),
+                                            np.array([t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z]))
+        for i in range(2):
+            model = rollout.models[i]
+            data = mujoco.MjData(model)
+            env = msg.envs[i]
+            data.qpos[0:3], data.qpos[3:7] = env.base_pos, env.base_quat
+            joints = [f"{leg}_{j}_joint" for leg in ("FL", "FR", "RL", "RR") for j in ("hip", "thigh", "calf")]
+            data.qpos[[model.joint(n).qposadr[0] for n in joints]] = env.joint_pos
+            mujoco.mj_kinematics(model, data)
+            for b in range(1, model.nbody):
+                pos, quat = _compose(transforms, f"env{i}/{model.body(b).name}", f"env{i}/world")
+                np.testing.assert_allclose(pos, data.xpos[b], atol=1e-9, err_msg=f"step {k} env {i} body {b}")
+                sign = 1.0 if np.dot(quat, data.xquat[b]) >= 0 else -1.0
+                np.testing.assert_allclose(sign * quat, data.xquat[b], atol=1e-9)
+        assert not any(f.startswith("env2/") for f in transforms)  # env 2 carries no frames
+
+    # the scene: one entity per geom of each scene env, in its body's frame, with the geom's type and size
+    (_, scene), = by_topic["/scene"]
+    entities = {e.id: e for e in scene.entities}
+    model = rollout.models[0]
+    assert "floor" in entities and entities["floor"].cubes[0].size.x >= 100
+    drawn = [g for g in range(model.ngeom) if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_PLANE]
+    assert len(entities) == 1 + 2 * len(drawn)
+    for i in range(2):
+        for g in drawn:
+            e = entities[f"env{i}/{model.geom(g).name}"]
+            size = model.geom_size[g]
+            assert e.frame_id == f"env{i}/{model.body(model.geom_bodyid[g]).name}" and e.frame_locked
+            kind = mujoco.mjtGeom(model.geom_type[g])
+            meta = {kv.key: kv.value for kv in e.metadata}
+            if kind == mujoco.mjtGeom.mjGEOM_BOX:
+                (cube,) = e.cubes
+                assert meta["type"] == "box"
+                np.testing.assert_allclose([cube.size.x, cube.size.y, cube.size.z], 2 * size)
+                prim = cube
+            elif kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+                (prim,) = e.spheres
+                assert meta["type"] == "sphere" and prim.size.x == pytest.approx(2 * size[0])
+            else:
+                assert kind == mujoco.mjtGeom.mjGEOM_CAPSULE and meta["type"] == "capsule"
+                (prim,) = e.cylinders
+                assert len(e.spheres) == 2  # the end caps
+                assert prim.size.x == pytest.approx(2 * size[0]) and prim.size.z == pytest.approx(2 * size[1])
+            p = prim.pose.position
+            np.testing.assert_allclose([p.x, p.y, p.z], model.geom_pos[g], atol=1e-12)
+            c = prim.color
+            np.testing.assert_allclose([c.r, c.g, c.b, c.a], model.geom_rgba[g], rtol=1e-6)

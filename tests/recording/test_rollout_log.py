@@ -1,4 +1,4 @@
-"""MCAP rollout logs: a hand-made 3-env x 5-step rollout written, then read back two ways."""
+"""MCAP rollout logs: a hand-made 3-env x 5-step rollout written, then read back with morfic and without."""
 
 from __future__ import annotations
 
@@ -17,7 +17,6 @@ from morfic_cli.recording.rollout_log import (
     ROLLOUT_TOPIC,
     RolloutLogWriter,
     read_rollout,
-    rollout_json_schema,
 )
 
 N, T = 3, 5
@@ -87,7 +86,7 @@ def test_read_rollout_gives_back_the_written_values(log_path):
 
 def test_metadata_round_trips_typed(log_path):
     meta = read_rollout(log_path).metadata
-    assert meta == {**META, "format": ROLLOUT_FORMAT, "num_envs": N, "term_names": TERMS}
+    assert meta == {**META, "format": ROLLOUT_FORMAT, "num_envs": N, "term_names": TERMS, "scene_envs": []}
     assert isinstance(meta["seed"], int) and meta["deterministic"] is True
     assert meta["numeric_string"] == "42"  # strings stay strings even when they look like JSON
 
@@ -98,78 +97,79 @@ def test_metadata_round_trips_typed(log_path):
     assert raw["robot"] == "go2" and raw["numeric_string"] == "42"  # str values stored as is
     assert raw["seed"] == "7" and raw["command"] == "[0.5, 0.0, 0.25]" and raw["term_names"] == '["r_lin", "p_vz"]'
     assert set(json.loads(raw["json_keys"])) == {"descriptor", "command", "seed", "deterministic", "push_scale",
-                                                 "num_envs", "term_names"}
+                                                 "num_envs", "term_names", "scene_envs"}
 
 
 def test_raw_mcap_schema_channel_chunks_and_messages(log_path):
-    with open(log_path, "rb") as f:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        messages = list(reader.iter_messages(topics=[ROLLOUT_TOPIC]))
+    """The numeric channel is protobuf with its FileDescriptorSet; mcap-protobuf-support decodes it (no morfic)."""
+    from mcap_protobuf.decoder import DecoderFactory
 
-    (schema,) = summary.schemas.values()
-    assert schema.encoding == "jsonschema" and schema.name == ROLLOUT_SCHEMA_NAME
-    assert json.loads(schema.data) == rollout_json_schema(TERMS, N)
+    with open(log_path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        messages = list(reader.iter_decoded_messages(topics=[ROLLOUT_TOPIC]))
+
+    (schema,) = summary.schemas.values()  # no scene: one schema, one channel
+    assert schema.encoding == "protobuf" and schema.name == ROLLOUT_SCHEMA_NAME == "morfic.RolloutStep"
     (channel,) = summary.channels.values()
-    assert channel.topic == ROLLOUT_TOPIC and channel.message_encoding == "json" and channel.schema_id == schema.id
+    assert channel.topic == ROLLOUT_TOPIC and channel.message_encoding == "protobuf" and channel.schema_id == schema.id
+    assert channel.metadata == {"num_envs": str(N)}
     assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
     assert summary.statistics.message_count == T
 
     assert len(messages) == T
-    for t, (sch, ch, msg) in enumerate(messages):
+    for t, (sch, ch, msg, body) in enumerate(messages):
         assert sch.id == schema.id and ch.id == channel.id
         assert msg.log_time == msg.publish_time == round((0.2 + t * DT) * 1e9)
-        body = json.loads(msg.data)
-        assert body["step"] == 10 + t and body["time_s"] == 0.2 + t * DT
-        assert len(body["envs"]) == N
-        env1 = body["envs"][1]
-        assert list(env1) == list(ROLLOUT_FIELDS)
-        # shortest decimals of the float32 values: 0.1 is written as 0.1, not 0.10000000149011612
-        assert env1["base_pos"] == [float(str(np.float32(t + 0.1 + 0.01 * j))) for j in range(3)]
-        assert env1["reward_terms"] == {"r_lin": float(str(np.float32(0.001 * t + 1))), "p_vz": -0.003}
-        assert env1["done"] is False and isinstance(env1["value"], float)
-    assert b"0.10000000149" not in messages[0][2].data
+        assert body.step == 10 + t and body.time_s == 0.2 + t * DT
+        assert len(body.envs) == N
+        env1 = body.envs[1]
+        assert [f.name for f in env1.DESCRIPTOR.fields] == list(ROLLOUT_FIELDS)
+        assert list(env1.base_pos) == [np.float32(t + 0.1 + 0.01 * j) for j in range(3)]
+        assert len(env1.joint_pos) == 12
+        # reward terms by name, as Foxglove plots /rollout/step.envs[1].reward_terms.r_lin
+        assert env1.reward_terms.r_lin == np.float32(0.001 * t + 1) and env1.reward_terms.p_vz == np.float32(-0.003)
+        assert env1.done is False and body.envs[2].done is (t == 2)
 
 
-def test_schema_is_foxglove_compatible_and_matches_messages(log_path):
-    """Foxglove's JSON Schema parser takes one "type" string per node and no arrays of arrays."""
-    schema = rollout_json_schema(TERMS, N)
-
-    def walk(node: dict, path: str) -> None:
-        assert isinstance(node["type"], str), path
-        if node["type"] == "object":
-            for k, child in node["properties"].items():
-                walk(child, f"{path}.{k}")
-        if node["type"] == "array":
-            assert node["items"]["type"] != "array", path
-            walk(node["items"], f"{path}[]")
-
-    walk(schema, "")
-    env_props = schema["properties"]["envs"]["items"]["properties"]
-    assert list(env_props) == list(ROLLOUT_FIELDS)
-    assert env_props["joint_pos"]["minItems"] == env_props["joint_pos"]["maxItems"] == 12
-    assert env_props["done"]["type"] == "boolean" and env_props["reward"]["type"] == "number"
-    assert list(env_props["reward_terms"]["properties"]) == TERMS
-    assert "world" in env_props["base_pos"]["description"] and "(m)" in env_props["base_pos"]["description"]
-
-    with open(log_path, "rb") as f:
-        _, _, msg = next(make_reader(f).iter_messages())
-    env0 = json.loads(msg.data)["envs"][0]
-    for name, prop in env_props.items():
-        if prop["type"] == "array":
-            assert len(env0[name]) == prop["maxItems"], name
+def test_non_finite_values_read_back_as_written(tmp_path):
+    path = tmp_path / "nan.mcap"
+    data = make_step(0)
+    data["value"] = np.array([np.nan, np.inf, 1.0])
+    with RolloutLogWriter(path, num_envs=N, term_names=TERMS, metadata={}) as log:
+        log.write_step(0, 0.0, data)
+    value = read_rollout(path).arrays["value"][0]
+    assert np.isnan(value[0]) and value[1] == np.inf and value[2] == 1.0
 
 
-def test_message_validates_against_schema(log_path):
-    jsonschema = pytest.importorskip("jsonschema")
-    schema = rollout_json_schema(TERMS, N)
-    with open(log_path, "rb") as f:
-        for _, _, msg in make_reader(f).iter_messages():
-            jsonschema.validate(json.loads(msg.data), schema)
-    bad = json.loads(msg.data)
-    bad["envs"][0]["base_pos"] = [1.0, 2.0]
-    with pytest.raises(jsonschema.ValidationError):
-        jsonschema.validate(bad, schema)
+def test_term_names_must_be_identifiers(tmp_path):
+    with pytest.raises(ValueError, match="identifiers"):
+        RolloutLogWriter(tmp_path / "x.mcap", num_envs=N, term_names=["r lin"], metadata={})
+
+
+def test_format_1_json_logs_still_read(tmp_path):
+    """A log of the previous layout (JSON messages, null for NaN) reads to the same arrays."""
+    from mcap.writer import CompressionType, Writer
+
+    path = tmp_path / "v1.mcap"
+    env = {"base_pos": [0.1, 0.2, 0.3], "base_quat": [1.0, 0.0, 0.0, 0.0], "base_lin_vel": [1.5, 0.0, 0.0],
+           "base_ang_vel": [0.0, 0.0, 0.0], "command": [2.0, 0.0, 0.0], "joint_pos": [0.5] * 12,
+           "joint_vel": [0.0] * 12, "action": [0.25] * 12, "reward": 0.07,
+           "reward_terms": {"r_lin": 0.08, "p_vz": None}, "value": 1.9, "done": True, "time_out": False}
+    with open(path, "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD)
+        w.start()
+        sid = w.register_schema("morfic.RolloutStep", "jsonschema", b"{}")
+        cid = w.register_channel(ROLLOUT_TOPIC, "json", sid)
+        w.add_metadata(METADATA_NAME, {"format": "morfic.rollout/1", "num_envs": "1", "term_names": '["r_lin", "p_vz"]',
+                                       "json_keys": '["num_envs", "term_names"]'})
+        w.add_message(cid, 20_000_000, json.dumps({"step": 0, "time_s": 0.02, "envs": [env]}).encode(), 20_000_000)
+        w.finish()
+    log = read_rollout(path)
+    assert log.steps.tolist() == [0] and log.time_s.tolist() == [0.02]
+    assert log.arrays["base_pos"].tolist() == [[[np.float32(0.1), np.float32(0.2), np.float32(0.3)]]]
+    assert log.arrays["reward_terms"][0, 0, 0] == np.float32(0.08) and np.isnan(log.arrays["reward_terms"][0, 0, 1])
+    assert log.arrays["done"].tolist() == [[True]] and log.arrays["joint_pos"].shape == (1, 1, 12)
 
 
 @pytest.mark.parametrize(
@@ -232,24 +232,6 @@ def test_bad_constructor_arguments(tmp_path):
     log = read_rollout(path)
     assert log.metadata["seed"] == 3 and log.metadata["cmd"] == [1.0, 0.0]
     assert log.num_steps == 0 and log.arrays["reward_terms"].shape == (0, N, 2)
-
-
-def test_non_finite_values_are_json_null_and_read_back_as_nan(tmp_path):
-    path = tmp_path / "nan.mcap"
-    data = make_step(0)
-    data["value"] = np.array([np.nan, np.inf, 1.0])
-    with RolloutLogWriter(path, num_envs=N, term_names=TERMS, metadata={}) as log:
-        log.write_step(0, 0.0, data)
-    with open(path, "rb") as f:
-        _, _, msg = next(make_reader(f).iter_messages())
-
-    def no_constants(token: str) -> None:
-        raise AssertionError(f"non-standard JSON constant {token}")
-
-    body = json.loads(msg.data, parse_constant=no_constants)  # strict JSON, as Foxglove's JSON.parse needs
-    assert [env["value"] for env in body["envs"]] == [None, None, 1.0]
-    value = read_rollout(path).arrays["value"][0]
-    assert np.isnan(value[:2]).all() and value[2] == 1.0
 
 
 def test_float32_round_trip_is_exact_for_random_values(tmp_path):

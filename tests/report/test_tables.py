@@ -77,6 +77,18 @@ def test_bold_best_ties_and_missing():
     assert bold_best([0.2, None, 0.5, 0.5], True) == [False, False, True, True]
     assert bold_best([0.2, float("nan"), 0.1], False) == [False, False, True]
     assert bold_best([None, None], True) == [False, False]
+    assert bold_best([0.7, None], True) == [False, False]  # one value: nothing to be best against
+
+
+def test_a_one_method_table_is_not_bold_and_tables_are_placed_and_never_enlarged():
+    a = _run("film", 0)
+    rows = transfer_rows(StoreData(runs=[a], evals=[_eval(a, "go1", 1.9, 0.3, 0.9), _eval(a, "b1", 0.1, 0.1, 0.0)]))
+    table = transfer_table(rows, key="k", title="t", command_vx=2.0, mode="descriptor")
+    assert not any(p.bold for row in table.rows for cell in row.cells for p in cell)
+    tex = table_latex(table)
+    assert r"\begin{table}[H]" in tex and r"\mathbf" not in tex
+    wide = table_latex(paper_table(paper.CROSS_EMBODIMENT_BASELINES))
+    assert r"\resizebox{\ifdim\width>\linewidth\linewidth\else\width\fi}{!}" in wide
 
 
 def test_transfer_table_bolds_best_speed_and_survival_per_robot_independently():

@@ -1,0 +1,56 @@
+"""Report figures a reader can trust: no cut bars, no joined robots, no single dot on log axes, no empty panels."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from morfic_cli.diagnostics.figures import ev_plot
+from morfic_cli.report.figures import compute_plot, curves_plot, distance_plot
+
+
+@pytest.fixture(autouse=True)
+def _close():
+    import matplotlib.pyplot as plt
+
+    yield
+    plt.close("all")
+
+
+def test_ev_bars_reach_their_values_on_a_symlog_axis():
+    rows = [{"run": "r", "variant": "film", "robot": robot, "ev": ev}
+            for robot, ev in (("Go2", 0.4), ("B1", -2.713), ("ANYmal-C", -105.815), ("A1", math.nan))]
+    ax = ev_plot(rows).axes[0]
+    heights = [p.get_height() for p in ax.patches if p.get_width() > 0 and p.get_height() != 0]
+    assert heights[:3] == [0.4, -2.713, -105.815]  # drawn to the value, not clipped at -1
+    assert ax.get_yscale() == "symlog" and ax.get_ylim()[0] < -105.815
+    labels = {t.get_text() for t in ax.texts}
+    assert {"0.40", "-2.71", "-105.8", "n/a"} <= labels
+    linear = ev_plot([{"run": "r", "variant": "film", "robot": "Go2", "ev": 0.9}]).axes[0]
+    assert linear.get_yscale() == "linear"
+
+
+def test_distance_points_are_not_joined():
+    rows = [{"mode": "descriptor", "command_vx": 2.0, "d": d, "preset": "cpu", "variant": "film", "robot": robot,
+             "vx": vx, "vx_std": 0.1} for robot, d, vx in (("go2", 0.0, 1.9), ("b1", 0.63, 0.0), ("go1", 0.21, 1.9))]
+    ax = distance_plot(rows).axes[0]
+    for line in ax.lines:
+        if len(line.get_xdata()) > 1 and line.get_linestyle() not in ("None", "none", ""):
+            assert len(set(line.get_ydata())) == 1, "only the horizontal command line may be a line"
+    assert {"Go2", "B1", "Go1"} <= {t.get_text() for t in ax.texts}
+
+
+def test_compute_is_bars_and_not_a_lone_log_log_dot():
+    rows = [{"preset": "cpu", "variant": "film", "device": "cpu", "transitions": 12.3e6, "device_hours": 1.507,
+             "device_hours_400m": 49.0}]
+    ax = compute_plot(rows).axes[0]
+    (bar,) = [p for p in ax.patches if p.get_width() > 0]
+    assert bar.get_width() == 49.0 and ax.get_xscale() == "linear" and not ax.collections
+    assert len(compute_plot(rows, with_paper=True).axes[0].patches) > 1
+
+
+def test_curves_skip_an_all_nan_panel():
+    curves = {"film-cpu": [{"env_steps": 1, "mean_reward": 1.0}, {"env_steps": 2, "mean_reward": 2.0}]}
+    fig = curves_plot(curves, {"film-cpu": "film"})
+    assert [ax.get_title() for ax in fig.axes] == ["mean episode return"]
