@@ -32,10 +32,11 @@ def _columns(table: str, with_paper: bool) -> list[Column]:
                 Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:g}", justify="right"),
                 Column("n_seeds", "seeds", justify="right"), Column("cell", "v_x ± σ / S", justify="right"),
                 Column("vx_seed_std", "σ seeds", fmt=lambda v: _n(v, 2), justify="right"),
-                Column("vx_max", "v_x^max", fmt=lambda v: _n(v, 2), justify="right")]
+                Column("vx_peak_1s", "peak 1 s", fmt=lambda v: _n(v, 2), justify="right")]
         if with_paper:
-            cols += [Column("paper_vx", "paper v_x", fmt=lambda v: _n(v, 2), justify="right"),
-                     Column("paper_vx_max", "paper v_x^max", fmt=lambda v: _n(v, 3), justify="right"),
+            cols += [Column("paper_quantity", "paper qty"),
+                     Column("paper_vx", "paper v", fmt=lambda v: _n(v, 3), justify="right"),
+                     Column("paper_vx_std", "paper σ", fmt=lambda v: _n(v, 3), justify="right"),
                      Column("paper_survival", "paper S", fmt=lambda v: _n(v, 3), justify="right")]
         return cols
     if table == "calibration":

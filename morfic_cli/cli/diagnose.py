@@ -72,8 +72,8 @@ def diagnose(
         float,
         typer.Option(
             "--trunc-eps",
-            help="A sample counts (I_eps) when the rollout's end cuts at most this "
-            "fraction of the return scale from its Monte-Carlo return.",
+            help="I_eps is the window t <= T - H_eps with gamma^H_eps <= this: a counted "
+            "return misses at most this fraction of the return scale.",
         ),
     ] = 0.05,
     seed: SeedOpt = 0,
@@ -86,7 +86,7 @@ def diagnose(
 
     Each run's actor collects rollouts on each robot (actions sampled from the policy, stored as MCAP and reused
     when asked again); its critic is scored against discounted Monte-Carlo returns (gamma of the run) on the
-    samples whose return the rollout's end does not cut (I_eps). CosGrad is the cosine between the PPO actor
+    samples of the fixed window t <= T - H_eps of every env (I_eps). CosGrad is the cosine between the PPO actor
     gradients with the critic's advantages G - V and with the Monte-Carlo ones G - mean(G). Stores the table and
     an EV figure (ref diagnoses/calibration). With --fixed-rollout ROBOT, one actor is frozen, its rollout
     collected once, and every critic scored on exactly those samples (ref diagnoses/fixed-rollout/ROBOT).

@@ -1,4 +1,4 @@
-"""Discounted Monte-Carlo returns of a recorded rollout and the truncation-safe sample set I_eps (SPEC section 6).
+"""Discounted Monte-Carlo returns of a recorded rollout and the diagnostic sample set I_eps (SPEC section 6).
 
 Arrays are (T, N): T policy steps of N envs. Step t of env i took action a_{t,i} in s_{t,i}, received r_{t,i} and
 ended its episode when ``done[t, i]`` (the env was reset, row t+1 starts a new episode). An episode ends
@@ -12,9 +12,18 @@ The return of (t, i) is summed up to the end e of its episode, eq. (mc_return) i
     G_hat[t, i] = sum_{k=t}^{e} gamma^(k-t) r[k, i]
 
 If that episode was truncated after H = e - t + 1 rewards, the true return differs from G_hat by the missing tail
-gamma^H * G(s_{e+1}): at most a fraction gamma^H of the largest possible |G| (max|r| / (1 - gamma)). I_eps keeps the
-samples where that fraction is at most eps, i.e. every sample of a terminated episode and the samples of a truncated
-one with H >= H_eps = ceil(ln eps / ln gamma) (299 steps for gamma = 0.99, eps = 0.05).
+gamma^H * G(s_{e+1}): at most a fraction gamma^H of the largest possible |G| (max|r| / (1 - gamma)).
+
+I_eps is a *fixed window*, chosen before looking at any outcome (eq. (sample_window) in docs/metrics.md)::
+
+    I_eps = {(t, i) : t <= T - H_eps},   H_eps = min{H : gamma^H <= eps}
+
+Every env contributes the same steps 0..T-H_eps, whether it falls or not; a sample in the window either belongs to
+an episode that fell (complete return) or to one the recording's end cut after at least T - t >= H_eps rewards
+(a tail of at most eps of the return scale). The earlier rule (every sample of a fallen episode, plus the
+truncated ones with H >= H_eps) let falls add late samples, so policies that fall at different rates were scored
+on different populations. A time-out inside the window (diagnostic rollouts have none) cuts a return earlier;
+such a sample with H < H_eps is left out.
 """
 
 from __future__ import annotations
@@ -85,27 +94,34 @@ def min_horizon(gamma: float, eps: float) -> int:
     return h if gamma**h <= eps else h + 1  # guard against rounding in the logs
 
 
-def valid_samples(horizon: torch.Tensor, truncated: torch.Tensor, gamma: float, eps: float) -> torch.Tensor:
-    """The mask of I_eps: samples whose return is complete or misses at most a fraction eps of a tail.
+def sample_window(done: torch.Tensor, time_out: torch.Tensor, gamma: float, eps: float) -> torch.Tensor:
+    """The mask of I_eps: the fixed window t <= T - H_eps of every env, independent of falls.
 
-    ``I_eps = {(t, i): not truncated[t, i] or H[t, i] >= H_eps}`` with H_eps = :func:`min_horizon`.
+    ``I_eps = {(t, i): t <= T - H_eps}`` with H_eps = :func:`min_horizon`; a sample of that window whose episode a
+    time-out cut after fewer than H_eps rewards is left out (never the case in a diagnostic rollout, which does not
+    time out).
 
     Args:
-        horizon: H from :func:`remaining_horizon`. Shape: (T, N).
-        truncated: From :func:`remaining_horizon`. Shape: (T, N) bool.
+        done: Episode ended at this step. Shape: (T, N) bool.
+        time_out: The end was a time-out (truncation), not a fall. Shape: (T, N) bool.
         gamma: Discount factor.
         eps: Relative truncation tolerance.
 
     Returns:
-        Shape: (T, N) bool.
+        Shape: (T, N) bool; all False when T < H_eps.
     """
-    return ~truncated | (horizon >= min_horizon(gamma, eps))
+    h_eps = min_horizon(gamma, eps)
+    num_steps = done.shape[0]
+    in_window = (torch.arange(num_steps) <= num_steps - h_eps)[:, None].expand(done.shape)
+    horizon, truncated = remaining_horizon(done.bool(), time_out.bool())
+    cut_by_time_out = truncated & (horizon < h_eps)  # inside the window only a time-out can cut this short
+    return in_window & ~cut_by_time_out
 
 
 def mc_returns(
     reward: torch.Tensor, done: torch.Tensor, time_out: torch.Tensor, gamma: float, eps: float
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """G_hat and the mask of I_eps of a recording (:func:`discounted_returns`, :func:`valid_samples`).
+    """G_hat and the mask of I_eps of a recording (:func:`discounted_returns`, :func:`sample_window`).
 
     Args:
         reward: r. Shape: (T, N).
@@ -118,5 +134,4 @@ def mc_returns(
         ``(G_hat, in_I_eps)``: float64 and bool. Shapes: (T, N), (T, N).
     """
     done, time_out = done.bool(), time_out.bool()
-    horizon, truncated = remaining_horizon(done, time_out)
-    return discounted_returns(reward, done, gamma), valid_samples(horizon, truncated, gamma, eps)
+    return discounted_returns(reward, done, gamma), sample_window(done, time_out, gamma, eps)

@@ -24,8 +24,9 @@ if TYPE_CHECKING:
 
 #: Columns of the eval table, in order.
 EVAL_COLUMNS: tuple[str, ...] = (
-    "robot", "mode", "command_vx", "d", "vx_mean", "vx_std", "vx_max_mean", "vx_max_std", "survival",
-    "tracking_ratio", "valid", "valid_fraction", "verdict", "cell", "cell_max", "num_envs", "steps",
+    "robot", "mode", "command_vx", "d", "vx_mean", "vx_std", "vx_env_std", "vx_step_mean", "n_alive",
+    "vx_peak_1s_mean", "vx_peak_1s_std", "survival", "tracking_ratio", "valid", "valid_fraction", "verdict", "cell",
+    "num_envs", "steps",
 )
 
 EVALS_PREFIX = "evals/"
@@ -65,7 +66,7 @@ def metrics_row(rollout: Rollout, distance: float | None) -> dict[str, Any]:
     return {
         "robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx, "d": distance,
         **{k: v for k, v in dataclasses.asdict(m).items()},
-        "cell": paper_cell(m), "cell_max": paper_cell(m, use_max=True),
+        "cell": paper_cell(m),
         "num_envs": int(rollout.arrays["done"].shape[1]), "steps": int(rollout.arrays["done"].shape[0]),
     }
 

@@ -4,16 +4,20 @@ Runs are grouped by (preset, variant); each group's seeds are aggregated per rob
 flat rows with a ``table`` key (so the CSV of all of them is one file):
 
 - ``transfer``: per (preset, variant, robot, mode, command): ``vx`` = mean over seeds of the per-run v_x,
-  ``vx_std`` = σ over envs pooled over seeds (the paper's σ; with one seed exactly the run's),
-  ``vx_seed_std`` = std of the per-run v_x over seeds (sample std, empty with one seed); the same for
-  ``vx_max``; ``survival`` (mean over seeds) and ``survival_seed_std``; ``cell`` = "v ± σ / S".
+  ``vx_std`` = σ over all alive (env, step) samples pooled over seeds (the paper's σ; with one seed exactly the
+  run's), ``vx_seed_std`` = std of the per-run v_x over seeds (sample std, empty with one seed);
+  ``vx_peak_1s`` (mean over seeds of the best 1 s moving average, morfic's extra); ``survival`` (mean over seeds)
+  and ``survival_seed_std``; ``cell`` = "v ± σ / S". The paper's v_x^max (its 2.5 m/s table) is the v_x of the
+  2.5 m/s rows. Evaluations stored before σ was taken over steps (no ``vx_env_std`` column) leave σ empty.
 - ``calibration``: per (preset, variant, robot): EV, |NVB|, NVE, ASA, Flip, CosGrad, each mean and ``_seed_std``.
 - ``fixed_rollout``: per (preset, robot, critic variant): Flip and Cos. over the critics (seeds) and actors.
 - ``compute``: per (preset, variant): transitions, iterations, s/iter, device-hours, hours per 400M transitions.
 
 ``--with-paper`` adds ``paper_*`` columns (and ``paper_table``, the paper table they come from) taken from
 :mod:`morfic_cli.report.paper`; the paper's numbers are in the descriptor mode of the protocol, so only
-descriptor-mode transfer rows get them. A number the paper does not print stays empty.
+descriptor-mode transfer rows get them. A transfer row's ``paper_vx`` / ``paper_vx_std`` hold the paper's speed
+for that command, ``paper_quantity`` says which it is (``v_x`` at 2.0 m/s, ``v_x^max`` at 2.5 m/s, the same
+quantity under the higher command). A number the paper does not print stays empty.
 """
 
 from __future__ import annotations
@@ -69,18 +73,37 @@ def seed_std(values: Iterable[Any]) -> float | None:
     return statistics.stdev(v) if len(v) >= 2 else None
 
 
-def pooled_std(means: Sequence[Any], stds: Sequence[Any]) -> float | None:
-    """σ over the envs of all seeds pooled (equal envs per seed): sqrt(mean(σ_i²) + var_pop(μ_i)).
+def pooled_std(means: Sequence[Any], stds: Sequence[Any], counts: Sequence[Any] | None = None) -> float | None:
+    """Population σ of the union of several sample sets from their means μ_i, σ_i and sizes n_i.
 
-    With one seed it is that seed's σ over envs, the paper's ± term.
+    σ² = Σ n_i (σ_i² + (μ_i - μ)²) / Σ n_i with μ = Σ n_i μ_i / Σ n_i; equal sizes when ``counts`` is None.
+    With one set it is that set's σ (one seed: the run's own σ, the paper's ± term).
     """
-    pairs = [(float(m), float(s)) for m, s in zip(means, stds, strict=True)
-             if m is not None and s is not None and math.isfinite(float(m)) and math.isfinite(float(s))]
-    if not pairs:
+    counts = counts if counts is not None else [1.0] * len(means)
+    rows = []
+    for m, s, n in zip(means, stds, counts, strict=True):
+        try:
+            m, s, n = float(m), float(s), float(n)
+        except (TypeError, ValueError):
+            continue
+        if math.isfinite(m) and math.isfinite(s) and math.isfinite(n) and n > 0:
+            rows.append((m, s, n))
+    if not rows:
         return None
-    mu = sum(m for m, _ in pairs) / len(pairs)
-    var = sum(s * s for _, s in pairs) / len(pairs) + sum((m - mu) ** 2 for m, _ in pairs) / len(pairs)
-    return math.sqrt(var)
+    total = sum(n for _, _, n in rows)
+    mu = sum(n * m for m, _, n in rows) / total
+    return math.sqrt(sum(n * (s * s + (m - mu) ** 2) for m, s, n in rows) / total)
+
+
+def step_sigma(rows: Sequence[dict[str, Any]]) -> float | None:
+    """The paper's σ of a cell: σ over all alive (env, step) samples of its runs (:func:`pooled_std`).
+
+    None when any run's evaluation predates the σ over steps (its ``vx_std`` was the std of per-env means, another
+    quantity; such an evaluation has no ``vx_env_std``): re-run ``morfic eval`` for those runs.
+    """
+    if any(r.get("vx_env_std") in (None, "") for r in rows):
+        return None
+    return pooled_std([r["vx_step_mean"] for r in rows], [r["vx_std"] for r in rows], [r["n_alive"] for r in rows])
 
 
 def _group(rows: Iterable[dict[str, Any]], key: Callable[[dict[str, Any]], tuple]) -> dict[tuple, list[dict]]:
@@ -99,16 +122,14 @@ def transfer_rows(data: StoreData) -> list[dict[str, Any]]:
     groups = _group(data.evals, lambda r: (r["preset"], r["variant"], r["robot"], r["mode"], float(r["command_vx"])))
     out = []
     for (preset, variant, robot, mode, vx_cmd), rows in groups.items():
-        vx, vx_max, s = mean(r["vx_mean"] for r in rows), mean(r["vx_max_mean"] for r in rows), \
-            mean(r["survival"] for r in rows)
-        vx_std = pooled_std([r["vx_mean"] for r in rows], [r["vx_std"] for r in rows])
-        vx_max_std = pooled_std([r["vx_max_mean"] for r in rows], [r["vx_max_std"] for r in rows])
+        vx, s = mean(r["vx_mean"] for r in rows), mean(r["survival"] for r in rows)
+        vx_std = step_sigma(rows)
         out.append({
             "table": "transfer", "preset": preset, "variant": variant, "robot": robot, "mode": mode,
             "command_vx": vx_cmd, "d": rows[0].get("d"), "n_seeds": len(rows),
             "runs": ";".join(sorted(r["run"] for r in rows)),
             "vx": vx, "vx_std": vx_std, "vx_seed_std": seed_std(r["vx_mean"] for r in rows),
-            "vx_max": vx_max, "vx_max_std": vx_max_std, "vx_max_seed_std": seed_std(r["vx_max_mean"] for r in rows),
+            "vx_peak_1s": mean(r.get("vx_peak_1s_mean") for r in rows),
             "survival": s, "survival_seed_std": seed_std(r["survival"] for r in rows),
             "tracking_ratio": mean(r["tracking_ratio"] for r in rows),
             "valid_fraction": mean(r["valid_fraction"] for r in rows),
@@ -189,8 +210,10 @@ def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         if table == "transfer":
             src = paper.transfer_source(row["variant"], row["command_vx"]) if row["mode"] == "descriptor" else None
             values = paper.transfer_values(row["variant"], row["robot"], row["command_vx"]) if src else {}
-            extra = {f"paper_{k}": values.get(k) for k in ("vx", "vx_std", "vx_max", "vx_max_std", "survival")}
-            extra["paper_table"] = src.label if src and row["robot"] in src.rows else None
+            extra = {f"paper_{k}": values.get(k) for k in ("vx", "vx_std", "survival")}
+            found = src is not None and row["robot"] in src.rows
+            extra["paper_quantity"] = paper.speed_quantity(src) if found else None
+            extra["paper_table"] = src.label if found else None
         elif table == "calibration":
             values = paper.critic_values(row["variant"], row["robot"])
             extra = {f"paper_{k}": v for k, v in values.items()}

@@ -449,14 +449,27 @@ def transfer_source(variant: str, command_vx: float) -> PaperTable | None:
     return None
 
 
+def speed_quantity(table: PaperTable) -> str:
+    """Which speed a transfer table prints: ``v_x`` or ``v_x^max`` (the paper's name for v_x under 2.5 m/s)."""
+    return "v_x^max" if table.parts[0] == "vx_max" else "v_x"
+
+
 def transfer_values(variant: str, robot: str, command_vx: float) -> dict[str, float | None]:
-    """The paper's v_x, its σ, v_x^max, its σ and S for a variant on a robot (None where it has none)."""
+    """The paper's forward speed, its σ and S for a variant on a robot at a command (None where it has none).
+
+    ``vx`` / ``vx_std`` are the table's speed part whichever name the paper gives it: its v_x^max (2.5 m/s table)
+    is the forward speed v_x measured under the higher command — at 2.0 m/s its v_x^max cells (Table "Effect of
+    expanded morphology ranges") equal its v_x cells — so it sits beside morfic's v_x of that command, not beside a
+    peak. :func:`speed_quantity` names which the paper printed.
+    """
     table = transfer_source(variant, command_vx)
-    out: dict[str, float | None] = dict.fromkeys(("vx", "vx_std", "vx_max", "vx_max_std", "survival"))
+    out: dict[str, float | None] = dict.fromkeys(("vx", "vx_std", "survival"))
     if table is None or robot not in table.rows:
         return out
-    for metric in (*table.parts, f"{table.parts[0]}_std"):
-        out[metric] = table.value(robot, variant, metric)
+    speed = table.parts[0]
+    out["vx"] = table.value(robot, variant, speed)
+    out["vx_std"] = table.value(robot, variant, f"{speed}_std")
+    out["survival"] = table.value(robot, variant, "survival")
     return out
 
 

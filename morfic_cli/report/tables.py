@@ -45,21 +45,25 @@ def _seed_note(rows: Sequence[dict[str, Any]], pooled: bool = False) -> str:
     seeds = sorted({int(r["n_seeds"]) for r in rows})
     what = f"{seeds[0]} seed" + ("s" if seeds[0] != 1 else "") if len(seeds) == 1 else \
         f"{seeds[0]}-{seeds[-1]} seeds"
-    sigma = " (σ over envs, pooled over seeds)" if pooled else ""
+    sigma = " (σ over all alive env-steps, pooled over seeds)" if pooled else ""
     return f"Mean over {what} per cell{sigma}; numbers from the artifacts listed under Provenance."
 
 
 def transfer_table(rows: Sequence[dict[str, Any]], *, key: str, title: str, command_vx: float, mode: str,
                    variants: Sequence[str] | None = None, use_max: bool = False,
                    min_columns: int = 1) -> Table | None:
-    """Robots x variants, cells ``v ± σ / S`` (or ``v_x^max ± σ / S``); bold best speed and survival per robot."""
+    """Robots x variants, cells ``v ± σ / S``; bold best speed and survival per robot.
+
+    ``use_max`` labels the speed v_x^max, as the paper's 2.5 m/s table does: the paper's v_x^max is the forward speed
+    v_x under that (higher) command, so the cell holds the same ``vx`` / ``vx_std`` either way.
+    """
     sel = [r for r in rows if r["mode"] == mode and abs(r["command_vx"] - command_vx) < 1e-9]
     cols = _columns(sel, variants)
     if len(cols) < min_columns or not cols:
         return None
     multi = len({p for p, _ in cols}) > 1
     by = {(r["robot"], r["preset"], r["variant"]): r for r in sel}
-    speed, std = ("vx_max", "vx_max_std") if use_max else ("vx", "vx_std")
+    speed, std = "vx", "vx_std"
     out_rows = []
     for robot in sorted({r["robot"] for r in sel}, key=robot_order):
         cells = [by.get((robot, p, v)) for p, v in cols]
@@ -70,9 +74,11 @@ def transfer_table(rows: Sequence[dict[str, Any]], *, key: str, title: str, comm
              Part(c["survival"] if c else None, None, 3, sb))
             for c, vb, sb in zip(cells, v_bold, s_bold, strict=True))))
     quantity = r"$v_x^{\max} \pm \sigma / S$" if use_max else r"$\bar{v}_x \pm \sigma / S$"
-    caption = (f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s, "
-               f"{'the target descriptor on the Go2 template (the paper protocol)' if mode == 'descriptor' else 'the target robot model itself'}; "  # noqa: E501
-               "bold: best speed and best survival per robot.")
+    meaning = r" ($v_x^{\max}$ as the paper uses it: the mean forward speed under this command)" if use_max else ""
+    where = ("the target descriptor on the Go2 template (the paper protocol)" if mode == "descriptor"
+             else "the target robot model itself")
+    caption = (f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s{meaning}, "
+               f"σ over all alive env-steps, {where}; bold: best speed and best survival per robot.")
     return Table(key, title, caption, "Target", tuple(method_label(v, p, multi) for p, v in cols),
                  tuple(out_rows), notes=(_seed_note(sel, pooled=True),))
 

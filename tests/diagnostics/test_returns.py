@@ -1,4 +1,4 @@
-"""Monte-Carlo returns and I_eps: hand-computed small cases, and the truncation property on random rollouts."""
+"""Monte-Carlo returns and I_eps: hand-computed small cases, the fixed window, and the truncation property."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from morfic_cli.diagnostics.returns import (
     mc_returns,
     min_horizon,
     remaining_horizon,
-    valid_samples,
+    sample_window,
 )
 
 F, T_ = False, True
@@ -53,14 +53,48 @@ def test_min_horizon_by_hand():
 
 
 def test_i_eps_by_hand():
-    H, truncated = remaining_horizon(DONE, TIME_OUT)
-    mask = valid_samples(H, truncated, gamma=0.5, eps=0.3)  # H_eps = 2
-    # env 0: t0, t1 complete (the fall ends the episode) -> in; t2 truncated with H = 2 >= 2 -> in; t3 H = 1 -> out
-    # env 1: t0 H = 2 -> in; t1 H = 1 -> out (cut by the time-out); t2 H = 2 -> in; t3 H = 1 -> out
+    mask = sample_window(DONE, TIME_OUT, gamma=0.5, eps=0.3)  # H_eps = 2: the window is t <= T - 2 = 2
+    # env 0: t0..t2 in the window; t3 out (also under the old rule it was out: truncated with H = 1)
+    # env 1: t0 in; t1 is in the window but its episode is cut by the time-out at t1 after H = 1 < 2 rewards -> out;
+    #        t2 in (H = 2 to the recording's end); t3 out of the window
     assert mask.tolist() == [[T_, T_], [T_, F], [T_, T_], [F, F]]
     G, mask2 = mc_returns(REWARD, DONE, TIME_OUT, gamma=0.5, eps=0.3)
     assert mask2.tolist() == mask.tolist()
     assert G.tolist() == discounted_returns(REWARD, DONE, 0.5).tolist()
+
+
+def test_the_window_does_not_depend_on_falls_where_the_old_rule_did():
+    """T = 6, N = 2, gamma = 0.5, eps = 0.2 -> H_eps = 3 (0.5^2 = 0.25 > 0.2 >= 0.5^3): window t <= 3.
+
+    env 0 never falls, r = 1. env 1: r = 1, 1, 1, 1, -10 (falls at t4), then a new episode with r = 1 at t5.
+    The old rule (every sample of a fallen episode, plus truncated ones with H >= 3) also took env 1's t4 — the
+    fall — because it fell before the log ended: 9 samples, mean G = -0.6354. The window takes t0..t3 of both envs:
+    8 = N (T - H_eps + 1) samples.
+    """
+    reward = torch.tensor([[1.0, 1.0], [1.0, 1.0], [1.0, 1.0], [1.0, 1.0], [1.0, -10.0], [1.0, 1.0]])
+    done = torch.zeros(6, 2, dtype=torch.bool)
+    done[4, 1] = True
+    no = torch.zeros(6, 2, dtype=torch.bool)
+    assert min_horizon(0.5, 0.2) == 3
+    G, mask = mc_returns(reward, done, no, gamma=0.5, eps=0.2)
+    assert mask.tolist() == [[T_, T_]] * 4 + [[F, F]] * 2
+    # env 0: G_t = sum_{k=t}^{5} 0.5^(k-t) = 2 (1 - 0.5^(6-t)): 1.96875, 1.9375, 1.875, 1.75 (t0..t3), cut at the end
+    # env 1: G4 = -10, G3 = 1 - 5 = -4, G2 = 1 - 2 = -1, G1 = 1 - 0.5 = 0.5, G0 = 1 + 0.25 = 1.25 (complete)
+    assert G[:4, 0].tolist() == [1.96875, 1.9375, 1.875, 1.75]
+    assert G[:5, 1].tolist() == [1.25, 0.5, -1.0, -4.0, -10.0]
+    # new rule: mean over the 8 window samples = (7.53125 - 3.25) / 8 = 0.53515625
+    assert G[mask].mean().item() == pytest.approx(0.53515625)
+    # the old rule, for comparison: the same 8 plus the fall sample (t4, env 1): (4.28125 - 10) / 9
+    H, truncated = remaining_horizon(done, no)
+    old = ~truncated | (H >= 3)
+    assert old.tolist() == [[T_, T_]] * 4 + [[F, T_], [F, F]]
+    assert G[old].mean().item() == pytest.approx((4.28125 - 10.0) / 9)
+    # and the window is the same for every fall pattern: move the fall to t1 or remove it
+    for fall in (1, None):
+        d = torch.zeros(6, 2, dtype=torch.bool)
+        if fall is not None:
+            d[fall, 1] = True
+        assert sample_window(d, no, 0.5, 0.2).tolist() == mask.tolist()
 
 
 def test_truncated_tail_is_excluded_from_i_eps():
@@ -70,7 +104,7 @@ def test_truncated_tail_is_excluded_from_i_eps():
     no = torch.zeros(10, 1, dtype=torch.bool)
     G, mask = mc_returns(reward, no, no, gamma=0.9, eps=0.5)
     assert min_horizon(0.9, 0.5) == 7
-    assert mask[:, 0].tolist() == [True] * 4 + [False] * 6  # H = 10, 9, 8, 7 are in; 6 .. 1 are out
+    assert mask[:, 0].tolist() == [True] * 4 + [False] * 6  # the window t <= 10 - 7 = 3: H = 10, 9, 8, 7 are in
     # in: G_hat[3] = (1 - 0.9^7) / 0.1 = 5.217, missing 0.9^7 * 10 = 4.78 <= eps * 10 = 5
     assert G[3, 0].item() == pytest.approx((1 - 0.9**7) / 0.1)
     assert 10 - G[3, 0].item() <= 0.5 * 10
@@ -92,8 +126,12 @@ def test_cutting_a_rollout_moves_returns_in_i_eps_by_at_most_eps(seed):
     h_eps = min_horizon(gamma, eps)
     bound = eps * reward.abs().max() / (1 - gamma)
     assert torch.all((G_cut - G_full[:n_cut]).abs()[mask] <= bound + 1e-12)
-    fell = ~truncated  # the episode ends by a fall inside the cut recording: exact, always in I_eps
-    assert torch.all(mask[fell])
+    window = (torch.arange(n_cut) <= n_cut - h_eps)[:, None]
+    cut = truncated & (H < h_eps)
+    assert torch.equal(mask, window & ~cut)  # the window, minus samples a time-out cut short
+    fell = ~truncated  # the episode ends by a fall inside the cut recording: its return is exact
     assert torch.equal(G_cut[fell], G_full[:n_cut][fell])
     assert not torch.any(mask & truncated & (H < h_eps))
-    assert torch.equal(mask[-1], done[n_cut - 1] & ~time_out[n_cut - 1])  # the last row counts only if it is a fall
+    assert not mask[n_cut - h_eps + 1:].any()  # nothing after the window, fall or not
+    no_timeouts = torch.zeros_like(done[:n_cut])
+    assert torch.equal(sample_window(done[:n_cut], no_timeouts, gamma, eps), window.expand(n_cut, n_envs))

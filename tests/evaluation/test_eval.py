@@ -44,7 +44,8 @@ def test_every_robot_in_both_modes_through_the_cli(run_cli, store):
     robots = list_robots()
     assert [(r["robot"], r["mode"]) for r in rows] == [(n, m) for n in robots for m in ("descriptor", "full")]
     for row in rows:
-        assert {"robot", "mode", "command_vx", "vx_mean", "vx_std", "vx_max_mean", "survival", "valid"} <= set(row)
+        assert {"robot", "mode", "command_vx", "vx_mean", "vx_std", "vx_env_std", "vx_peak_1s_mean", "survival",
+                "valid"} <= set(row)
         assert row["command_vx"] == 1.0 and 0.0 <= row["survival"] <= 1.0 and isinstance(row["valid"], bool)
         assert row["num_envs"] == 2 and row["steps"] == 6
         assert " / " in row["cell"]

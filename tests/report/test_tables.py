@@ -22,10 +22,12 @@ def _run(variant: str, seed: int, wall: float = 36.0, steps: int = 1000, iters: 
                    wall_time_s=wall, device="cpu", finished=True, created="")
 
 
-def _eval(run: RunInfo, robot: str, vx: float, std: float, s: float) -> dict:
+def _eval(run: RunInfo, robot: str, vx: float, std: float, s: float, n_alive: int = 100,
+          command_vx: float = 2.0) -> dict:
     return {"run": run.name, "variant": run.variant, "seed": run.seed, "preset": run.preset,
-            "checkpoint": run.checkpoint, "robot": robot, "mode": "descriptor", "command_vx": 2.0, "d": 0.3,
-            "vx_mean": vx, "vx_std": std, "vx_max_mean": vx + 0.1, "vx_max_std": std, "survival": s,
+            "checkpoint": run.checkpoint, "robot": robot, "mode": "descriptor", "command_vx": command_vx, "d": 0.3,
+            "vx_mean": vx, "vx_std": std, "vx_env_std": 0.01, "vx_step_mean": vx, "n_alive": n_alive,
+            "vx_peak_1s_mean": vx + 0.1, "vx_peak_1s_std": std, "survival": s,
             "tracking_ratio": vx / 2, "valid_fraction": s, "num_envs": 64, "steps": 500}
 
 
@@ -36,13 +38,22 @@ def test_mean_and_std_over_seeds_by_hand():
     assert row["n_seeds"] == 2 and row["runs"] == "film-s0;film-s1"
     assert row["vx"] == pytest.approx(1.5)
     assert row["vx_seed_std"] == pytest.approx(statistics.stdev([1.0, 2.0]))  # 0.7071
-    # pooled over envs: sqrt(mean(0.09, 0.16) + var_pop(1, 2)) = sqrt(0.125 + 0.25)
+    # pooled over the alive steps of both seeds (100 each): sqrt(mean(0.09, 0.16) + var_pop(1, 2)) = sqrt(0.375)
     assert row["vx_std"] == pytest.approx(math.sqrt(0.375))
+    assert row["vx_peak_1s"] == pytest.approx(1.6)
     assert row["survival"] == pytest.approx(0.75)
     assert row["cell"] == "1.50 ± 0.61 / 0.750"
     one = transfer_rows(StoreData(runs=[a], evals=[_eval(a, "go1", 1.234, 0.2, 0.5)]))[0]
-    assert one["vx_seed_std"] is None and one["vx_std"] == pytest.approx(0.2)  # one seed: the paper's σ over envs
+    assert one["vx_seed_std"] is None and one["vx_std"] == pytest.approx(0.2)  # one seed: the run's own σ
     assert pooled_std([None], [None]) is None
+    # unequal sample counts: seed 0 has 300 alive steps at mean 1 (σ 0), seed 1 has 100 at mean 2 (σ 0):
+    # μ = (300 + 200) / 400 = 1.25, σ² = (300 * 0.0625 + 100 * 0.5625) / 400 = 0.1875
+    assert pooled_std([1.0, 2.0], [0.0, 0.0], [300, 100]) == pytest.approx(math.sqrt(0.1875))
+    # an evaluation stored before σ was over steps (no vx_env_std) has another σ: the cell's σ stays empty
+    old = {k: v for k, v in _eval(a, "go1", 1.0, 0.3, 0.5).items() if k not in ("vx_env_std", "vx_step_mean",
+                                                                                   "n_alive")}
+    (r_old,) = transfer_rows(StoreData(runs=[a], evals=[old]))
+    assert r_old["vx_std"] is None and r_old["cell"] == "1.00 ± - / 0.500"
 
 
 def test_paper_columns_and_compute_normalisation():
@@ -53,7 +64,13 @@ def test_paper_columns_and_compute_normalisation():
     (cp,) = add_paper_columns([c])
     assert cp["paper_s_per_iteration"] == "1.98-2.70" and cp["paper_table"] == "tab:training_compute"
     (t,) = add_paper_columns(transfer_rows(StoreData(runs=[a], evals=[_eval(a, "b1", 0.2, 0.1, 1.0)])))
-    assert t["paper_vx"] == 0.22 and t["paper_survival"] == 1.0 and t["paper_vx_max"] is None
+    assert t["paper_vx"] == 0.22 and t["paper_survival"] == 1.0 and t["paper_quantity"] == "v_x"
+    # at 2.5 m/s the paper's v_x^max (its speed under the higher command) sits beside our v_x of that command
+    (f,) = add_paper_columns(transfer_rows(StoreData(runs=[a], evals=[_eval(a, "aliengo", 0.9, 0.5, 1.0,
+                                                                            command_vx=2.5)])))
+    assert f["paper_quantity"] == "v_x^max" and f["paper_table"] == "tab:cross_embodiment_baselines_25"
+    assert f["paper_vx"] == 0.832 and f["paper_vx_std"] == 0.542 and f["paper_survival"] == 1.0
+    assert f["vx"] == pytest.approx(0.9)
 
 
 def test_bold_best_ties_and_missing():
