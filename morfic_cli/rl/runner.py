@@ -36,6 +36,7 @@ from morfic_cli.envs import observations as O
 from morfic_cli.errors import ArtifactNotFoundError, MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
+from morfic_cli.rl.models import link_morphology_encoder
 from morfic_cli.rl.ppo import ALGORITHM_CLASS
 from morfic_cli.rl.variants import resolve_variant
 from morfic_cli.sim.args import NUM_JOINTS
@@ -51,11 +52,19 @@ def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
     Raises:
         MorficError: A user variant whose module cannot be imported (:func:`~morfic_cli.rl.variants.resolve_variant`).
     """
-    actor, critic, obs_groups = resolve_variant(cfg.variant).model_cfgs()
+    variant = resolve_variant(cfg.variant)
+    actor, critic, obs_groups = variant.model_cfgs()
     actor["hidden_dims"] = list(cfg.model.actor_hidden_dims)
     actor["distribution_cfg"]["init_std"] = cfg.model.init_std
     if cfg.model.critic_hidden_dims is not None:
         critic["hidden_dims"] = list(cfg.model.critic_hidden_dims)
+    if variant.stock:  # a user's class takes the config its critic_defaults give (docs/extending.md)
+        if critic["conditioning"] == "film":
+            critic["conditioning_scale"] = cfg.model.film_scale
+        if critic["conditioning"] == "hyper" and cfg.model.hyper_conditions == "head":
+            critic["conditioning"] = "hyper_head"
+        if cfg.model.shared_morphology_encoder and variant.actor_morphology and variant.critic_morphology:
+            critic["shared_morphology_encoder"] = True
     algorithm = {"class_name": ALGORITHM_CLASS, "optimizer": "adam", **dataclasses.asdict(cfg.ppo),
                  "rnd_cfg": None, "symmetry_cfg": None}
     return {
@@ -72,7 +81,7 @@ def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
 
 def dummy_observations(cfg: TrainCfg, batch: int = 1) -> TensorDict:
     """Zero observations with the env's group shapes, to build models without an env. Batch shape: (batch,)."""
-    h = cfg.env.obs.history_len
+    h = O.history_frames(cfg.env.obs)
     return TensorDict(
         {
             "policy": torch.zeros(batch, O.POLICY_DIM),
@@ -98,6 +107,7 @@ def build_models(cfg: TrainCfg) -> tuple[torch.nn.Module, torch.nn.Module]:
     critic_class, critic_kwargs = resolve_class(rcfg["critic"])
     actor = actor_class(obs, groups, "actor", NUM_JOINTS, **actor_kwargs)
     critic = critic_class(obs, groups, "critic", 1, **critic_kwargs)
+    link_morphology_encoder(actor, critic)
     return actor, critic
 
 

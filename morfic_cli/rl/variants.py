@@ -120,7 +120,7 @@ STOCK: dict[str, Variant] = {v.name: v for v in (
     _stock("ppo", "PPO", ("main",), "none", actor_morphology=False),
     _stock("actor-only", "Actor-only", ("main",), "none"),
     _stock("concat", "Actor+Critic", ("main",), "concat"),
-    _stock("film", "MorFiC-F", ("main", "ablation"), "film"),
+    _stock("film", "MorFiC-F", ("main", "ablation"), "film", 0.1),
     _stock("film-scaled", "MorFiC-F(Scaled)", ("ablation",), "film", 0.1, (1024, 512, 256)),
     _stock("hyper", "MorFiC-H", ("ablation",), "hyper", 0.1),
     _stock("adaln", "MorFiC-A", ("ablation",), "adaln"),
