@@ -32,6 +32,7 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 from tensordict import TensorDict
 
+from morfic_cli import __version__
 from morfic_cli.envs import observations as O
 from morfic_cli.errors import ArtifactNotFoundError, MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
@@ -142,9 +143,12 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
         actor.load_state_dict(state["actor"])
         critic.load_state_dict(state["critic"])
     except RuntimeError as exc:
-        if variant.stock:
-            raise  # the paper's classes: a mismatch is a bug in morfic
         first = str(exc).strip().splitlines()[0]
+        if variant.stock:
+            raise MorficError(
+                f"checkpoint '{spec}' was written by morfic {manifest.morfic_version}, and its weights do not fit "
+                f"the '{cfg.variant}' models of this morfic {__version__} ({first}); evaluate it with morfic "
+                f"{manifest.morfic_version}, or retrain it with this version.") from exc
         raise MorficError(f"checkpoint '{spec}' does not fit variant '{cfg.variant}' ({variant.critic_class}) as "
                           f"it is installed now ({first}); install the version of the class it was trained "
                           "with.") from exc
