@@ -104,7 +104,7 @@ def smoke_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
 def cpu_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
     """Sized for a 2-core machine: 512 envs x 24 steps x 1000 iterations (12.3 M transitions).
 
-    Two learning epochs instead of the paper's five: on 2 cores the update of the 720-input actor dominates the
+    Two learning epochs instead of the paper's five: on 2 cores the update of the 768-input actor dominates the
     iteration (5 epochs: 5.5 s of 7.5 s at 512 envs), so fewer epochs buy more iterations per hour. Action
     latency is sampled in 0..2 policy steps instead of the paper's 0..6: with 3 % of the paper's transitions,
     up to 120 ms of latency is a third of a 3 Hz gait cycle, a hard start for a small budget (docs/training.md);

@@ -5,8 +5,9 @@ Sizes follow the paper's Tables "architecture" and "conditioning variants". Both
 from ``class_name`` strings (``"morfic_cli.rl.models:MorficActor"``); which variant uses which configuration is
 the registry's (:mod:`morfic_cli.rl.variants`). Observation groups (N = batch):
 
-- ``history`` (N, 15, 48): noisy o_{t-14..t}, flattened to (N, 720) — the actor's state.
-- ``critic`` (N, 15, 48): the same history, clean — the critic's state.
+- ``history`` (N, 16, 48): noisy [h_t, o_t] = o_{t-15..t}, flattened to (N, 768) — the actor's state (15 frames,
+  720, for runs recorded with ``history_includes_current``).
+- ``critic`` (N, 16, 48): the same history, clean — the critic's state.
 - ``privileged`` (N, 18): p_t, encoded by the critic into z_priv.
 - ``morphology`` (N, 11): the normalised descriptor m, encoded into z_m = f_psi(m).
 
@@ -61,11 +62,11 @@ def flatten_groups(obs: TensorDict, groups: list[str]) -> torch.Tensor:
     """Concatenate observation groups, each flattened past the batch dimension.
 
     Args:
-        obs: Observation groups; e.g. ``history`` of shape (N, 15, 48).
+        obs: Observation groups; e.g. ``history`` of shape (N, 16, 48).
         groups: Group names, in order.
 
     Returns:
-        Shape: (N, sum of the groups' per-sample sizes), e.g. (N, 720) for ``["history"]``.
+        Shape: (N, sum of the groups' per-sample sizes), e.g. (N, 768) for ``["history"]``.
     """
     return torch.cat([obs[g].flatten(start_dim=1) for g in groups], dim=-1)
 
@@ -76,7 +77,7 @@ def _state_groups(
     """Split a model's groups into the state groups (flattened, normalised) and its role groups (encoded apart).
 
     Returns:
-        The state groups in config order and their flattened size (e.g. (["history"], 720)).
+        The state groups in config order and their flattened size (e.g. (["history"], 768)).
     """
     active = list(obs_groups[obs_set])
     roles = [g for g in role_groups if g is not None]
@@ -229,7 +230,7 @@ class MorficActor(MLPModel):
 
     ``latent = [s, dropout(sg(z_priv_hat)), z_m]`` (sg = stop-gradient) with
 
-    - ``s``: the flattened (optionally normalised) state groups, e.g. ``history`` -> (N, 720);
+    - ``s``: the flattened (optionally normalised) state groups, e.g. ``history`` -> (N, 768);
     - ``z_priv_hat = adaptation(s)`` (N, 16): trained only by MorficPPO's regression to the critic's z_priv, so the
       policy loss does not reach the adaptation module;
     - ``z_m = f_psi(m)`` (N, 64): the actor's own morphology encoder, left out when ``morphology_group`` is None
@@ -272,7 +273,7 @@ class MorficActor(MLPModel):
             morphology_group: Group holding m (N, 11), or None for no z_m (variant ``ppo``).
             morphology_hidden_dims: Hidden widths of the morphology encoder (11 -> 128 -> 64).
             morphology_latent_dim: Size of z_m.
-            adaptation_hidden_dims: Hidden widths of the adaptation module (720 -> 256 -> 128 -> 16).
+            adaptation_hidden_dims: Hidden widths of the adaptation module (768 -> 256 -> 128 -> 16).
             privileged_latent_dim: Size of z_priv_hat; must equal the critic's z_priv size.
             latent_dropout: Dropout probability on z_priv_hat in the policy input during training.
         """
@@ -304,7 +305,7 @@ class MorficActor(MLPModel):
         return torch.cat(parts, dim=-1)
 
     def get_state(self, obs: TensorDict) -> torch.Tensor:
-        """The flattened, optionally normalised state groups. Shape: (N, D_s), D_s = 720 for ``history``."""
+        """The flattened, optionally normalised state groups. Shape: (N, D_s), D_s = 768 for ``history``."""
         return self.obs_normalizer(flatten_groups(obs, self.obs_groups))
 
     def estimate_privileged(self, obs: TensorDict) -> torch.Tensor:
@@ -367,7 +368,7 @@ class MorficActor(MLPModel):
 class MorficCritic(MLPModel):
     """Value function ``V(h_t^clean, z_priv; z_m)``: an rsl-rl MLPModel whose trunk is conditioned on z_m.
 
-    ``V = trunk([s, z_priv (, z_m if concat)])`` with ``s`` the flattened clean history (N, 720) and
+    ``V = trunk([s, z_priv (, z_m if concat)])`` with ``s`` the flattened clean history (N, 768) and
     ``z_priv = g(p_t)`` (N, 16). The trunk is MLPModel's ``self.mlp`` (rsl-rl :class:`~rsl_rl.modules.MLP`, layers
     ``Linear, act, ..., Linear``); :meth:`trunk` runs it layer by layer and applies one modulator per hidden layer
     (:class:`FiLM`, :class:`AdaLN` or :class:`LowRankAdapter`). The critic's morphology encoder exists only when the
@@ -525,7 +526,7 @@ class MorficCritic(MLPModel):
         return self._latent(obs, z_m)
 
     def get_state(self, obs: TensorDict) -> torch.Tensor:
-        """The flattened, optionally normalised clean history. Shape: (N, D_s), D_s = 720."""
+        """The flattened, optionally normalised clean history. Shape: (N, D_s), D_s = 768."""
         return self.obs_normalizer(flatten_groups(obs, self.obs_groups))
 
     def encode_privileged(self, obs: TensorDict) -> torch.Tensor:
