@@ -166,3 +166,22 @@ def test_a_config_recorded_before_the_new_fields_reads_as_the_old_method():
     fresh = preset_cfg("cpu", "film")
     assert fresh.model.film_scale == 0.1 and fresh.model.shared_morphology_encoder
     assert not fresh.env.obs.history_includes_current and fresh.env.rand.rerandomize_interval_s == 10.0
+
+
+def test_in_a_training_iteration_the_critic_encodes_no_morphology_of_its_own(tmp_path):
+    """Rollout steps and PPO mini-batches: the critic reuses the actor's z_m (one encoder pass per actor pass)."""
+    from morfic_cli.rl.runner import new_run
+    from morfic_cli.store import Store
+
+    cfg = dataclasses.replace(preset_cfg("smoke", "film"), max_iterations=1)
+    run = new_run(Store(tmp_path / "s"), cfg, "z")
+    actor, critic = run.runner.alg._raw_actor, run.runner.alg._raw_critic
+    assert critic._shared_source == (actor,)
+    calls = {"encoder": 0, "actor": 0, "critic": 0}
+    actor.morphology_encoder.register_forward_hook(lambda *_: calls.__setitem__("encoder", calls["encoder"] + 1))
+    actor.register_forward_hook(lambda *_: calls.__setitem__("actor", calls["actor"] + 1))
+    critic.register_forward_hook(lambda *_: calls.__setitem__("critic", calls["critic"] + 1))
+    run.train()
+    # 8 rollout steps + 2 mini-batches x 1 epoch = 10 actor and 10 critic passes, plus the critic's bootstrap
+    # value on the last observation (no actor pass there): 11 critic passes, 10 + 1 encoder passes.
+    assert calls == {"actor": 10, "critic": 11, "encoder": 11}
