@@ -82,6 +82,10 @@ class DomainRandCfg:
     """Base centre-of-mass offset, uniform in [-x, x] per axis (m)."""
     joint_friction: tuple[float, float] = (0.0, 0.2)
     """Joint dry friction (N m), uniform per joint."""
+    rerandomize_interval_s: float = 10.0
+    """Friction, restitution, COM offset and joint friction are drawn again every this many seconds of an episode
+    (and at reset), as the paper re-randomises rigid-body and contact properties periodically "with the interval
+    10 s". 0 draws them at reset only (morfic before this field; runs recorded without it read as 0)."""
     push_interval_s: float = 15.0
     """Seconds between pushes (paper: 15 s)."""
     push_vel: float = 1.0
@@ -114,7 +118,12 @@ class ObsCfg:
     noise_joint_pos: float = 0.01
     noise_joint_vel: float = 1.5
     history_len: int = 15
-    """Length of the observation history h_t (paper: 15)."""
+    """|h_t|, the number of past observations in the history (paper: 15)."""
+    history_includes_current: bool = False
+    """False (the paper's h_t = {o_{t-k}}, k = 1..15, Table "Observation streams"): the ``history`` and ``critic``
+    groups hold [o_{t-15}, ..., o_{t-1}, o_t], the 15 previous observations followed by the current one, so the
+    networks see both of the paper's streams o_t and h_t (16 x 48). True: the groups hold o_{t-14..t}, 15 entries
+    with o_t the newest (morfic before this field; runs recorded without it read as True)."""
     clip: float = 100.0
     """Observations are clipped to [-clip, clip]."""
 
@@ -168,11 +177,12 @@ class RewardCfg:
     w_yaw: float = 2.0
     """r_yaw, yaw-rate tracking (task, +). Half of r_lin's maximum (4), the 2:1 lin/yaw ratio of
     legged_gym (1.0 / 0.5)."""
-    w_gaitF: float = 2.0
-    """r_gaitF, no force on swing feet (task, +; the term itself is <= 0). walk-these-ways uses 4
-    next to tracking 1; halved here so tracking (4 w_lin) stays twice the gait shaping."""
-    w_gaitV: float = 2.0
-    """r_gaitV, no velocity of stance feet (task, +; term <= 0). Same reasoning as ``w_gaitF``."""
+    w_gaitF: float = 0.0
+    """r_gaitF, no force on swing feet (task, +; the term itself is <= 0). Off (0) by default: it follows the
+    gait clock, which no observation group carries, so no critic could predict it (docs/rewards.md, "Gait-clock
+    terms"). Runs before this default trained with 2.0 (walk-these-ways' 4 halved) and record it."""
+    w_gaitV: float = 0.0
+    """r_gaitV, no velocity of stance feet (task, +; term <= 0). Off by default like ``w_gaitF`` (was 2.0)."""
     w_jump: float = 10.0
     """r_jump, base-height tracking with h_cmd = 0 (task, +; term <= 0). walk-these-ways' 10: a
     5 cm height error costs 0.025."""
@@ -212,10 +222,10 @@ class RewardCfg:
     with weight 0.5-1): keeps the hips near default without forbidding the trot's joint swing."""
     w_qdot: float = 1e-4
     """p_qdot, joint speeds (penalty, -). walk-these-ways' dof_vel 1e-4."""
-    w_raibert: float = 5.0
+    w_raibert: float = 0.0
     """r_raibert, squared distance of the feet from the Raibert footholds (penalty, -: the table
-    defines it as a non-negative distance, so it is subtracted). walk-these-ways uses -10 next to
-    its gait terms at 4; halved with them."""
+    defines it as a non-negative distance, so it is subtracted). Off by default like ``w_gaitF``: its
+    footholds follow the unobserved gait clock (was 5.0, walk-these-ways' 10 halved)."""
 
     # ---- stability shaping (added) ----
     w_upright: float = 1.0

@@ -50,7 +50,8 @@ def export(
     """Export a deployable policy with the metadata a robot stack needs.
 
     The model is the deployed actor path (adaptation module + morphology encoder + actor, observation
-    normalisation included): inputs `history` (N, 15, 48) and, unless --robot bakes it in, `morphology` (N, 11);
+    normalisation included): inputs `history` (N, 16, 48) (15 for runs before issue 16) and, unless --robot
+    bakes it in, `morphology` (N, 11);
     output `actions` (N, 12) (and `joint_targets` with --targets). ONNX has opset 18 and a dynamic batch axis.
     policy.json beside it holds the joint order, default pose, action scale, Kp/Kd, torque and joint limits,
     observation layout and scales, history length, control dt, descriptor, run and checkpoint ids. The export is

@@ -49,7 +49,7 @@ class LocomotionEnv(VecEnv):
     """Velocity-tracking locomotion with per-env morphology and domain randomisation.
 
     Observation groups (TensorDict keys), N = num_envs:
-        ``policy`` (N, 48), ``history`` (N, 15, 48), ``critic`` (N, 15, 48, clean),
+        ``policy`` (N, 48), ``history`` (N, 16, 48) = [h_t, o_t], ``critic`` (N, 16, 48, clean),
         ``privileged`` (N, 18), ``morphology`` (N, 11).
     """
 
@@ -95,7 +95,7 @@ class LocomotionEnv(VecEnv):
 
     # ------------------------------------------------------------------ buffers
     def _alloc_buffers(self) -> None:
-        n, h = self.num_envs, self.cfg.obs.history_len
+        n, h = self.num_envs, O.history_frames(self.cfg.obs)
         f32 = {"dtype": torch.float32}
         self._all_ids = torch.arange(n)
         self.episode_length_buf = torch.zeros(n, dtype=torch.long)
@@ -261,8 +261,9 @@ class LocomotionEnv(VecEnv):
         self.history = O.push_history(self.history, noisy)
         self.critic_history = O.push_history(self.critic_history, clean)
         if len(reset_ids):
-            self.history[reset_ids] = noisy[reset_ids, None].expand(-1, self.cfg.obs.history_len, -1)
-            self.critic_history[reset_ids] = clean[reset_ids, None].expand(-1, self.cfg.obs.history_len, -1)
+            frames = O.history_frames(self.cfg.obs)
+            self.history[reset_ids] = noisy[reset_ids, None].expand(-1, frames, -1)
+            self.critic_history[reset_ids] = clean[reset_ids, None].expand(-1, frames, -1)
         p = self.params
         self.obs_buf = noisy
         self._obs = TensorDict(
@@ -284,10 +285,27 @@ class LocomotionEnv(VecEnv):
         push_every = max(1, int(round(rand.push_interval_s / self.dt)))
         if rand.enabled and rand.pushes and self.common_step_counter % push_every == 0:
             self.backend.push(self._all_ids, sample_push(self.num_envs, rand, self.gen))
+        self._rerandomize()
         every = max(1, int(round(self.cfg.commands.resample_time_s / self.dt)))
         ids = ((self.episode_length_buf % every) == 0).nonzero(as_tuple=False).flatten()
         if len(ids):
             self.commands[ids] = sample_commands(len(ids), self.command_ranges, self.cfg.commands, self.gen)
+
+    def _rerandomize(self) -> None:
+        """Re-draw friction, restitution, COM offset and joint friction (paper: every 10 s).
+
+        For the envs whose episode time is a positive multiple of ``rand.rerandomize_interval_s``; p_t (the
+        privileged group) follows.
+        """
+        rand = self.cfg.rand
+        if not rand.enabled or rand.rerandomize_interval_s <= 0:
+            return
+        every = max(1, int(round(rand.rerandomize_interval_s / self.dt)))
+        ids = ((self.episode_length_buf % every) == 0).nonzero(as_tuple=False).flatten()
+        if len(ids):
+            dyn = sample_dynamics(len(ids), rand, self.gen)
+            self.backend.set_dynamics(ids, dyn.friction, dyn.restitution, dyn.com_offset, dyn.joint_friction)
+            self.params = self.backend.params()
 
     def _episode_log(
         self, ids: torch.Tensor, time_outs: torch.Tensor, masks: dict[str, torch.Tensor], bad: torch.Tensor

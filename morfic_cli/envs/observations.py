@@ -2,7 +2,9 @@
 
 - ``policy``: o_t (48) = [v (3), omega (3), g_proj (3), c (3), q - q0 (12), qdot (12), a_{t-1} (12)],
   scaled, with sensor noise during training.
-- ``history``: h_t, the last ``history_len`` (15) o_t, newest last, noisy. Shape (N, 15, 48).
+- ``history``: [h_t, o_t] with h_t = {o_{t-k}}, k = 1..15 (paper Table "Observation streams"): the 15 previous
+  observations then the current one, oldest first, noisy. Shape (N, 16, 48) = (N, :func:`history_frames`, 48).
+  With ``ObsCfg.history_includes_current`` (runs before that field) it is o_{t-14..t}, (N, 15, 48).
 - ``critic``: the same history with clean values (the critic sees clean observations).
 - ``privileged``: p_t (18) = [ground friction, restitution, base mass, COM offset (3), joint friction (12)].
 - ``morphology``: the 11-D descriptor normalised to [-1, 1] over the training support.
@@ -28,6 +30,14 @@ POLICY_LAYOUT: tuple[tuple[str, int, int], ...] = (
     ("joint_vel", 24, 36),
     ("last_action", 36, 48),
 )
+
+
+def history_frames(cfg: ObsCfg) -> int:
+    """Observations in the ``history`` / ``critic`` groups: |h_t| + 1 for o_t (16).
+
+    |h_t| (15) when ``history_includes_current`` counts o_t as one of h_t's entries.
+    """
+    return cfg.history_len + (0 if cfg.history_includes_current else 1)
 
 
 def obs_scales(cfg: ObsCfg) -> torch.Tensor:

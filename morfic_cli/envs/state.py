@@ -78,3 +78,33 @@ class EnvState:
     nominal_height: torch.Tensor
     total_mass: torch.Tensor
     dt: float
+
+
+OBSERVED = "observed"
+"""In o_t (every network's history), or the policy's own action a_t (o_{t+1}'s last action)."""
+MORPHOLOGY = "morphology"
+"""A function of the morphology descriptor m (the ``morphology`` group) or a constant."""
+PHYSICAL = "physical"
+"""A function of the simulator's state and of p_t (the ``privileged`` group): Markov state that the history
+estimates (base height, foot positions, contact forces, torques)."""
+CLOCK = "clock"
+"""The gait clock: a phase drawn at each reset that no observation group carries, so no network can know it."""
+
+#: Where each :class:`EnvState` field comes from, for the rule that every reward term with a non-zero weight is a
+#: function of what the networks observe (issue 16 item 4; tested in tests/envs/test_rewards.py): it may read
+#: ``observed``, ``morphology`` and ``physical`` fields, never a ``clock`` one. For ``observed`` fields the value is
+#: the :data:`~morfic_cli.envs.observations.POLICY_LAYOUT` term that carries it.
+FIELD_SOURCES: dict[str, tuple[str, str | None]] = {
+    "base_pos_w": (PHYSICAL, None), "base_quat_w": (PHYSICAL, None),
+    "base_lin_vel_b": (OBSERVED, "base_lin_vel"), "base_ang_vel_b": (OBSERVED, "base_ang_vel"),
+    "projected_gravity_b": (OBSERVED, "projected_gravity"), "joint_pos": (OBSERVED, "joint_pos"),
+    "joint_vel": (OBSERVED, "joint_vel"), "joint_vel_prev": (OBSERVED, "joint_vel"),
+    "joint_torque": (PHYSICAL, None), "default_joint_pos": (MORPHOLOGY, None),
+    "joint_pos_min": (MORPHOLOGY, None), "joint_pos_max": (MORPHOLOGY, None),
+    "foot_pos_w": (PHYSICAL, None), "foot_vel_w": (PHYSICAL, None), "foot_vel_w_prev": (PHYSICAL, None),
+    "foot_force_w": (PHYSICAL, None), "foot_contact": (PHYSICAL, None), "body_contact_force": (PHYSICAL, None),
+    "command": (OBSERVED, "command"), "action": (OBSERVED, "last_action"), "action_prev": (OBSERVED, "last_action"),
+    "gait_phase": (CLOCK, None), "desired_contact": (CLOCK, None), "gait_frequency": (CLOCK, None),
+    "nominal_foot_pos_b": (MORPHOLOGY, None), "nominal_height": (MORPHOLOGY, None), "total_mass": (MORPHOLOGY, None),
+    "dt": (MORPHOLOGY, None),
+}

@@ -56,7 +56,7 @@ class Rollout:
     """qpos addresses of the 12 joints in those models (the free joint is qpos[0:7]). Shape: (12,)."""
     obs: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     """The observation groups the models saw at each step, before acting (``keep_obs``): group -> (T, N, ...)
-    float32, e.g. ``critic`` (T, N, 15, 48). Row t is s_t, the input of ``action[t]`` and ``value[t]``."""
+    float32, e.g. ``critic`` (T, N, 16, 48). Row t is s_t, the input of ``action[t]`` and ``value[t]``."""
 
     def qpos(self, num_envs: int) -> np.ndarray:
         """Full qpos of the first ``num_envs`` envs at each step. Shape: (T, num_envs, nq)."""

@@ -116,8 +116,10 @@ def observation_section(env: EnvCfg) -> dict[str, Any]:
         )
     return {
         "size": O.POLICY_DIM,
-        "history_len": env.obs.history_len,
-        "history_order": "oldest first, newest last: history[:, -1] is o_t",
+        "history_len": O.history_frames(env.obs),
+        "history_order": ("oldest first, newest last: history[:, -1] is o_t and history[:, :-1] the paper's "
+                          "h_t = o_{t-15..t-1}" if not env.obs.history_includes_current
+                          else "oldest first, newest last: history[:, -1] is o_t (o_{t-14..t})"),
         "history_reset": "at start (and after a reset) every slot holds the first observation",
         "clip": env.obs.clip,
         "formula": "o_t = clip(raw * scale, -clip, clip), raw terms concatenated in this order",
@@ -162,7 +164,7 @@ def io_section(history_len: int, morphology_input: bool, targets: bool) -> tuple
             "name": "history",
             "shape": ["batch", history_len, O.POLICY_DIM],
             "dtype": "float32",
-            "description": "the last history_len observations o_t, oldest first",
+            "description": "the last history_len observations, oldest first, o_t last",
         }
     ]
     if morphology_input:
@@ -218,7 +220,7 @@ def build_metadata(
     Returns:
         The JSON-serialisable metadata (see the module docstring).
     """
-    inputs, outputs = io_section(env.obs.history_len, morphology_input, targets)
+    inputs, outputs = io_section(O.history_frames(env.obs), morphology_input, targets)
     return {
         "schema": SCHEMA,
         "morfic_version": __version__,

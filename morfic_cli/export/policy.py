@@ -4,8 +4,8 @@ The core is :meth:`MorficActor.as_onnx` (rsl-rl's export pattern): a copy of the
 adaptation module, the morphology encoder and the policy MLP, returning the distribution mean. Here it gets
 named inputs instead of one flat vector:
 
-- :class:`DescriptorInputPolicy`: ``(history (N, 15, 48), morphology (N, 11)) -> actions (N, 12)``;
-- :class:`FixedDescriptorPolicy`: ``history (N, 15, 48) -> actions (N, 12)``, the normalised descriptor of one
+- :class:`DescriptorInputPolicy`: ``(history (N, H, 48), morphology (N, 11)) -> actions (N, 12)``;
+- :class:`FixedDescriptorPolicy`: ``history (N, H, 48) -> actions (N, 12)``, the normalised descriptor of one
   robot stored as a buffer (``--robot``; also used for ``ppo``, whose actor has no morphology input);
 - :class:`JointTargetPolicy`: as the fixed one, plus ``joint_targets (N, 12)`` by the env's rule
   ``clamp(q0 + action_scale * clip(a, -action_clip, action_clip), q_min, q_max)`` (``--targets``).

@@ -67,7 +67,7 @@ def random_inputs(meta: dict[str, Any], samples: int, seed: int) -> dict[str, np
     support is [-1, 1], a little outside included).
 
     Returns:
-        Input name -> float32 array, e.g. ``history`` (samples, 15, 48).
+        Input name -> float32 array, e.g. ``history`` (samples, 16, 48).
     """
     gen = torch.Generator().manual_seed(seed)
     out = {}

@@ -22,6 +22,8 @@ from morfic_cli.rl.variants import resolve_variant
 from morfic_cli.validation import validate_train_cfg
 
 PRESETS: tuple[str, ...] = ("smoke", "cpu", "paper")
+HYPER_CONDITIONS: tuple[str, ...] = ("head", "layers")
+"""Values of :attr:`ModelCfg.hyper_conditions`."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,20 @@ class ModelCfg:
     """None: [512, 256, 128], or [1024, 512, 256] for ``film-scaled``."""
     init_std: float = 1.0
     """Initial action standard deviation of the Gaussian policy."""
+    film_scale: float = 0.1
+    """s of the residual FiLM update h (1 + s gamma) + s beta of ``film`` and ``film-scaled`` (paper Table
+    "architecture": FiLM scale 0.1), so the two differ only in the trunk. 1.0 is the conditioning-variants
+    table's other reading (plain FiLM, scale on the scaled variant only), and what ``film`` runs before this
+    field used."""
+    hyper_conditions: str = "head"
+    """What ``hyper``'s hypernetwork generates: "head", eq. (hyper) V = A_m h_t + c_m with (A_m, c_m) = H_eta(z_m)
+    (a rank-16, 0.1-scaled delta on a learned base head; the trunk is unconditioned), or "layers", a low-rank
+    residual adapter on every hidden layer (the conditioning-variants table's "h <- W h + B_z A_z h"; runs before
+    this field)."""
+    shared_morphology_encoder: bool = True
+    """One morphology encoder f_psi whose z_m feeds both the actor and the critic (paper: "the same z is provided
+    to both"), trained by the sum of PPO's losses. False: each network has its own encoder (runs before this
+    field). Only variants where both networks see z_m share it."""
 
 
 @dataclass(frozen=True)
@@ -89,7 +105,7 @@ def smoke_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
 def cpu_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
     """Sized for a 2-core machine: 512 envs x 24 steps x 1000 iterations (12.3 M transitions).
 
-    Two learning epochs instead of the paper's five: on 2 cores the update of the 720-input actor dominates the
+    Two learning epochs instead of the paper's five: on 2 cores the update of the 768-input actor dominates the
     iteration (5 epochs: 5.5 s of 7.5 s at 512 envs), so fewer epochs buy more iterations per hour. Action
     latency is sampled in 0..2 policy steps instead of the paper's 0..6: with 3 % of the paper's transitions,
     up to 120 ms of latency is a third of a 3 Hz gait cycle, a hard start for a small budget (docs/training.md);
@@ -134,13 +150,49 @@ def train_cfg_to_dict(cfg: TrainCfg) -> dict[str, Any]:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
 
 
+#: Values of fields a run recorded before the field existed: what that morfic did (fields not listed take their
+#: default). A callable gets the recorded config, e.g. to depend on the variant. These are never the defaults of a
+#: new run; they keep an old checkpoint evaluating, diagnosing and resuming exactly as it was trained.
+LEGACY_VALUES: dict[str, Any] = {
+    "model.film_scale": lambda doc: 0.1 if doc.get("variant") == "film-scaled" else 1.0,
+    "model.hyper_conditions": "layers",
+    "model.shared_morphology_encoder": False,
+    "env.obs.history_includes_current": True,
+    "env.rand.rerandomize_interval_s": 0.0,
+}
+
+
+def fill_legacy(doc: dict[str, Any]) -> dict[str, Any]:
+    """A recorded config with every field it lacks from :data:`LEGACY_VALUES` filled in (a new dict).
+
+    Only sections the record has are filled; a complete record comes back unchanged.
+    """
+    out = json.loads(json.dumps(doc))
+    for key, value in LEGACY_VALUES.items():
+        *parents, leaf = key.split(".")
+        node = out
+        for part in parents:
+            node = node.get(part) if isinstance(node, dict) else None
+            if node is None:
+                break
+        if isinstance(node, dict) and leaf not in node:
+            node[leaf] = value(doc) if callable(value) else value
+    return out
+
+
 def train_cfg_from_dict(doc: dict[str, Any]) -> TrainCfg:
     """Rebuild a :class:`TrainCfg` from :func:`train_cfg_to_dict`'s output (e.g. a checkpoint manifest).
+
+    Fields the record lacks (it was written by an older morfic) get :data:`LEGACY_VALUES`, not today's defaults.
 
     Raises:
         MorficError: Unknown keys or values of the wrong type.
     """
-    return _build(TrainCfg, doc, "")
+    out = _build(TrainCfg, fill_legacy(doc), "")
+    if out.model.hyper_conditions not in HYPER_CONDITIONS:
+        raise MorficError(f"model.hyper_conditions must be one of {', '.join(HYPER_CONDITIONS)}; "
+                          f"got '{out.model.hyper_conditions}'.")
+    return out
 
 
 def _build(cls: type, doc: dict[str, Any], prefix: str) -> Any:

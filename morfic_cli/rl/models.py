@@ -5,8 +5,9 @@ Sizes follow the paper's Tables "architecture" and "conditioning variants". Both
 from ``class_name`` strings (``"morfic_cli.rl.models:MorficActor"``); which variant uses which configuration is
 the registry's (:mod:`morfic_cli.rl.variants`). Observation groups (N = batch):
 
-- ``history`` (N, 15, 48): noisy o_{t-14..t}, flattened to (N, 720) — the actor's state.
-- ``critic`` (N, 15, 48): the same history, clean — the critic's state.
+- ``history`` (N, 16, 48): noisy [h_t, o_t] = o_{t-15..t}, flattened to (N, 768) — the actor's state (15 frames,
+  720, for runs recorded with ``history_includes_current``).
+- ``critic`` (N, 16, 48): the same history, clean — the critic's state.
 - ``privileged`` (N, 18): p_t, encoded by the critic into z_priv.
 - ``morphology`` (N, 11): the normalised descriptor m, encoded into z_m = f_psi(m).
 
@@ -20,17 +21,24 @@ none          h
 concat        none per layer; z_m is appended to the trunk input, eq. (add)
 film          h (1 + s gamma_l(z_m)) + s beta_l(z_m), eq. (film) in residual form
 adaln         LN(h) (1 + s gamma_l(z_m)) + s beta_l(z_m), eq. (adaln) in residual form
-hyper         W x + b + s B_l(z_m) A_l(z_m) x, rank r, eq. (hyper) as a low-rank residual adapter
+hyper         W x + b + s B_l(z_m) A_l(z_m) x, rank r: the conditioning-variants table's low-rank adapter
+hyper_head    hidden layers unconditioned; the head V = A_m h + c_m, (A_m, c_m) = H_eta(z_m), eq. (hyper)
 ============  ===============================================================================
 
 Each modulation is followed by the trunk activation (ELU). The generators' last layers (FiLM's gamma/beta, hyper's
-B) are zero-initialised, so at initialisation every conditioned critic computes exactly its unconditioned trunk.
+B, the head generator) are zero-initialised, so at initialisation every conditioned critic computes exactly its
+unconditioned trunk. ``hyper_head`` is MorFiC-H (``model.hyper_conditions = "head"``); ``hyper`` is kept for runs
+trained with it and as the other reading of the paper.
 
-Encoder sharing: the actor and the critic each own a morphology encoder (same architecture, separate weights). rsl-rl
-builds the two models independently and optimises ``chain(actor.parameters(), critic.parameters())``; a shared module
-would sit in that list twice (two Adam updates per step) and be clipped and saved twice. Consequence: the actor's z_m
-is trained by the surrogate and entropy losses only, the critic's z_m by the value loss only; the value loss never
-reaches the actor (tested).
+Encoder sharing (``model.shared_morphology_encoder``, default on): the actor owns the one morphology encoder f_psi;
+the critic is built with ``shared_morphology_encoder=True`` and no encoder of its own, and
+:func:`link_morphology_encoder` (called by MorficPPO and by the model loader) points it at the actor's. So the
+encoder's parameters are in ``actor.parameters()`` once: one Adam update per step, clipped with the actor's
+gradients, saved in the actor's state dict (export needs it there). The actor caches z_m per observation tensor, so
+when PPO calls ``actor(obs)`` and ``critic(obs)`` on one mini-batch both receive the same z_m tensor object, and the
+single ``loss.backward()`` of ``surrogate + c_v value_loss - c_e entropy`` sends both the policy and the value
+gradients into f_psi (tested). With ``shared_morphology_encoder=False`` (runs before the option) each network owns
+an encoder: the actor's trained by the policy losses only, the critic's by the value loss only.
 """
 
 from __future__ import annotations
@@ -47,18 +55,18 @@ from tensordict import TensorDict
 from morfic_cli.errors import UnknownNameError
 
 #: Critic conditioning kinds of :class:`MorficCritic` (a subclass may add its own by overriding ``make_modulator``).
-CONDITIONINGS: tuple[str, ...] = ("none", "concat", "film", "adaln", "hyper")
+CONDITIONINGS: tuple[str, ...] = ("none", "concat", "film", "adaln", "hyper", "hyper_head")
 
 
 def flatten_groups(obs: TensorDict, groups: list[str]) -> torch.Tensor:
     """Concatenate observation groups, each flattened past the batch dimension.
 
     Args:
-        obs: Observation groups; e.g. ``history`` of shape (N, 15, 48).
+        obs: Observation groups; e.g. ``history`` of shape (N, 16, 48).
         groups: Group names, in order.
 
     Returns:
-        Shape: (N, sum of the groups' per-sample sizes), e.g. (N, 720) for ``["history"]``.
+        Shape: (N, sum of the groups' per-sample sizes), e.g. (N, 768) for ``["history"]``.
     """
     return torch.cat([obs[g].flatten(start_dim=1) for g in groups], dim=-1)
 
@@ -69,7 +77,7 @@ def _state_groups(
     """Split a model's groups into the state groups (flattened, normalised) and its role groups (encoded apart).
 
     Returns:
-        The state groups in config order and their flattened size (e.g. (["history"], 720)).
+        The state groups in config order and their flattened size (e.g. (["history"], 768)).
     """
     active = list(obs_groups[obs_set])
     roles = [g for g in role_groups if g is not None]
@@ -93,8 +101,8 @@ class FiLM(nn.Module):
     """Residual FiLM of one hidden layer, eq. (film): ``h <- h (1 + s gamma(z_m)) + s beta(z_m)``.
 
     The generator is ``z_m (64) -> 128 -> 2H`` (ELU) with its last layer zero-initialised, so gamma = beta = 0 and
-    the layer is unconditioned at initialisation. ``s`` is ``conditioning_scale`` (1 for ``film``, 0.1 for
-    ``film-scaled``).
+    the layer is unconditioned at initialisation. ``s`` is ``conditioning_scale`` (``model.film_scale``, 0.1 for
+    ``film`` and ``film-scaled``, paper Table "architecture"; 1 for ``adaln``).
     """
 
     def __init__(
@@ -182,12 +190,47 @@ class LowRankAdapter(nn.Module):
         return h + self.scale * torch.einsum("nhr,nr->nh", b_z, u)
 
 
+class HyperHead(nn.Module):
+    """The hypernetwork-generated value head of MorFiC-H, eq. (hyper): ``V = A_m h + c_m``, ``(A_m, c_m) = H_eta(z_m)``.
+
+    ``A_m = A_0 + s k(z_m) U`` and ``c_m = c_0 + s k_c(z_m)``: (A_0, c_0) is the trunk's last ``nn.Linear`` (a learned
+    base head), U a learned (r, H) basis, and ``[k, k_c] = G(z_m)`` a ``z_m (64) -> 128 -> O (r + 1)`` MLP (ELU)
+    whose last layer is zero-initialised, so ``A_m = A_0`` and ``c_m = c_0`` at initialisation. So the head's
+    weights move in a rank-r (16) subspace per morphology, scaled by s (0.1), the appendix's "low-rank, rank 16,
+    scale 0.1" applied to the head. Shapes: h (N, H), z_m (N, 64) -> V (N, O), O = 1.
+    """
+
+    def __init__(self, latent_dim: int, in_dim: int, out_dim: int, rank: int, generator_hidden_dim: int,
+                 scale: float, activation: str) -> None:
+        super().__init__()
+        self.scale, self.rank, self.out_dim = scale, rank, out_dim
+        self.basis = nn.Parameter(torch.empty(rank, in_dim))
+        nn.init.orthogonal_(self.basis)
+        self.generator = MLP(latent_dim, out_dim * (rank + 1), [generator_hidden_dim], activation)
+        _zero_last_linear(self.generator)
+
+    def weights(self, linear: nn.Linear, z_m: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(A_m, c_m) per sample. Shapes: (N, O, H), (N, O)."""
+        g = self.generator(z_m).view(-1, self.out_dim, self.rank + 1)
+        a_m = linear.weight + self.scale * torch.einsum("nor,rh->noh", g[..., : self.rank], self.basis)
+        return a_m, linear.bias + self.scale * g[..., self.rank]
+
+    def forward(self, linear: nn.Linear, h: torch.Tensor, z_m: torch.Tensor | None) -> torch.Tensor:
+        """V = A_m h + c_m, computed without forming A_m. Shapes: (N, H), (N, 64) -> (N, O)."""
+        v = linear(h)
+        if z_m is None:
+            return v
+        g = self.generator(z_m).view(-1, self.out_dim, self.rank + 1)
+        u = h @ self.basis.T  # (N, r)
+        return v + self.scale * (torch.einsum("nor,nr->no", g[..., : self.rank], u) + g[..., self.rank])
+
+
 class MorficActor(MLPModel):
     """Policy ``pi(a | h_t, z_priv_hat, z_m)``: an rsl-rl MLPModel whose MLP input is built from three parts.
 
     ``latent = [s, dropout(sg(z_priv_hat)), z_m]`` (sg = stop-gradient) with
 
-    - ``s``: the flattened (optionally normalised) state groups, e.g. ``history`` -> (N, 720);
+    - ``s``: the flattened (optionally normalised) state groups, e.g. ``history`` -> (N, 768);
     - ``z_priv_hat = adaptation(s)`` (N, 16): trained only by MorficPPO's regression to the critic's z_priv, so the
       policy loss does not reach the adaptation module;
     - ``z_m = f_psi(m)`` (N, 64): the actor's own morphology encoder, left out when ``morphology_group`` is None
@@ -230,7 +273,7 @@ class MorficActor(MLPModel):
             morphology_group: Group holding m (N, 11), or None for no z_m (variant ``ppo``).
             morphology_hidden_dims: Hidden widths of the morphology encoder (11 -> 128 -> 64).
             morphology_latent_dim: Size of z_m.
-            adaptation_hidden_dims: Hidden widths of the adaptation module (720 -> 256 -> 128 -> 16).
+            adaptation_hidden_dims: Hidden widths of the adaptation module (768 -> 256 -> 128 -> 16).
             privileged_latent_dim: Size of z_priv_hat; must equal the critic's z_priv size.
             latent_dropout: Dropout probability on z_priv_hat in the policy input during training.
         """
@@ -249,6 +292,7 @@ class MorficActor(MLPModel):
             if morphology_group is not None
             else None
         )
+        self._z_cache: tuple | None = None
 
     def get_latent(
         self, obs: TensorDict, masks: torch.Tensor | None = None, hidden_state: HiddenState = None
@@ -261,7 +305,7 @@ class MorficActor(MLPModel):
         return torch.cat(parts, dim=-1)
 
     def get_state(self, obs: TensorDict) -> torch.Tensor:
-        """The flattened, optionally normalised state groups. Shape: (N, D_s), D_s = 720 for ``history``."""
+        """The flattened, optionally normalised state groups. Shape: (N, D_s), D_s = 768 for ``history``."""
         return self.obs_normalizer(flatten_groups(obs, self.obs_groups))
 
     def estimate_privileged(self, obs: TensorDict) -> torch.Tensor:
@@ -269,10 +313,30 @@ class MorficActor(MLPModel):
         return self.adaptation(self.get_state(obs))
 
     def encode_morphology(self, obs: TensorDict) -> torch.Tensor:
-        """z_m = f_psi(m) from the actor's own encoder. Shape: (N, 64)."""
+        """z_m = f_psi(m). Shape: (N, 64).
+
+        Called twice on the same observations (``actor(obs)`` then a sharing ``critic(obs)``), it returns the same
+        tensor object: one z_m, one node of the autograd graph. The cache holds one entry, keyed by the ``m``
+        tensor object and its version, the grad / inference mode and the encoder's parameter versions (an
+        optimiser step invalidates it), and is dropped when a backward pass has gone through z_m (its graph is
+        freed then).
+        """
         if self.morphology_encoder is None:
             raise ValueError("this actor has no morphology encoder (morphology_group is None).")
-        return self.morphology_encoder(obs[self.morphology_group])
+        m = obs[self.morphology_group]
+        key = (0 if m.is_inference() else m._version, torch.is_grad_enabled(), torch.is_inference_mode_enabled(),
+               tuple(p._version for p in self.morphology_encoder.parameters()))
+        cached = self._z_cache
+        if cached is not None and cached[0] is m and cached[1] == key:
+            return cached[2]
+        z_m = self.morphology_encoder(m)
+        self._z_cache = (m, key, z_m)
+        if z_m.requires_grad:
+            z_m.register_hook(self._drop_z_cache)
+        return z_m
+
+    def _drop_z_cache(self, grad: torch.Tensor) -> None:
+        self._z_cache = None
 
     def update_normalization(self, obs: TensorDict) -> None:
         """Update the state normaliser from a batch of observations (no-op without ``obs_normalization``)."""
@@ -304,7 +368,7 @@ class MorficActor(MLPModel):
 class MorficCritic(MLPModel):
     """Value function ``V(h_t^clean, z_priv; z_m)``: an rsl-rl MLPModel whose trunk is conditioned on z_m.
 
-    ``V = trunk([s, z_priv (, z_m if concat)])`` with ``s`` the flattened clean history (N, 720) and
+    ``V = trunk([s, z_priv (, z_m if concat)])`` with ``s`` the flattened clean history (N, 768) and
     ``z_priv = g(p_t)`` (N, 16). The trunk is MLPModel's ``self.mlp`` (rsl-rl :class:`~rsl_rl.modules.MLP`, layers
     ``Linear, act, ..., Linear``); :meth:`trunk` runs it layer by layer and applies one modulator per hidden layer
     (:class:`FiLM`, :class:`AdaLN` or :class:`LowRankAdapter`). The critic's morphology encoder exists only when the
@@ -330,6 +394,7 @@ class MorficCritic(MLPModel):
         conditioning_scale: float = 1.0,
         hyper_rank: int = 16,
         generator_hidden_dim: int = 128,
+        shared_morphology_encoder: bool = False,
     ) -> None:
         """Build the critic.
 
@@ -350,8 +415,11 @@ class MorficCritic(MLPModel):
             morphology_latent_dim: Size of z_m.
             conditioning: One of :data:`CONDITIONINGS`, or a subclass's own (with its ``make_modulator``).
             conditioning_scale: s in the FiLM / AdaLN / hyper update.
-            hyper_rank: Rank r of the hyper adapter.
+            hyper_rank: Rank r of the hyper adapter / head basis.
             generator_hidden_dim: Hidden width of the FiLM / hyper generators (64 -> 128 -> ...).
+            shared_morphology_encoder: Own no encoder; z_m comes from the actor's after
+                :func:`link_morphology_encoder` (``morphology_hidden_dims`` / ``morphology_latent_dim`` must match
+                the actor's).
         """
         if conditioning not in CONDITIONINGS and type(self).make_modulator is MorficCritic.make_modulator:
             raise UnknownNameError("conditioning", conditioning, CONDITIONINGS)
@@ -370,17 +438,25 @@ class MorficCritic(MLPModel):
         self.privileged_encoder = MLP(
             obs[privileged_group].shape[-1], privileged_latent_dim, privileged_hidden_dims, activation
         )
+        self.uses_morphology = morphology_group is not None
+        self.shared_morphology_encoder = shared_morphology_encoder and self.uses_morphology
+        self._shared_source: tuple[MorficActor, ...] = ()  # a tuple: not a registered submodule
         self.morphology_encoder: MLP | None = (
             MLP(obs[morphology_group].shape[-1], morphology_latent_dim, morphology_hidden_dims, activation)
-            if morphology_group is not None
+            if self.uses_morphology and not self.shared_morphology_encoder
             else None
         )
         self.modulator_cfg = {"latent_dim": morphology_latent_dim, "generator_hidden_dim": generator_hidden_dim,
                               "scale": conditioning_scale, "rank": hyper_rank, "activation": activation}
         self.modulators: nn.ModuleList | None = None
-        if conditioning not in ("none", "concat"):
-            linears = [m for m in self.mlp if isinstance(m, nn.Linear)][:-1]
-            self.modulators = nn.ModuleList(self.make_modulator(lin) for lin in linears)
+        self.head: HyperHead | None = None
+        linears = [m for m in self.mlp if isinstance(m, nn.Linear)]
+        if conditioning == "hyper_head":
+            c = self.modulator_cfg
+            self.head = HyperHead(c["latent_dim"], linears[-1].in_features, linears[-1].out_features, c["rank"],
+                                  c["generator_hidden_dim"], c["scale"], c["activation"])
+        elif conditioning not in ("none", "concat"):
+            self.modulators = nn.ModuleList(self.make_modulator(lin) for lin in linears[:-1])
 
     def make_modulator(self, linear: nn.Linear) -> nn.Module:
         """The conditioning module of one hidden trunk layer (called once per layer, input to output).
@@ -411,7 +487,7 @@ class MorficCritic(MLPModel):
     ) -> torch.Tensor:
         """The value V(s_t, z_m). Shape: (N, 1)."""
         obs = unpad_trajectories(obs, masks) if masks is not None and not self.is_recurrent else obs
-        z_m = self.encode_morphology(obs) if self.morphology_encoder is not None else None
+        z_m = self.encode_morphology(obs) if self.uses_morphology else None
         return self.trunk(self._latent(obs, z_m), z_m)
 
     def trunk(self, latent: torch.Tensor, z_m: torch.Tensor | None) -> torch.Tensor:
@@ -424,14 +500,23 @@ class MorficCritic(MLPModel):
         Returns:
             Shape: (N, 1).
         """
+        x = self.features(latent, z_m)
+        last = self.mlp[-1]
+        return self.head(last, x, z_m) if self.head is not None else last(x)
+
+    def features(self, latent: torch.Tensor, z_m: torch.Tensor | None) -> torch.Tensor:
+        """The last hidden layer h_t of the trunk (modulated by z_m where the conditioning does). Shape: (N, H)."""
+        layers = list(self.mlp)[:-1]
         if self.modulators is None:
-            return self.mlp(latent)
+            x = latent
+            for layer in layers:
+                x = layer(x)
+            return x
         x = latent
-        layers = list(self.mlp)
         for i, modulator in enumerate(self.modulators):
             linear, act = layers[2 * i], layers[2 * i + 1]
             x = act(modulator(linear, x, z_m))
-        return layers[-1](x)
+        return x
 
     def get_latent(
         self, obs: TensorDict, masks: torch.Tensor | None = None, hidden_state: HiddenState = None
@@ -441,7 +526,7 @@ class MorficCritic(MLPModel):
         return self._latent(obs, z_m)
 
     def get_state(self, obs: TensorDict) -> torch.Tensor:
-        """The flattened, optionally normalised clean history. Shape: (N, D_s), D_s = 720."""
+        """The flattened, optionally normalised clean history. Shape: (N, D_s), D_s = 768."""
         return self.obs_normalizer(flatten_groups(obs, self.obs_groups))
 
     def encode_privileged(self, obs: TensorDict) -> torch.Tensor:
@@ -449,10 +534,15 @@ class MorficCritic(MLPModel):
         return self.privileged_encoder(obs[self.privileged_group])
 
     def encode_morphology(self, obs: TensorDict) -> torch.Tensor:
-        """z_m = f_psi(m) from the critic's own encoder. Shape: (N, 64)."""
-        if self.morphology_encoder is None:
+        """z_m = f_psi(m): the actor's (shared encoder, the same tensor the actor got) or the critic's own. (N, 64)."""
+        if not self.uses_morphology:
             raise ValueError("this critic has no morphology encoder (conditioning 'none').")
-        return self.morphology_encoder(obs[self.morphology_group])
+        if self.shared_morphology_encoder:
+            if not self._shared_source:
+                raise ValueError("this critic shares the actor's morphology encoder; call "
+                                 "link_morphology_encoder(actor, critic) first.")
+            return self._shared_source[0].encode_morphology(obs)
+        return self.morphology_encoder(obs[self.morphology_group])  # type: ignore[misc]
 
     def update_normalization(self, obs: TensorDict) -> None:
         """Update the state normaliser from a batch of observations (no-op without ``obs_normalization``)."""
@@ -480,6 +570,23 @@ class MorficCritic(MLPModel):
     def _get_latent_dim(self) -> int:
         """D_s + |z_priv| (+ |z_m| for concat)."""
         return self.obs_dim + self.privileged_latent_dim + self.concat_dim
+
+
+def link_morphology_encoder(actor: nn.Module, critic: nn.Module) -> None:
+    """Point a sharing critic (``shared_morphology_encoder=True``) at the actor's morphology encoder; else no-op.
+
+    Raises:
+        ValueError: The critic shares but the actor has no encoder, or the latent sizes differ.
+    """
+    if not getattr(critic, "shared_morphology_encoder", False):
+        return
+    encoder = getattr(actor, "morphology_encoder", None)
+    if encoder is None:
+        raise ValueError("the critic shares the actor's morphology encoder, but the actor has none.")
+    if critic.modulator_cfg["latent_dim"] != actor.morphology_latent_dim:
+        raise ValueError(f"critic z_m size {critic.modulator_cfg['latent_dim']} != actor z_m size "
+                         f"{actor.morphology_latent_dim}.")
+    critic._shared_source = (actor,)
 
 
 class _ExportedActor(nn.Module):

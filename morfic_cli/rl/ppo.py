@@ -24,7 +24,7 @@ from rsl_rl.algorithms import PPO
 from rsl_rl.storage import RolloutStorage
 from rsl_rl.utils import reduce_gradients_in_buckets, resolve_optimizer
 
-from morfic_cli.rl.models import MorficActor, MorficCritic
+from morfic_cli.rl.models import MorficActor, MorficCritic, link_morphology_encoder
 from morfic_cli.rl.rsl_rl_patches import raw_models, tapped_mini_batches
 
 ALGORITHM_CLASS = "morfic_cli.rl.ppo:MorficPPO"
@@ -160,6 +160,7 @@ class MorficPPO(PPO):
                 f"actor z_priv_hat size {actor.privileged_latent_dim} != critic z_priv size "
                 f"{critic.privileged_latent_dim}."
             )
+        link_morphology_encoder(actor, critic)  # one f_psi for both (model.shared_morphology_encoder)
         super().__init__(actor, critic, storage, **kwargs)
         self.adaptation_loss_coef = adaptation_loss_coef
         self.adaptation_learning_rate = (

@@ -38,11 +38,13 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils.logger import Logger
 from tensordict import TensorDict
 
+from morfic_cli import __version__
 from morfic_cli.envs import observations as O
 from morfic_cli.errors import ArtifactNotFoundError, MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.rl import trainer_state
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
+from morfic_cli.rl.models import link_morphology_encoder
 from morfic_cli.rl.ppo import ALGORITHM_CLASS
 from morfic_cli.rl.rsl_rl_patches import raw_models, replace_logger
 from morfic_cli.rl.variants import resolve_variant
@@ -60,11 +62,19 @@ def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
     Raises:
         MorficError: A user variant whose module cannot be imported (:func:`~morfic_cli.rl.variants.resolve_variant`).
     """
-    actor, critic, obs_groups = resolve_variant(cfg.variant).model_cfgs()
+    variant = resolve_variant(cfg.variant)
+    actor, critic, obs_groups = variant.model_cfgs()
     actor["hidden_dims"] = list(cfg.model.actor_hidden_dims)
     actor["distribution_cfg"]["init_std"] = cfg.model.init_std
     if cfg.model.critic_hidden_dims is not None:
         critic["hidden_dims"] = list(cfg.model.critic_hidden_dims)
+    if variant.stock:  # a user's class takes the config its critic_defaults give (docs/extending.md)
+        if critic["conditioning"] == "film":
+            critic["conditioning_scale"] = cfg.model.film_scale
+        if critic["conditioning"] == "hyper" and cfg.model.hyper_conditions == "head":
+            critic["conditioning"] = "hyper_head"
+        if cfg.model.shared_morphology_encoder and variant.actor_morphology and variant.critic_morphology:
+            critic["shared_morphology_encoder"] = True
     algorithm = {"class_name": ALGORITHM_CLASS, "optimizer": "adam", **dataclasses.asdict(cfg.ppo),
                  "rnd_cfg": None, "symmetry_cfg": None}
     return {
@@ -81,7 +91,7 @@ def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
 
 def dummy_observations(cfg: TrainCfg, batch: int = 1) -> TensorDict:
     """Zero observations with the env's group shapes, to build models without an env. Batch shape: (batch,)."""
-    h = cfg.env.obs.history_len
+    h = O.history_frames(cfg.env.obs)
     return TensorDict(
         {
             "policy": torch.zeros(batch, O.POLICY_DIM),
@@ -107,6 +117,7 @@ def build_models(cfg: TrainCfg) -> tuple[torch.nn.Module, torch.nn.Module]:
     critic_class, critic_kwargs = resolve_class(rcfg["critic"])
     actor = actor_class(obs, groups, "actor", NUM_JOINTS, **actor_kwargs)
     critic = critic_class(obs, groups, "critic", 1, **critic_kwargs)
+    link_morphology_encoder(actor, critic)
     return actor, critic
 
 
@@ -141,9 +152,12 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
         actor.load_state_dict(state["actor"])
         critic.load_state_dict(state["critic"])
     except RuntimeError as exc:
-        if variant.stock:
-            raise  # the paper's classes: a mismatch is a bug in morfic
         first = str(exc).strip().splitlines()[0]
+        if variant.stock:
+            raise MorficError(
+                f"checkpoint '{spec}' was written by morfic {manifest.morfic_version}, and its weights do not fit "
+                f"the '{cfg.variant}' models of this morfic {__version__} ({first}); evaluate it with morfic "
+                f"{manifest.morfic_version}, or retrain it with this version.") from exc
         raise MorficError(f"checkpoint '{spec}' does not fit variant '{cfg.variant}' ({variant.critic_class}) as "
                           f"it is installed now ({first}); install the version of the class it was trained "
                           "with.") from exc

@@ -11,7 +11,7 @@ A user's variant is a critic class in the user's own module, named by import pat
 ``morfic.variants``. The protocol (docs/extending.md):
 
 - the class is an rsl-rl model built as ``cls(obs, obs_groups, "critic", 1, **critic_cfg)``; it receives the
-  observation groups ``critic`` (N, 15, 48), ``privileged`` (N, 18) and ``morphology`` (N, 11), and its
+  observation groups ``critic`` (N, 16, 48), ``privileged`` (N, 18) and ``morphology`` (N, 11), and its
   ``forward(obs)`` returns the value V, shape (N, 1);
 - it provides ``encode_privileged(obs)`` -> z_priv (N, 16), the target of the actor's adaptation module, and
   ``privileged_latent_dim``. Subclassing :class:`~morfic_cli.rl.models.MorficCritic` gives both and z_m =
@@ -120,7 +120,7 @@ STOCK: dict[str, Variant] = {v.name: v for v in (
     _stock("ppo", "PPO", ("main",), "none", actor_morphology=False),
     _stock("actor-only", "Actor-only", ("main",), "none"),
     _stock("concat", "Actor+Critic", ("main",), "concat"),
-    _stock("film", "MorFiC-F", ("main", "ablation"), "film"),
+    _stock("film", "MorFiC-F", ("main", "ablation"), "film", 0.1),
     _stock("film-scaled", "MorFiC-F(Scaled)", ("ablation",), "film", 0.1, (1024, 512, 256)),
     _stock("hyper", "MorFiC-H", ("ablation",), "hyper", 0.1),
     _stock("adaln", "MorFiC-A", ("ablation",), "adaln"),

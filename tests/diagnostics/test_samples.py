@@ -8,6 +8,7 @@ import torch
 
 from morfic_cli.diagnostics.samples import OBS_GROUPS, decode_obs, encode_obs
 from morfic_cli.diagnostics.scoring import actor_gradients, batch_obs, critic_values
+from morfic_cli.envs.observations import history_frames
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -40,7 +41,7 @@ def test_rollout_records_the_models_inputs_only_when_asked(models):
     assert plain.obs == {}
     kept = _rollout(models, keep_obs=OBS_GROUPS)
     assert set(kept.obs) == set(OBS_GROUPS)
-    h = models[2].env.obs.history_len
+    h = history_frames(models[2].env.obs)
     assert kept.obs["critic"].shape == (5, 2, h, 48) and kept.obs["history"].shape == (5, 2, h, 48)
     assert kept.obs["privileged"].shape == (5, 2, 18) and kept.obs["morphology"].shape == (5, 2, 11)
     assert all(a.dtype == np.float32 for a in kept.obs.values())
@@ -99,7 +100,7 @@ def test_obs_encoding_round_trips_and_stores_equal_groups_once():
 def test_actor_gradients_in_chunks_equal_the_full_batch_gradient(models):
     actor = models[0]
     rng = np.random.default_rng(1)
-    h = models[2].env.obs.history_len
+    h = history_frames(models[2].env.obs)
     obs = {
         "history": rng.normal(size=(4, 3, h, 48)).astype(np.float32),
         "morphology": rng.uniform(-1, 1, size=(4, 3, 11)).astype(np.float32),

@@ -24,8 +24,8 @@ def _check_obs(env: LocomotionEnv) -> None:
     obs = env.get_observations()
     n = env.num_envs
     assert obs["policy"].shape == (n, 48)
-    assert obs["history"].shape == (n, 15, 48)
-    assert obs["critic"].shape == (n, 15, 48)
+    assert obs["history"].shape == (n, 16, 48)  # [h_t (15 previous), o_t]
+    assert obs["critic"].shape == (n, 16, 48)
     assert obs["privileged"].shape == (n, 18)
     assert obs["morphology"].shape == (n, 11)
     for key in ("policy", "history", "critic", "privileged", "morphology"):

@@ -401,7 +401,7 @@ def _busy_state(n: int = 3, seed: int = 0) -> EnvState:
 
 
 def test_total_is_the_hand_weighted_sum_with_penalties_subtracted():
-    s, c = _busy_state(), CFG
+    s, c = _busy_state(), dataclasses.replace(CFG, w_gaitF=2.0, w_gaitV=2.0, w_raibert=5.0)  # clock terms on too
     total, parts, raw = compute_rewards(s, c)
     # eq. (rews), written out term by term (no dt: the env applies it)
     expected = (

@@ -92,7 +92,7 @@ def test_onnx_model_has_opset_17_plus_a_dynamic_batch_and_equals_the_torch_actor
     m = np.asarray(meta["robots"]["go1"]["morphology"], dtype=np.float32)
     q0 = np.asarray(meta["robots"]["go1"]["default_joint_pos"])
     for batch in (1, 5, 33):
-        history = gen.standard_normal((batch, 15, 48)).astype(np.float32)
+        history = gen.standard_normal((batch, 16, 48)).astype(np.float32)  # [h_t (15), o_t]
         actions, targets = session.run(None, {"history": history})
         expected = _actor_outputs(trained.actor, history, np.repeat(m[None], batch, 0))
         assert actions.shape == (batch, 12)
@@ -116,7 +116,7 @@ def test_torchscript_export_with_the_descriptor_as_input(store, tmp_path):
     scripted = torch.jit.load(io.BytesIO((tmp_path / "ts" / "policy.pt").read_bytes()))
     trained = load_trained(store, "runs/film-s0")
     gen = torch.Generator().manual_seed(1)
-    history, morphology = torch.randn(9, 15, 48, generator=gen), torch.rand(9, 11, generator=gen) * 2 - 1
+    history, morphology = torch.randn(9, 16, 48, generator=gen), torch.rand(9, 11, generator=gen) * 2 - 1
     with torch.no_grad():
         got = scripted(history, morphology).numpy()
     assert np.abs(got - _actor_outputs(trained.actor, history.numpy(), morphology.numpy())).max() < 1e-5
@@ -162,7 +162,8 @@ def test_metadata_observation_layout_and_control_are_the_envs(store):
     assert [(t["name"], t["start"], t["stop"]) for t in obs["terms"]] == list(O.POLICY_LAYOUT)
     scales = np.concatenate([np.asarray(t["scale"], dtype=np.float32) for t in obs["terms"]])
     assert np.array_equal(scales, O.obs_scales(trained.cfg.env.obs).numpy())
-    assert obs["size"] == 48 and obs["history_len"] == 15 and obs["clip"] == 100.0
+    assert obs["size"] == 48 and obs["history_len"] == 16 and obs["clip"] == 100.0  # 15 previous + o_t
+    assert "h_t = o_{t-15..t-1}" in obs["history_order"]
     assert meta["control"] == {
         **meta["control"],
         "dt": 0.02,
