@@ -17,6 +17,14 @@ class OutputFormat(str, enum.Enum):
     csv = "csv"
 
 
+class ExportTo(str, enum.Enum):
+    """``morfic export --to``: the model format (docs/deploy.md)."""
+
+    onnx = "onnx"
+    torchscript = "torchscript"
+    rsl_rl = "rsl-rl"
+
+
 class Preset(str, enum.Enum):
     """Training/pipeline budget presets (docs/training.md)."""
 

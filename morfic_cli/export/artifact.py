@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -244,6 +245,74 @@ def export_policy(
     return result
 
 
+@dataclass
+class RslRlExport:
+    """A stored rsl-rl checkpoint export (``morfic export RUN --to rsl-rl``).
+
+    Attributes:
+        id: The export manifest id.
+        ref: ``exports/<run>/rsl-rl`` and version.
+        files: File name -> bytes (``model_<it>.pt``, ``agent.json``, ``train.json``).
+        checkpoint: The morfic checkpoint id it was made from.
+        optimizer: ``trained`` (the run's optimiser state) or ``fresh`` (a weights-only checkpoint).
+        reused: The store already held this export (no new manifest).
+        written: Files written to ``--out``.
+    """
+
+    id: str
+    ref: str
+    files: dict[str, bytes]
+    checkpoint: str
+    optimizer: str
+    reused: bool
+    written: list[Path] = field(default_factory=list)
+
+
+def export_rsl_rl(store: Store, spec: str, out: Path | None = None) -> RslRlExport:
+    """Export checkpoint ``spec`` in rsl-rl's checkpoint layout (:mod:`morfic_cli.export.rsl_rl`), store it, write it.
+
+    The weights are checked to load back into freshly built models with identical actions before anything is
+    stored. Ref ``exports/<run>/rsl-rl``; an identical export already in the store is reused (no new version).
+
+    Raises:
+        MorficError: Not a checkpoint, or its user variant cannot be imported.
+    """
+    from morfic_cli.export import rsl_rl
+
+    trained = load_trained(store, spec)
+    files, infos = rsl_rl.rsl_rl_files(store, trained)
+    name = next(n for n in files if n.endswith(".pt"))
+    _check_rsl_rl_weights(trained, files[name])
+    run = run_of(spec, trained.meta)
+    ref = export_ref(run, None, "rsl-rl")
+    optimizer = infos["optimizer"]
+    pub = store.publish("export", ref, config={"to": "rsl-rl"}, inputs={"checkpoint": trained.checkpoint_id},
+                        files=files, meta={"run": run, "format": "rsl-rl", "model_file": name, "optimizer": optimizer},
+                        reuse=True)
+    result = RslRlExport(pub.id, f"{ref}@{pub.version}", files, trained.checkpoint_id, optimizer, pub.reused)
+    if out is not None:
+        result.written = write_files(out, files)
+    return result
+
+
+def _check_rsl_rl_weights(trained: TrainedModels, data: bytes) -> None:
+    """Load the exported weights into fresh models and compare actions on random inputs (an internal invariant)."""
+    from morfic_cli.rl.runner import build_models, dummy_observations
+
+    state = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    actor, critic = build_models(trained.cfg)
+    actor.load_state_dict(state["actor_state_dict"])
+    critic.load_state_dict(state["critic_state_dict"])
+    actor.eval()
+    obs = dummy_observations(trained.cfg, batch=8)
+    gen = torch.Generator().manual_seed(0)
+    for key in obs.keys():
+        obs[key] = torch.randn(obs[key].shape, generator=gen)
+    with torch.no_grad():
+        if not torch.equal(actor(obs), trained.actor(obs)):
+            raise RuntimeError("the rsl-rl export's actor weights do not reproduce the checkpoint's actions")
+
+
 def metadata_bytes(meta: dict[str, Any]) -> bytes:
     """``policy.json``: indented, key order as built, trailing newline."""
     return (json.dumps(meta, indent=2) + "\n").encode()
@@ -305,6 +374,9 @@ def read_export(store: Store, source: str) -> tuple[dict[str, Any], bytes]:
             ) from exc
         return meta, model
     manifest = store.read_manifest(source)
+    if manifest.kind == "export" and METADATA_FILE not in manifest.files:
+        raise MorficError(f"'{source}' is an rsl-rl checkpoint export; --check verifies ONNX and TorchScript "
+                          "exports (load it with rsl-rl's OnPolicyRunner.load, docs/deploy.md).")
     if manifest.kind != "export":
         raise MorficError(
             f"'{source}' is a {manifest.kind} artifact; --check takes an export (an exports/... ref "

@@ -53,7 +53,7 @@ def require_onnx() -> None:
         raise MorficError(
             f"ONNX export needs {', '.join(missing)}, which {'is' if len(missing) == 1 else 'are'} "
             "not installed; install the export extra with `pip install 'morfic[export]'` "
-            "(or use --format torchscript)."
+            "(or use --to torchscript)."
         )
 
 

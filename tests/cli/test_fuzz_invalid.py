@@ -165,6 +165,7 @@ ROWS: list[tuple[str, ...]] = [
     # export
     ("export", "runs/film-s0", "--out", "{FILE}"),
     ("export", "runs/nothing"),
+    ("export", "runs/film-s0", "--to", "nosuch"),
     ("export", "runs/film-s0", "--format", "nosuch"),
     ("export", "runs/film-s0", "--robot", "nosuch"),
     ("export", "runs/film-s0", "--store", "{FILE}"),

@@ -54,7 +54,7 @@ def _actor_outputs(actor, history, morphology):
 
 def test_onnx_export_through_the_cli_is_stored_verified_and_written(run_cli, store, tmp_path):
     out = tmp_path / "deploy"
-    code, stdout, err = run_cli("export", "runs/film-s0", "--robot", "go2", "--out", str(out))
+    code, stdout, err = run_cli("export", "runs/film-s0", "--robot", "go2", "--out", str(out), "-f", "json")
     assert code == 0, err
     result = json.loads(stdout)
     assert result["ref"] == "exports/film-s0/go2-onnx@1"
@@ -174,10 +174,10 @@ def test_metadata_observation_layout_and_control_are_the_envs(store):
 
 
 def test_check_reverifies_a_stored_export_and_an_out_directory(run_cli, store, tmp_path):
-    code, out, err = run_cli("export", "exports/film-s0/go1-onnx", "--check")
+    code, out, err = run_cli("export", "exports/film-s0/go1-onnx", "--check", "-f", "json")
     assert code == 0, err
     assert json.loads(out)["ok"] is True and "check: onnxruntime" in err
-    code, out, err = run_cli("export", str(tmp_path / "out"), "--check", "--samples", "16")
+    code, out, err = run_cli("export", str(tmp_path / "out"), "--check", "--samples", "16", "-f", "json")
     assert code == 0, err
     assert json.loads(out)["verification"]["samples"] == 16
 
@@ -187,7 +187,7 @@ def test_check_catches_edited_metadata_and_a_swapped_model(run_cli, store, tmp_p
     meta = json.loads((out / "policy.json").read_text())
     meta["observation"]["terms"][5]["scale"] = [0.1] * 12
     (out / "policy.json").write_text(json.dumps(meta))
-    code, stdout, err = run_cli("export", str(out), "--check")
+    code, stdout, err = run_cli("export", str(out), "--check", "-f", "json")
     assert code == 1 and "Error: " in err and "observation" in err
     assert json.loads(stdout)["ok"] is False
 
@@ -224,7 +224,7 @@ def test_missing_onnx_packages_name_the_extra(run_cli, store, monkeypatch):
     [
         (["runs/film-s0", "--targets"], "--targets needs --robot"),
         (["runs/film-s0", "--robot", "spot"], "unknown robot 'spot'"),
-        (["runs/film-s0", "--format", "tflite"], "unknown format 'tflite'"),
+        (["runs/film-s0", "--to", "tflite"], "'tflite' is not one of"),
         (["runs/nope"], "runs/nope"),
         (["exports/film-s0/go1-onnx"], "not a training checkpoint"),
         (["runs/film-s0", "--check"], "--check takes an export"),
