@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from morfic_cli.cli._options import DEFAULT_STORE, ExportTo, FormatOpt, OutputFormat, QuietOpt, StoreOpt
-from morfic_cli.cli._render import emit_object, info
+from morfic_cli.cli._render import emit_object, err_console, info
 from morfic_cli.errors import MorficError
 from morfic_cli.validation import check_args
 
@@ -80,7 +83,8 @@ def export(
         _rsl_rl(st, run, out, robot, targets, quiet, fmt)
         return
     cfg = ExportCfg(robot=robot, fmt=to.value, targets=targets, samples=samples)
-    result = export_policy(st, run, cfg, out=out)
+    with _phases(quiet) as on_phase:
+        result = export_policy(st, run, cfg, out=out, on_phase=on_phase)
     meta = result.metadata
     if not quiet:
         info(f"verified: {result.verification.summary()}")
@@ -100,6 +104,29 @@ def export(
         },
         fmt,
     )
+
+
+@contextlib.contextmanager
+def _phases(quiet: bool) -> Iterator[Callable[[str], None]]:
+    """A spinner on stderr naming the export's current phase; a line with its time as each phase ends."""
+    if quiet:
+        yield lambda _text: None
+        return
+    current: list[tuple[str, float]] = []
+
+    def finish() -> None:
+        if current:
+            text, start = current.pop()
+            info(f"export: {text}: {time.perf_counter() - start:.1f} s")
+
+    with err_console.status("export") as status:
+        def on_phase(text: str) -> None:
+            finish()
+            current.append((text, time.perf_counter()))
+            status.update(f"export: {text}")
+
+        yield on_phase
+        finish()
 
 
 def _rsl_rl(st: Store, run: str, out: Path | None, robot: str | None, targets: bool, quiet: bool,

@@ -13,6 +13,7 @@ import dataclasses
 import hashlib
 import io
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,9 +29,11 @@ from morfic_cli.export.runtime import (
     ONNX_OPSET,
     load_runner,
     onnxruntime_version,
+    read_metadata,
     require_onnx,
     to_onnx,
     to_torchscript,
+    with_metadata,
 )
 from morfic_cli.export.verify import TOLERANCE, Verification, model_mismatches, verify_outputs
 from morfic_cli.morphology.robots import list_robots, load_robot
@@ -193,7 +196,8 @@ def runtime_name(fmt: str) -> str:
 
 
 def export_policy(
-    store: Store, spec: str, cfg: ExportCfg, out: Path | None = None, trained: TrainedModels | None = None
+    store: Store, spec: str, cfg: ExportCfg, out: Path | None = None, trained: TrainedModels | None = None,
+    on_phase: Callable[[str], None] | None = None,
 ) -> ExportResult:
     """Export checkpoint ``spec``'s deployed actor path, verify it, store it, and optionally write it to ``out``.
 
@@ -203,21 +207,24 @@ def export_policy(
         cfg: What to export.
         out: Also write the model and ``policy.json`` into this directory.
         trained: The checkpoint already loaded (else loaded from ``spec``).
+        on_phase: Called with a short description as each phase starts (the CLI's progress line).
 
     Raises:
         MorficError: Bad options, not a checkpoint, or a failed verification (then nothing is stored).
     """
     check_cfg(cfg)
+    phase = on_phase or (lambda _text: None)
+    phase("loading the checkpoint")
     trained = trained or load_trained(store, spec)
     module, meta = plan_export(trained, cfg.robot, cfg.targets)
-    model_bytes = serialise(module, meta, cfg.fmt, cfg.opset)
     model_file = MODEL_FILES[cfg.fmt]
-    meta.update(
-        format=cfg.fmt,
-        model_file=model_file,
-        model_sha256=hashlib.sha256(model_bytes).hexdigest(),
-        onnx_opset=cfg.opset if cfg.fmt == "onnx" else None,
-    )
+    meta.update(format=cfg.fmt, model_file=model_file, onnx_opset=cfg.opset if cfg.fmt == "onnx" else None)
+    phase(f"exporting {'ONNX (torch.export)' if cfg.fmt == 'onnx' else 'TorchScript'}")
+    model_bytes = serialise(module, meta, cfg.fmt, cfg.opset)
+    if cfg.fmt == "onnx":
+        model_bytes = with_metadata(model_bytes, M.onnx_props(meta))
+    meta["model_sha256"] = hashlib.sha256(model_bytes).hexdigest()
+    phase(f"verifying on {cfg.samples} random inputs")
     verification = verify_outputs(
         load_runner(cfg.fmt, model_bytes),
         runtime_name(cfg.fmt),
@@ -229,6 +236,7 @@ def export_policy(
     )
     if not verification.ok:
         raise MorficError(f"export verification failed, nothing stored: {verification.summary()}.")
+    phase("checking the metadata against the robot models")
     problems = robot_model_problems(meta)
     if problems:
         raise MorficError("export metadata disagrees with the robot model, nothing stored: " + "; ".join(problems))
@@ -417,6 +425,13 @@ def check_export(
             continue
         if expected.get(key) != meta.get(key):
             problems.append(f"metadata '{key}' differs from what checkpoint {trained.checkpoint_id[:12]} gives")
+    if meta.get("format") == "onnx":
+        try:
+            props = read_metadata(model)
+        except Exception:  # onnx raises its own decode errors; the sha256 check above names the file
+            props = None
+        if props != M.onnx_props(meta):
+            problems.append("the ONNX metadata_props disagree with policy.json")
     problems += robot_model_problems(meta)
     verification = verify_outputs(
         load_runner(meta["format"], model),
