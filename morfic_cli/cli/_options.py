@@ -25,6 +25,14 @@ class ExportTo(str, enum.Enum):
     rsl_rl = "rsl-rl"
 
 
+class Logger(str, enum.Enum):
+    """``morfic train --logger``: where live curves go (``morfic_cli.rl.live_log.LOGGERS``)."""
+
+    tensorboard = "tensorboard"
+    wandb = "wandb"
+    none = "none"
+
+
 class Preset(str, enum.Enum):
     """Training/pipeline budget presets (docs/training.md)."""
 
