@@ -144,6 +144,11 @@ def train(
     emit_object(result, fmt)
 
 
+def _num(value: float | None, digits: int = 2) -> str:
+    """``0.12``, or ``-`` for a value not measured yet (None, NaN: no episode has ended)."""
+    return "-" if value is None or value != value else f"{value:.{digits}f}"
+
+
 def _seconds(value: float | None) -> str:
     """``12.3s``, or ``-`` before the first episode has ended (NaN)."""
     return "-" if value is None or value != value else f"{value:.1f}s"
@@ -169,12 +174,12 @@ class _progress:
             def log_line(row: dict) -> None:
                 it = int(row["iteration"])
                 if it % every == 0 or it == self.run.cfg.max_iterations:
-                    sys.stderr.write(f"it {it}/{self.run.cfg.max_iterations}  {row.get('env_steps', 0):,.0f} steps  "
-                         f"{row.get('steps_per_s', 0):,.0f} steps/s  reward {row.get('mean_reward', float('nan')):.2f}"
-                         f"  EV {row.get('explained_variance', float('nan')):.2f}  vx_err "
-                         f"{row.get('tracking.vx_error', float('nan')):.2f}  "
-                         f"vx_max {row.get('curriculum.vx_max', 0):.1f}"
-                         f"  ep {_seconds(row.get('episode_length_s'))}  {row.get('wall_time_s', 0):.0f}s\n")
+                    sys.stderr.write(
+                        f"it {it}/{self.run.cfg.max_iterations}  {row.get('env_steps', 0):,.0f} steps  "
+                        f"{row.get('steps_per_s', 0):,.0f} steps/s  reward {_num(row.get('mean_reward'))}  "
+                        f"EV {_num(row.get('explained_variance'))}  vx_err {_num(row.get('tracking.vx_error'))}  "
+                        f"vx_max {row.get('curriculum.vx_max', 0):.1f}  ep {_seconds(row.get('episode_length_s'))}  "
+                        f"{row.get('wall_time_s', 0):.0f}s\n")
                     sys.stderr.flush()
 
             self.run.progress = log_line

@@ -5,7 +5,8 @@ The store keeps each run's curve (``curve.csv`` in every checkpoint); this modul
 rsl-rl's (5.5.1 ``rsl_rl/utils/logger.py``): ``Loss/<key>`` for every loss-dict entry and
 ``Loss/learning_rate``, ``Policy/mean_std``, ``Perf/total_fps``, ``Perf/collection_time``,
 ``Perf/learning_time``, ``Train/mean_reward``, ``Train/mean_episode_length`` (steps), and the env's episode
-extras under their own key when it holds a ``/`` (``Episode/<key>`` otherwise); the step is rsl-rl's 0-based
+extras under their own key when it holds a ``/`` (leading ``/`` dropped: ``curriculum/vx_max``; ``Episode/<key>``
+otherwise); the step is rsl-rl's 0-based
 iteration. The writer is rsl-rl's choice too: torch's ``SummaryWriter`` for ``tensorboard``, rsl-rl's
 ``WandbLogWriter`` for ``wandb`` (the optional ``morfic[wandb]`` extra).
 """
@@ -82,7 +83,8 @@ def write_iteration(writer: Any, it: int, size: int, collect_time: float, learn_
         mean_length: Their mean length in steps, or None.
     """
     for key, value in extras.items():
-        writer.add_scalar(key if "/" in key else f"Episode/{key}", value, it)
+        name = key.strip("/")  # morfic's env keys start with "/" ("/curriculum/vx_max"): no empty top group
+        writer.add_scalar(name if "/" in name else f"Episode/{name}", value, it)
     for key, value in loss_dict.items():
         writer.add_scalar(f"Loss/{key}", value, it)
     writer.add_scalar("Loss/learning_rate", learning_rate, it)
