@@ -42,7 +42,7 @@ def evaluate(
     video: Annotated[bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")]
     = False,
     out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Also write the table CSV (and videos next to it) here.")
+        Path | None, typer.Option("--out", "-o", help="Also write eval.csv (and the videos) into this directory.")
     ] = None,
     training_conditions: Annotated[
         bool,
@@ -70,7 +70,7 @@ def evaluate(
 
     Example: morfic eval runs/film-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
     """
-    check_args(store=store, out_file=out, seed=seed, envs=envs, steps=steps, command_vx=command_vx, robots=robots,
+    check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=command_vx, robots=robots,
                specs=[run])
     if training_conditions:
         _training_check(run, robots, command_vx, mode, envs, steps, seed, video, out, fmt, quiet, store)
@@ -110,8 +110,8 @@ def evaluate(
         from morfic_cli.evaluation.protocol import EVAL_COLUMNS
         from morfic_cli.recording.tables import rows_to_csv
 
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(rows_to_csv(result.rows, EVAL_COLUMNS))
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "eval.csv").write_bytes(rows_to_csv(result.rows, EVAL_COLUMNS))
     if not quiet:
         info(f"stored {result.ref}@{result.version} ({result.id[:12]}) with {len(result.rollouts)} MCAP rollout logs")
     emit_rows(
@@ -164,8 +164,8 @@ def _training_check(run: str, robots: str, command_vx: str | None, mode: str, en
     if out is not None:
         from morfic_cli.recording.tables import rows_to_csv
 
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(rows_to_csv(result.rows, CHECK_COLUMNS))
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "training-check.csv").write_bytes(rows_to_csv(result.rows, CHECK_COLUMNS))
     ref = result.reference
     if not quiet:
         info(f"training: {ref.length_s:.2f} ± {ref.sd_s:.2f} s mean episode length over iterations "
