@@ -120,17 +120,17 @@ def evaluate(
         columns=[
             Column("robot", "robot"),
             Column("mode", "mode"),
-            Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:.1f}", justify="right"),
+            Column("command_vx", "cmd", fmt=lambda v: f"{v:.1f}", justify="right"),
             Column("d", "d", fmt=lambda v: "-" if v is None else f"{v:.3f}", justify="right"),
-            Column("cell", "v_x ± σ / S", justify="right"),
-            Column("vx_peak_1s_mean", "peak 1 s", fmt=lambda v: f"{v:.2f}", justify="right"),
-            Column("tracking_ratio", "tracking", fmt=lambda v: f"{v:.2f}", justify="right"),
-            Column("verdict", "validity"),
+            Column("cell", "v_x ± σ / S", justify="right", no_wrap=True),
+            Column("vx_peak_1s_mean", "peak", fmt=lambda v: f"{v:.2f}", justify="right"),
+            Column("tracking_ratio", "track", fmt=lambda v: f"{v:.2f}", justify="right"),
+            Column("verdict", "validity", no_wrap=True),
         ],
         title=f"zero-shot transfer of {run}",
-        caption="v_x: mean forward velocity over alive steps (at 2.5 m/s also the paper's v_x^max); σ: std over all "
-        "alive (env, step) samples; S: survival; peak 1 s: best 1 s moving average (morfic's extra); validity: "
-        "moving, upright, no dragging",
+        caption="cmd: commanded v_x (m/s); v_x: mean forward velocity over alive steps (at 2.5 m/s also the "
+        "paper's v_x^max); σ: std over all alive (env, step) samples; S: survival; peak: best 1 s moving average "
+        "(morfic's extra); track: v_x / cmd; validity: moving, upright, no dragging",
     )
 
 

@@ -101,3 +101,14 @@ def test_an_object_as_a_table_is_a_key_value_table(capsys):
     out = capsys.readouterr().out
     assert not _is_json(out.strip()) and "files.model.pt" in out and "history, morphology" in out
     assert "morfic[gpu]" in out  # rich markup does not eat the brackets
+
+
+def test_help_reads_well(monkeypatch):
+    monkeypatch.setenv("COLUMNS", "250")  # wide: every line break left is one the help text itself makes
+    out = runner.invoke(app, ["train", "--help"]).stdout
+    assert "pip install 'morfic[gpu]'" in out and "pip install 'morfic[wandb]'" in out  # markup keeps [..]
+    assert "Ctrl-C finishes the current iteration, writes a checkpoint" in out  # not hard-wrapped mid-sentence
+    quiet = next(line for line in out.splitlines() if "--quiet" in line)
+    assert "<bool>" not in quiet and "No progress" in quiet  # a flag looks like a flag
+    out = runner.invoke(app, ["eval", "--help"]).stdout
+    assert "[default: 500]" in out
