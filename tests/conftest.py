@@ -12,6 +12,7 @@ from gl_probe import PROBE, probe_env
 @pytest.fixture(autouse=True)
 def _isolated_store(tmp_path, monkeypatch):
     monkeypatch.setenv("MORFIC_STORE", str(tmp_path / "store"))
+    monkeypatch.setenv("MORFIC_LOG_DIR", str(tmp_path / "logs"))  # `morfic train`'s TensorBoard run folders
     monkeypatch.delenv("MORFIC_DEBUG", raising=False)
 
 

@@ -8,10 +8,15 @@ Importing this module must not import torch or mujoco: heavy imports happen insi
 
 from __future__ import annotations
 
+import inspect
 import os
 import sys
+import typing
 
 import typer
+import typer.core
+import typer.models
+from rich.markup import escape
 
 try:  # typer >= 0.2x vendors its own copy of click
     from typer._click import exceptions as _click_exc
@@ -76,6 +81,58 @@ app.command("reproduce")(reproduce.reproduce)
 app.add_typer(store.app, name="store")
 app.add_typer(robots.app, name="robots")
 app.command("bench")(bench.bench)
+
+
+def unwrap_help(doc: str) -> str:
+    """A docstring as help text: source line breaks inside a paragraph joined, rich markup escaped.
+
+    Paragraphs (blank-line separated) stay apart; a line starting with ``Example`` or ``Your own`` or indented
+    starts a new line (command examples). ``[gpu]`` in ``pip install 'morfic[gpu]'`` is escaped so rich shows it.
+    """
+    paragraphs = []
+    for para in inspect.cleandoc(doc or "").split("\n\n"):
+        lines: list[str] = []
+        for line in para.splitlines():
+            if lines and not line.startswith(("Example", "Your own", " ", "-")):
+                lines[-1] += " " + line.strip()
+            else:
+                lines.append(line)
+        paragraphs.append("\n".join(lines))
+    return escape("\n\n".join(paragraphs))
+
+
+def _polish_help(typer_app: typer.Typer, seen: set[int]) -> None:
+    """Unwrap and escape every command's docstring, escape every option's help (once per shared option object)."""
+    for info in typer_app.registered_commands:
+        if info.help is None and info.callback is not None:
+            info.help = unwrap_help(info.callback.__doc__ or "")
+        if info.callback is None:
+            continue
+        # the annotations are strings (``from __future__ import annotations``), evaluated anew on every read: evaluate
+        # them once, escape the option help in place and keep the evaluated objects, so typer reads these
+        hints = typing.get_type_hints(info.callback, include_extras=True)
+        for hint in hints.values():
+            for meta in getattr(hint, "__metadata__", ()):
+                if isinstance(meta, typer.models.ParameterInfo) and meta.help and id(meta) not in seen:
+                    seen.add(id(meta))
+                    meta.help = escape(meta.help)
+        info.callback.__annotations__ = hints
+    for group in typer_app.registered_groups:
+        if group.typer_instance is not None:
+            _polish_help(group.typer_instance, seen)
+
+
+_polish_help(app, set())
+
+
+def _flag_type(self, ctx):  # noqa: ANN001, ANN202
+    """Typer's TyperOption.display_type_rich, minus the ``<bool>`` of on/off flags (a flag takes no value)."""
+    return None if getattr(self, "is_flag", False) else _display_type_rich(self, ctx)
+
+
+# typer (0.29) prints `--quiet <bool>` for flags that take no value; show them as plain flags (one place).
+_display_type_rich = typer.core.TyperOption.display_type_rich
+typer.core.TyperOption.display_type_rich = _flag_type  # type: ignore[method-assign]
 
 
 def _fail(message: str, code: int = 1) -> None:

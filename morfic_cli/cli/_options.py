@@ -17,6 +17,22 @@ class OutputFormat(str, enum.Enum):
     csv = "csv"
 
 
+class ExportTo(str, enum.Enum):
+    """``morfic export --to``: the model format (docs/deploy.md)."""
+
+    onnx = "onnx"
+    torchscript = "torchscript"
+    rsl_rl = "rsl-rl"
+
+
+class Logger(str, enum.Enum):
+    """``morfic train --logger``: where live curves go (``morfic_cli.rl.live_log.LOGGERS``)."""
+
+    tensorboard = "tensorboard"
+    wandb = "wandb"
+    none = "none"
+
+
 class Preset(str, enum.Enum):
     """Training/pipeline budget presets (docs/training.md)."""
 

@@ -11,11 +11,12 @@ from typing import Any
 
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from morfic_cli.cli._options import OutputFormat
 
 #: Human messages (progress, "wrote artifact ...") go here, never to stdout.
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, soft_wrap=True)  # messages are not hard-wrapped; the terminal wraps them
 out_console = Console()
 
 
@@ -28,12 +29,14 @@ class Column:
         header: Header shown in the rich table (defaults to ``key``).
         fmt: Formatter for the rich table cell; json/csv always get the raw value.
         justify: rich justification ("left", "right", "center").
+        no_wrap: Keep the cell on one line (rich shrinks other columns first).
     """
 
     key: str
     header: str | None = None
     fmt: Callable[[Any], str] | None = None
     justify: str = "left"
+    no_wrap: bool = False
 
 
 def _cell(value: Any, col: Column) -> str:
@@ -75,9 +78,9 @@ def emit_rows(
     cols = list(columns) if columns else [Column(k) for k in (rows[0].keys() if rows else [])]
     table = Table(title=title, caption=caption)
     for col in cols:
-        table.add_column(col.header or col.key, justify=col.justify)  # type: ignore[arg-type]
+        table.add_column(col.header or col.key, justify=col.justify, no_wrap=col.no_wrap)  # type: ignore[arg-type]
     for row in rows:
-        table.add_row(*(_cell(row.get(col.key), col) for col in cols))
+        table.add_row(*(Text(_cell(row.get(col.key), col)) for col in cols))  # Text: no markup in cells
     out_console.print(table)
 
 
@@ -92,15 +95,48 @@ def json_safe(obj: Any) -> Any:
     return obj
 
 
-def emit_object(obj: Any, fmt: OutputFormat) -> None:
-    """Print one object: pretty JSON for json/table, a two-column key,value CSV for csv."""
+def flatten(obj: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    """``(dotted key, leaf value)`` pairs of nested dicts; lists of plain values stay one leaf.
+
+    Example: ``{"a": {"b": 1}, "c": [1, 2]}`` -> ``[("a.b", 1), ("c", [1, 2])]``.
+    """
+    if isinstance(obj, dict) and obj:
+        return [pair for k, v in obj.items() for pair in flatten(v, f"{prefix}.{k}" if prefix else str(k))]
+    if isinstance(obj, list | tuple) and any(isinstance(v, dict) for v in obj):
+        return [pair for i, v in enumerate(obj) for pair in flatten(v, f"{prefix}[{i}]")]
+    return [(prefix or "value", obj)]
+
+
+def _plain(value: Any) -> str:
+    """A leaf value as table text: lists comma-separated, None as '-', floats to 6 significant digits."""
+    if isinstance(value, list | tuple):
+        return ", ".join(_plain(v) for v in value) if value else "-"
+    if isinstance(value, dict):
+        return "-"  # an empty dict
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def emit_object(obj: Any, fmt: OutputFormat, title: str | None = None) -> None:
+    """Print one object: JSON for json, a key/value table for table (never JSON), key,value CSV for csv.
+
+    The table and CSV flatten nested dicts into dotted keys (:func:`flatten`).
+    """
     obj = json_safe(obj)
     if fmt == OutputFormat.csv and isinstance(obj, dict):
         emit_rows([{"key": k, "value": json.dumps(v) if isinstance(v, dict | list) else v}
                    for k, v in obj.items()], fmt)
         return
     if fmt == OutputFormat.table:
-        out_console.print_json(json.dumps(obj, default=str))
+        table = Table(title=title, show_header=False)
+        table.add_column("key", style="bold")
+        table.add_column("value", overflow="fold")
+        for key, value in flatten(obj):
+            table.add_row(Text(key), Text(_plain(value)))
+        out_console.print(table)
         return
     sys.stdout.write(json.dumps(obj, indent=2, default=str) + "\n")
 

@@ -73,7 +73,8 @@ def diagnose(
         ),
     ] = 0.05,
     seed: SeedOpt = 0,
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="Also write the table CSV here.")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Also write the table CSV (calibration.csv or "
+                                                          "fixed_rollout.csv) into this directory.")] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
@@ -90,7 +91,7 @@ def diagnose(
     Example: morfic diagnose runs/film-s0 runs/ppo-s0 --robots aliengo,mini_cheetah
     Example: morfic diagnose --fixed-rollout aliengo --actor runs/film-s0 --critics runs/film-s0,runs/ppo-s0
     """
-    check_args(store=store, out_file=out, seed=seed, envs=envs, steps=steps, command_vx=str(command_vx), specs=runs)
+    check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=str(command_vx), specs=runs)
     from morfic_cli.diagnostics.samples import DiagnoseCfg
     from morfic_cli.morphology.distance import parse_robot_list
     from morfic_cli.store import Store
@@ -143,7 +144,7 @@ def _calibration(st, specs: list[str], cfg, out: Path | None, fmt: OutputFormat,
         check_horizon(t.cfg.ppo.gamma, cfg)
     with StepBar("diagnose", len(specs) * len(cfg.robots) * cfg.steps, quiet) as bar:
         result = diagnose_runs(st, specs, cfg, trained=trained, on_rollout_start=_describe(bar), on_step=bar.step)
-    _write_out(out, result.rows, CALIBRATION_COLUMNS)
+    _write_out(out, "calibration.csv", result.rows, CALIBRATION_COLUMNS)
     if not quiet:
         reused = sum(r["reused"] for r in result.rows)
         info(
@@ -177,7 +178,7 @@ def _fixed(
     models = load_models(st, actor, critics, cfg)  # defaults, bad refs, incompatible critics fail here
     with StepBar("diagnose", cfg.steps, quiet) as bar:
         result = fixed_rollout(st, robot, models, cfg, on_rollout_start=_describe(bar), on_step=bar.step)
-    _write_out(out, result.rows, FIXED_ROLLOUT_COLUMNS)
+    _write_out(out, "fixed_rollout.csv", result.rows, FIXED_ROLLOUT_COLUMNS)
     if not quiet:
         how = "reused" if result.rows[0]["reused"] else "collected"
         info(
@@ -201,13 +202,14 @@ def _fixed(
     )
 
 
-def _write_out(out: Path | None, rows: list[dict], columns: tuple[str, ...]) -> None:
+def _write_out(out: Path | None, name: str, rows: list[dict], columns: tuple[str, ...]) -> None:
+    """``--out DIR``: the table as ``DIR/name`` (the directory is created)."""
     if out is None:
         return
     from morfic_cli.recording.tables import rows_to_csv
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_bytes(rows_to_csv(rows, columns))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_bytes(rows_to_csv(rows, columns))
 
 
 def _describe(bar: StepBar):

@@ -47,8 +47,13 @@ def distance(
     rows = distance_table(names, ref_name, normalize.value)
     flat = [r.as_row(ref_name, normalize.value) for r in rows]
     artifact = write_distance_table(store, flat, names, ref_name, normalize.value)
+    if fmt == OutputFormat.json:  # the out-of-support dimensions as a list, not the table's joined text
+        shown = [{**row, "outside": [{"dim": k, "side": "above" if v > 0 else "below"} for k, v in r.outside.items()]}
+                 for row, r in zip(flat, rows, strict=True)]
+    else:
+        shown = flat
     emit_rows(
-        flat,
+        shown,
         fmt,
         columns=[
             Column("robot"),

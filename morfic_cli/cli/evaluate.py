@@ -46,8 +46,8 @@ def evaluate(
     video: Annotated[bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")]
     = False,
     out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Also write the table CSV here, and beside it a "
-                                       "speed/survival figure per robot and command (and videos).")
+        Path | None, typer.Option("--out", "-o", help="Also write eval.csv, a speed/survival figure per robot and "
+                                       "command (and the videos) into this directory.")
     ] = None,
     training_conditions: Annotated[
         bool,
@@ -76,7 +76,7 @@ def evaluate(
 
     Example: morfic eval runs/film-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
     """
-    check_args(store=store, out_file=out, seed=seed, envs=envs, steps=steps, command_vx=command_vx, robots=robots,
+    check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=command_vx, robots=robots,
                specs=[run])
     if training_conditions:
         _training_check(run, robots, command_vx, mode, envs, steps, seed, video, out, fmt, quiet, store)
@@ -120,8 +120,8 @@ def evaluate(
         from morfic_cli.evaluation.protocol import EVAL_COLUMNS
         from morfic_cli.recording.tables import rows_to_csv
 
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(rows_to_csv(result.rows, EVAL_COLUMNS))
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "eval.csv").write_bytes(rows_to_csv(result.rows, EVAL_COLUMNS))
         from morfic_cli.evaluation.figures import write_figures
 
         for path in write_figures(st, result.id, out):
@@ -134,17 +134,17 @@ def evaluate(
         columns=[
             Column("robot", "robot"),
             Column("mode", "mode"),
-            Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:.1f}", justify="right"),
+            Column("command_vx", "cmd", fmt=lambda v: f"{v:.1f}", justify="right"),
             Column("d", "d", fmt=lambda v: "-" if v is None else f"{v:.3f}", justify="right"),
-            Column("cell", "v_x ± σ / S", justify="right"),
-            Column("vx_peak_1s_mean", "peak 1 s", fmt=lambda v: f"{v:.2f}", justify="right"),
-            Column("tracking_ratio", "tracking", fmt=lambda v: f"{v:.2f}", justify="right"),
-            Column("verdict", "validity"),
+            Column("cell", "v_x ± σ / S", justify="right", no_wrap=True),
+            Column("vx_peak_1s_mean", "peak", fmt=lambda v: f"{v:.2f}", justify="right"),
+            Column("tracking_ratio", "track", fmt=lambda v: f"{v:.2f}", justify="right"),
+            Column("verdict", "validity", no_wrap=True),
         ],
         title=f"zero-shot transfer of {run}",
-        caption="v_x: mean forward velocity over alive steps (at 2.5 m/s also the paper's v_x^max); σ: std over all "
-        "alive (env, step) samples; S: survival; peak 1 s: best 1 s moving average (morfic's extra); validity: "
-        "moving, upright, no dragging",
+        caption="cmd: commanded v_x (m/s); v_x: mean forward velocity over alive steps (at 2.5 m/s also the "
+        "paper's v_x^max); σ: std over all alive (env, step) samples; S: survival; peak: best 1 s moving average "
+        "(morfic's extra); track: v_x / cmd; validity: moving, upright, no dragging",
     )
 
 
@@ -178,8 +178,8 @@ def _training_check(run: str, robots: str, command_vx: str | None, mode: str, en
     if out is not None:
         from morfic_cli.recording.tables import rows_to_csv
 
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(rows_to_csv(result.rows, CHECK_COLUMNS))
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "training-check.csv").write_bytes(rows_to_csv(result.rows, CHECK_COLUMNS))
     ref = result.reference
     if not quiet:
         info(f"training: {ref.length_s:.2f} ± {ref.sd_s:.2f} s mean episode length over iterations "

@@ -23,7 +23,7 @@ def report(
     with_paper: Annotated[bool, typer.Option("--with-paper", help="Put the paper's published tables after "
                                              "ours.")] = False,
     out: Annotated[Path | None, typer.Option("--out", "-o", help="Also write the report's files into this "
-                                             "folder.")] = None,
+                                             "directory.")] = None,
     name: Annotated[str, typer.Option("--name", help="The report's ref is reports/NAME.")] = "latest",
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,

@@ -88,9 +88,9 @@ def show(
         "public_total_mass_kg": spec.public_total_mass,
         "nominal_height_m": round(nominal_height(spec), 4),
     }
-    if fmt == OutputFormat.json:
-        emit_object({**summary, "facts": facts, "descriptor": descriptor,
-                     "descriptor_source": spec.descriptor_source, "conflicts": conflicts}, fmt)
+    if fmt == OutputFormat.json:  # values as numbers and lists, not the table's text
+        emit_object({**summary, "facts": fact_rows(spec, raw=True), "descriptor": descriptor,
+                     "descriptor_source": spec.descriptor_source, "conflicts": conflict_rows(spec, raw=True)}, fmt)
         return
     if fmt == OutputFormat.csv:
         rows = [{"section": "summary", "field": k, "value": v, "unit": "", "source": ""} for k, v in summary.items()]

@@ -105,6 +105,32 @@ def show(
     _emit(rows, fmt, columns, title=f"history of {spec}")
 
 
+@app.command("get")
+def get(
+    spec: Annotated[str, typer.Argument(help="Ref (runs/film-s0), ref@N, id or unique id prefix.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Directory to write the files into (created).")],
+    files: Annotated[
+        Optional[list[str]], typer.Option("--file", help="Only this file of the artifact (repeatable).")
+    ] = None,
+    fmt: FormatOpt = OutputFormat.table,
+    store: StoreOpt = DEFAULT_STORE,
+) -> None:
+    """Copy an artifact's files out of the store, byte for byte, under readable names.
+
+    Files keep their names in the artifact (model.pt, eval.csv, table.csv, policy.onnx); a rollout's
+    rollout.mcap is named after its robot, mode and command (go1-descriptor-vx2.0.mcap).
+
+    Example: morfic store get runs/film-s0 --file model.pt --out ckpt/
+    """
+    from morfic_cli.store.get import get_files
+
+    got = get_files(Store(store), spec, out, files)
+    rows = [{"file": g.name, "path": str(g.path), "id": g.id, "size": g.size} for g in got]
+    columns = [Column("file"), Column("path"), Column("id", fmt=_short_id),
+               Column("size", fmt=human_size, justify="right")]
+    _emit(rows, fmt, columns, title=f"files of {spec}")
+
+
 @app.command("verify")
 def verify(store: StoreOpt = DEFAULT_STORE) -> None:
     """Rehash every object and check the manifest index and refs; exit 1 if anything is wrong.

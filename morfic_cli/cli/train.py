@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import sys
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -13,6 +14,7 @@ from morfic_cli.cli._options import (
     Device,
     DeviceOpt,
     FormatOpt,
+    Logger,
     OutputFormat,
     Preset,
     QuietOpt,
@@ -20,6 +22,7 @@ from morfic_cli.cli._options import (
     StoreOpt,
 )
 from morfic_cli.cli._render import emit_object, info
+from morfic_cli.errors import MorficError
 from morfic_cli.rl.variants import help_text
 from morfic_cli.runs import run_name
 from morfic_cli.validation import check_args
@@ -45,6 +48,14 @@ def train(
         typer.Option("--set", help="Config override key=value, repeatable (e.g. ppo.learning_rate=3e-4, "
                      "env.num_envs=256, max_iterations=50). Unknown keys are an error."),
     ] = None,
+    logger: Annotated[
+        Logger, typer.Option("--logger", help="Live curves while training: tensorboard event files, wandb "
+                             "(pip install 'morfic[wandb]'), or none. The store keeps the curve either way.")
+    ] = Logger.tensorboard,
+    log_dir: Annotated[
+        Path, typer.Option("--log-dir", envvar="MORFIC_LOG_DIR",
+                           help="Root of the run folders of --logger: <log-dir>/<run name> (env MORFIC_LOG_DIR).")
+    ] = Path("logs"),
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
@@ -64,18 +75,23 @@ def train(
     """
     check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None)
     from morfic_cli.rl.config import apply_overrides, preset_cfg
+    from morfic_cli.rl.live_log import check_logger
     from morfic_cli.rl.runner import new_run, resume_run
     from morfic_cli.store import Store
 
+    check_logger(logger.value)
+    if log_dir.exists() and not log_dir.is_dir():
+        raise MorficError(f"--log-dir {log_dir} is a file; give a directory (it is created if missing).")
+    live = (logger.value, log_dir)
     st = Store(store)
     if resume is not None:
         if variant is not None or preset is not None or name is not None:
             info("note: --variant/--preset/--name are taken from the checkpoint when resuming; ignored.")
-        run = resume_run(st, resume, overrides, device.value)
+        run = resume_run(st, resume, overrides, device.value, live=live)
     else:
         base = preset_cfg((preset or Preset.smoke).value, variant or "film", seed)
         cfg = apply_overrides(base, list(overrides or []))
-        run = new_run(st, cfg, name or run_name(cfg.variant, cfg.seed), device.value)
+        run = new_run(st, cfg, name or run_name(cfg.variant, cfg.seed), device.value, live=live)
 
     cfg = run.cfg
     quiet = quiet or run.dist.rank != 0  # torchrun: one progress bar, rank 0's
@@ -85,6 +101,10 @@ def train(
              f"({cfg.env.num_envs * cfg.num_steps_per_env:,} transitions each) "
              f"sim={cfg.env.sim.backend} on {cfg.env.sim.device}"
              + (f" x {run.dist.world_size} processes" if run.dist.world_size > 1 else ""))
+        if run.live is not None:
+            kind, folder = run.live
+            hint = f" (tensorboard --logdir {log_dir})" if kind == "tensorboard" else ""
+            info(f"train: live curves ({kind}) in {folder}{hint}")
 
     def on_sigint(signum, frame):  # noqa: ARG001
         if run.stop_requested:
@@ -124,6 +144,16 @@ def train(
     emit_object(result, fmt)
 
 
+def _num(value: float | None, digits: int = 2) -> str:
+    """``0.12``, or ``-`` for a value not measured yet (None, NaN: no episode has ended)."""
+    return "-" if value is None or value != value else f"{value:.{digits}f}"
+
+
+def _seconds(value: float | None) -> str:
+    """``12.3s``, or ``-`` before the first episode has ended (NaN)."""
+    return "-" if value is None or value != value else f"{value:.1f}s"
+
+
 class _progress:
     """A rich progress bar on stderr fed by the run's per-iteration rows (nothing when quiet)."""
 
@@ -144,12 +174,12 @@ class _progress:
             def log_line(row: dict) -> None:
                 it = int(row["iteration"])
                 if it % every == 0 or it == self.run.cfg.max_iterations:
-                    sys.stderr.write(f"it {it}/{self.run.cfg.max_iterations}  {row.get('env_steps', 0):,.0f} steps  "
-                         f"{row.get('steps_per_s', 0):,.0f} steps/s  reward {row.get('mean_reward', float('nan')):.2f}"
-                         f"  EV {row.get('explained_variance', float('nan')):.2f}  vx_err "
-                         f"{row.get('tracking.vx_error', float('nan')):.2f}  "
-                         f"vx_max {row.get('curriculum.vx_max', 0):.1f}"
-                         f"  ep {row.get('episode_length_s', float('nan')):.1f}s  {row.get('wall_time_s', 0):.0f}s\n")
+                    sys.stderr.write(
+                        f"it {it}/{self.run.cfg.max_iterations}  {row.get('env_steps', 0):,.0f} steps  "
+                        f"{row.get('steps_per_s', 0):,.0f} steps/s  reward {_num(row.get('mean_reward'))}  "
+                        f"EV {_num(row.get('explained_variance'))}  vx_err {_num(row.get('tracking.vx_error'))}  "
+                        f"vx_max {row.get('curriculum.vx_max', 0):.1f}  ep {_seconds(row.get('episode_length_s'))}  "
+                        f"{row.get('wall_time_s', 0):.0f}s\n")
                     sys.stderr.flush()
 
             self.run.progress = log_line

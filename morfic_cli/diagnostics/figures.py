@@ -66,7 +66,8 @@ def ev_plot(rows: Sequence[dict[str, Any]]):
         ax.set_ylabel("explained variance EV", fontsize=9)
     ax.set_title("Critic calibration under morphology shift (higher is better, 1 = perfect, dashed)", fontsize=10)
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=8, ncol=min(len(runs), 3), loc="upper center", bbox_to_anchor=(0.5, -0.08), frameon=False)
+    if runs:  # no diagnosis rows (a report of evals only): no bars, no legend (ncol=0 is an error)
+        ax.legend(fontsize=7, ncol=min(len(runs), 4), loc="upper center", bbox_to_anchor=(0.5, -0.1), frameon=False)
     return fig
 
 

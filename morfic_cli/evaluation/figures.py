@@ -103,9 +103,9 @@ def rollout_figure(vx: np.ndarray, terminated: np.ndarray, dt: float, command_vx
 
 
 def write_figures(store: Store, eval_id: str, out: Path) -> list[Path]:
-    """Copy the stored figure of every rollout of eval ``eval_id`` beside the ``--out`` table.
+    """Copy the stored figure of every rollout of eval ``eval_id`` into the ``--out`` directory.
 
-    Names: ``<out stem>-<robot>-<mode>-vx<cmd>-speed.png`` (and ``.pdf``) next to ``out``.
+    Names: ``<robot>-<mode>-vx<cmd>-speed.png`` (and ``.pdf``) in ``out``.
 
     Returns:
         The paths written.
@@ -118,10 +118,10 @@ def write_figures(store: Store, eval_id: str, out: Path) -> list[Path]:
         if not role.startswith("rollout/"):
             continue
         files = store.read_manifest(rid).files
-        stem = f"{out.stem}-{media_name(role)}-speed"
+        stem = f"{media_name(role)}-speed"
         for name in (FIGURE_PNG, FIGURE_PDF):
             if name in files:
-                path = out.parent / (stem + Path(name).suffix)
+                path = out / (stem + Path(name).suffix)
                 path.write_bytes(store.read_file(rid, name))
                 written.append(path)
     return written

@@ -30,8 +30,8 @@ def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: i
     Args:
         store: The store ``result`` was written to.
         result: What :func:`~morfic_cli.evaluation.protocol.evaluate` returned (with ``keep_models`` > 0).
-        out: The ``--out`` table path; the videos and frame grids are also written beside it as
-            ``<out stem>-<robot>-<mode>-vx<cmd>.<mp4|gif>`` and ``...-frames.png``.
+        out: The ``--out`` directory; the videos and frame grids are also written into it as
+            ``<robot>-<mode>-vx<cmd>.<mp4|gif>`` and ``...-frames.png``.
         every: Keep every ``every``-th policy step.
 
     Returns:
@@ -60,8 +60,8 @@ def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: i
         if out is None:
             written.append(mid)
             continue
-        out.parent.mkdir(parents=True, exist_ok=True)
-        stem = out.parent / f"{out.stem}-{media_name(role)}"
+        out.mkdir(parents=True, exist_ok=True)
+        stem = out / media_name(role)
         video_path, sheet_path = stem.with_name(stem.name + f".{ext}"), stem.with_name(stem.name + "-frames.png")
         video_path.write_bytes(data)
         sheet_path.write_bytes(sheet)

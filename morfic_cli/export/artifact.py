@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,9 +29,11 @@ from morfic_cli.export.runtime import (
     ONNX_OPSET,
     load_runner,
     onnxruntime_version,
+    read_metadata,
     require_onnx,
     to_onnx,
     to_torchscript,
+    with_metadata,
 )
 from morfic_cli.export.verify import TOLERANCE, Verification, model_mismatches, verify_outputs
 from morfic_cli.morphology.robots import list_robots, load_robot
@@ -192,7 +196,8 @@ def runtime_name(fmt: str) -> str:
 
 
 def export_policy(
-    store: Store, spec: str, cfg: ExportCfg, out: Path | None = None, trained: TrainedModels | None = None
+    store: Store, spec: str, cfg: ExportCfg, out: Path | None = None, trained: TrainedModels | None = None,
+    on_phase: Callable[[str], None] | None = None,
 ) -> ExportResult:
     """Export checkpoint ``spec``'s deployed actor path, verify it, store it, and optionally write it to ``out``.
 
@@ -202,21 +207,24 @@ def export_policy(
         cfg: What to export.
         out: Also write the model and ``policy.json`` into this directory.
         trained: The checkpoint already loaded (else loaded from ``spec``).
+        on_phase: Called with a short description as each phase starts (the CLI's progress line).
 
     Raises:
         MorficError: Bad options, not a checkpoint, or a failed verification (then nothing is stored).
     """
     check_cfg(cfg)
+    phase = on_phase or (lambda _text: None)
+    phase("loading the checkpoint")
     trained = trained or load_trained(store, spec)
     module, meta = plan_export(trained, cfg.robot, cfg.targets)
-    model_bytes = serialise(module, meta, cfg.fmt, cfg.opset)
     model_file = MODEL_FILES[cfg.fmt]
-    meta.update(
-        format=cfg.fmt,
-        model_file=model_file,
-        model_sha256=hashlib.sha256(model_bytes).hexdigest(),
-        onnx_opset=cfg.opset if cfg.fmt == "onnx" else None,
-    )
+    meta.update(format=cfg.fmt, model_file=model_file, onnx_opset=cfg.opset if cfg.fmt == "onnx" else None)
+    phase(f"exporting {'ONNX (torch.export)' if cfg.fmt == 'onnx' else 'TorchScript'}")
+    model_bytes = serialise(module, meta, cfg.fmt, cfg.opset)
+    if cfg.fmt == "onnx":
+        model_bytes = with_metadata(model_bytes, M.onnx_props(meta))
+    meta["model_sha256"] = hashlib.sha256(model_bytes).hexdigest()
+    phase(f"verifying on {cfg.samples} random inputs")
     verification = verify_outputs(
         load_runner(cfg.fmt, model_bytes),
         runtime_name(cfg.fmt),
@@ -228,6 +236,7 @@ def export_policy(
     )
     if not verification.ok:
         raise MorficError(f"export verification failed, nothing stored: {verification.summary()}.")
+    phase("checking the metadata against the robot models")
     problems = robot_model_problems(meta)
     if problems:
         raise MorficError("export metadata disagrees with the robot model, nothing stored: " + "; ".join(problems))
@@ -242,6 +251,74 @@ def export_policy(
     if out is not None:
         result.written = write_files(out, files)
     return result
+
+
+@dataclass
+class RslRlExport:
+    """A stored rsl-rl checkpoint export (``morfic export RUN --to rsl-rl``).
+
+    Attributes:
+        id: The export manifest id.
+        ref: ``exports/<run>/rsl-rl`` and version.
+        files: File name -> bytes (``model_<it>.pt``, ``agent.json``, ``train.json``).
+        checkpoint: The morfic checkpoint id it was made from.
+        optimizer: ``trained`` (the run's optimiser state) or ``fresh`` (a weights-only checkpoint).
+        reused: The store already held this export (no new manifest).
+        written: Files written to ``--out``.
+    """
+
+    id: str
+    ref: str
+    files: dict[str, bytes]
+    checkpoint: str
+    optimizer: str
+    reused: bool
+    written: list[Path] = field(default_factory=list)
+
+
+def export_rsl_rl(store: Store, spec: str, out: Path | None = None) -> RslRlExport:
+    """Export checkpoint ``spec`` in rsl-rl's checkpoint layout (:mod:`morfic_cli.export.rsl_rl`), store it, write it.
+
+    The weights are checked to load back into freshly built models with identical actions before anything is
+    stored. Ref ``exports/<run>/rsl-rl``; an identical export already in the store is reused (no new version).
+
+    Raises:
+        MorficError: Not a checkpoint, or its user variant cannot be imported.
+    """
+    from morfic_cli.export import rsl_rl
+
+    trained = load_trained(store, spec)
+    files, infos = rsl_rl.rsl_rl_files(store, trained)
+    name = next(n for n in files if n.endswith(".pt"))
+    _check_rsl_rl_weights(trained, files[name])
+    run = run_of(spec, trained.meta)
+    ref = export_ref(run, None, "rsl-rl")
+    optimizer = infos["optimizer"]
+    pub = store.publish("export", ref, config={"to": "rsl-rl"}, inputs={"checkpoint": trained.checkpoint_id},
+                        files=files, meta={"run": run, "format": "rsl-rl", "model_file": name, "optimizer": optimizer},
+                        reuse=True)
+    result = RslRlExport(pub.id, f"{ref}@{pub.version}", files, trained.checkpoint_id, optimizer, pub.reused)
+    if out is not None:
+        result.written = write_files(out, files)
+    return result
+
+
+def _check_rsl_rl_weights(trained: TrainedModels, data: bytes) -> None:
+    """Load the exported weights into fresh models and compare actions on random inputs (an internal invariant)."""
+    from morfic_cli.rl.runner import build_models, dummy_observations
+
+    state = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    actor, critic = build_models(trained.cfg)
+    actor.load_state_dict(state["actor_state_dict"])
+    critic.load_state_dict(state["critic_state_dict"])
+    actor.eval()
+    obs = dummy_observations(trained.cfg, batch=8)
+    gen = torch.Generator().manual_seed(0)
+    for key in obs.keys():
+        obs[key] = torch.randn(obs[key].shape, generator=gen)
+    with torch.no_grad():
+        if not torch.equal(actor(obs), trained.actor(obs)):
+            raise RuntimeError("the rsl-rl export's actor weights do not reproduce the checkpoint's actions")
 
 
 def metadata_bytes(meta: dict[str, Any]) -> bytes:
@@ -305,6 +382,9 @@ def read_export(store: Store, source: str) -> tuple[dict[str, Any], bytes]:
             ) from exc
         return meta, model
     manifest = store.read_manifest(source)
+    if manifest.kind == "export" and METADATA_FILE not in manifest.files:
+        raise MorficError(f"'{source}' is an rsl-rl checkpoint export; --check verifies ONNX and TorchScript "
+                          "exports (load it with rsl-rl's OnPolicyRunner.load, docs/deploy.md).")
     if manifest.kind != "export":
         raise MorficError(
             f"'{source}' is a {manifest.kind} artifact; --check takes an export (an exports/... ref "
@@ -345,6 +425,13 @@ def check_export(
             continue
         if expected.get(key) != meta.get(key):
             problems.append(f"metadata '{key}' differs from what checkpoint {trained.checkpoint_id[:12]} gives")
+    if meta.get("format") == "onnx":
+        try:
+            props = read_metadata(model)
+        except Exception:  # onnx raises its own decode errors; the sha256 check above names the file
+            props = None
+        if props != M.onnx_props(meta):
+            problems.append("the ONNX metadata_props disagree with policy.json")
     problems += robot_model_problems(meta)
     verification = verify_outputs(
         load_runner(meta["format"], model),

@@ -237,6 +237,67 @@ def build_metadata(
     }
 
 
+def _csv(values: Any) -> str:
+    """Comma-separated values, floats as ``repr`` (``float(x)`` gives each back exactly)."""
+    return ",".join(repr(float(v)) if isinstance(v, float) else str(v) for v in values)
+
+
+def onnx_props(meta: dict[str, Any]) -> dict[str, str]:
+    """The ONNX ``metadata_props`` of an export: mjlab's keys plus morfic's, every value from ``meta``.
+
+    ``meta`` is the policy.json document (:func:`build_metadata`); the props are a flat string view of it, so
+    the two agree by construction (``policy.json`` stays the readable twin). Lists are comma-separated, floats as
+    ``repr``. mjlab's keys (``joint_names``, ``joint_stiffness``, ``joint_damping``, ``default_joint_pos``,
+    ``action_scale``, ``observation_names``, ``command_names``) describe ONE robot: the baked one, else the
+    template the policy was trained on (``robot`` names it); ``robots`` lists every described robot and
+    ``robot.<name>.<key>`` gives each one's values. ``model_sha256`` is not a prop (it hashes the file itself).
+
+    Returns:
+        Key -> string value.
+    """
+    obs, control = meta["observation"], meta["control"]
+    robots = meta["robots"]
+    robot = meta["baked_robot"] or next((n for n in robots if n == "go2"), next(iter(robots)))
+    n_joints = len(meta["joint_names"])
+
+    def per_robot(section: dict[str, Any]) -> dict[str, str]:
+        return {
+            "joint_stiffness": _csv(section["kp"]),
+            "joint_damping": _csv(section["kd"]),
+            "default_joint_pos": _csv(section["default_joint_pos"]),
+            "torque_limit": _csv(section["torque_limit"]),
+            "morphology": _csv(section["morphology"]),
+        }
+
+    props: dict[str, str] = {
+        "joint_names": _csv(meta["joint_names"]),
+        **per_robot(robots[robot]),
+        "action_scale": _csv([float(control["action_scale"])] * n_joints),
+        "observation_names": _csv(t["name"] for t in obs["terms"]),
+        "command_names": _csv(obs["command"]["names"]),
+        "robot": robot,
+        "robots": _csv(robots),
+        "baked_robot": meta["baked_robot"] or "",
+        "history_length": str(obs["history_len"]),
+        "history_order": obs["history_order"],
+        "observation_size": str(obs["size"]),
+        "observation_scales": _csv(v for t in obs["terms"] for v in t["scale"]),
+        "observation_clip": repr(float(obs["clip"])),
+        "dt": repr(float(control["dt"])),
+        "action_clip": repr(float(control["action_clip"])),
+        "inputs": _csv(s["name"] for s in meta["inputs"]),
+        "outputs": _csv(s["name"] for s in meta["outputs"]),
+        "descriptor_names": _csv(meta["descriptor"]["names"]),
+        "schema": meta["schema"],
+        "morfic_version": meta["morfic_version"],
+    }
+    for key in ("run", "checkpoint", "variant", "preset", "seed", "iteration"):
+        props[key] = "" if meta.get(key) is None else str(meta[key])
+    for name, section in robots.items():
+        props.update({f"robot.{name}.{k}": v for k, v in per_robot(section).items()})
+    return props
+
+
 def _floats(values: Any) -> list[float]:
     return [float(v) for v in np.asarray(values, dtype=np.float64).reshape(-1)]
 

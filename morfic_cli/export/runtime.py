@@ -53,7 +53,7 @@ def require_onnx() -> None:
         raise MorficError(
             f"ONNX export needs {', '.join(missing)}, which {'is' if len(missing) == 1 else 'are'} "
             "not installed; install the export extra with `pip install 'morfic[export]'` "
-            "(or use --format torchscript)."
+            "(or use --to torchscript)."
         )
 
 
@@ -103,6 +103,23 @@ def to_onnx(
             path = Path(tmp) / "policy.onnx"
             program.save(str(path), external_data=False)
             return path.read_bytes()
+
+
+def with_metadata(model: bytes, props: dict[str, str]) -> bytes:
+    """The ONNX model ``model`` with ``props`` as its ``metadata_props`` (replacing any it had)."""
+    import onnx
+
+    proto = onnx.load_from_string(model)
+    del proto.metadata_props[:]
+    onnx.helper.set_model_props(proto, props)
+    return proto.SerializeToString()
+
+
+def read_metadata(model: bytes) -> dict[str, str]:
+    """The ``metadata_props`` of ONNX model bytes as a dict."""
+    import onnx
+
+    return {p.key: p.value for p in onnx.load_from_string(model).metadata_props}
 
 
 def to_torchscript(module: nn.Module) -> bytes:

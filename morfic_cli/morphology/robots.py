@@ -722,15 +722,20 @@ def _format_value(value: Any) -> str:
     return str(value)
 
 
-def fact_rows(spec: RobotSpec) -> list[dict[str, Any]]:
-    """Every fact of the spec as a row: ``field``, ``value`` (as written), ``unit``, ``source``."""
-    return [{"field": f.key, "value": _format_value(f.value), "unit": f.unit, "source": f.source}
-            for f in spec.facts]
+def fact_rows(spec: RobotSpec, raw: bool = False) -> list[dict[str, Any]]:
+    """Every fact of the spec as a row: ``field``, ``value``, ``unit``, ``source``.
+
+    ``value`` is text as written (``[0.3762, 0.0935, 0.114]``), or with ``raw`` the TOML value itself (numbers as
+    numbers, lists as lists: the JSON output).
+    """
+    fmt = (lambda v: v) if raw else _format_value
+    return [{"field": f.key, "value": fmt(f.value), "unit": f.unit, "source": f.source} for f in spec.facts]
 
 
-def conflict_rows(spec: RobotSpec) -> list[dict[str, Any]]:
-    """The spec's conflicts with public sources as rows (field, paper, public, source, note)."""
-    return [{"field": c.field, "paper": _format_value(c.paper), "public": _format_value(c.public),
+def conflict_rows(spec: RobotSpec, raw: bool = False) -> list[dict[str, Any]]:
+    """The spec's conflicts with public sources as rows (field, paper, public, source, note); ``raw`` as above."""
+    fmt = (lambda v: v) if raw else _format_value
+    return [{"field": c.field, "paper": fmt(c.paper), "public": fmt(c.public),
              "source": c.source, "note": c.note} for c in spec.conflicts]
 
 

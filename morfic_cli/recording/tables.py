@@ -42,10 +42,14 @@ def write_distance_table(
     from morfic_cli.store import Store
 
     store = Store(store_root)
-    config = {"table": "distance", "robots": list(names), "reference": reference, "normalize": normalize}
-    return store.publish("table", "tables/distance", config=config,
+    digests = robot_file_digests(sorted({*names, reference}))
+    # the robot files are part of the config: the same files and options give the same table, which is then reused
+    # (running `morfic distance` again adds no ref version); an edited TOML gives a new one
+    config = {"table": "distance", "robots": list(names), "reference": reference, "normalize": normalize,
+              "robot_toml_sha256": digests}
+    return store.publish("table", "tables/distance", config=config, reuse=True,
                          files={"distance.csv": rows_to_csv(rows, DISTANCE_COLUMNS)},
-                         meta={"robot_toml_sha256": robot_file_digests(sorted({*names, reference}))})
+                         meta={"robot_toml_sha256": digests})
 
 
 BENCH_ENV_COLUMNS: tuple[str, ...] = (

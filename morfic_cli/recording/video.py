@@ -3,7 +3,7 @@
 Pipeline (``morfic eval --video``)::
 
     frames = render_frames(models, qpos)          # (T, E, nq) -> (F, H_grid, W_grid, 3) uint8
-    data, ext = encode_video(frames, fps)         # MP4 (H.264) with ffmpeg, else an animated GIF
+    data, ext = encode_video(frames, fps)         # MP4 (H.264) via imageio-ffmpeg, else an animated GIF
     sheet = frame_grid_png(frames, n=6)           # PNG contact sheet for docs
 
 Rendering is offscreen OpenGL through :class:`mujoco.Renderer`. Which OpenGL platform mujoco uses is the
@@ -28,8 +28,6 @@ import hashlib
 import io
 import math
 import os
-import shutil
-import subprocess
 import sys
 import tempfile
 from collections.abc import Sequence
@@ -368,43 +366,40 @@ def _check_frames(frames: np.ndarray) -> np.ndarray:
 
 
 def find_ffmpeg() -> str | None:
-    """An ffmpeg executable: ``ffmpeg`` on PATH, else the one bundled with ``imageio-ffmpeg``, else None."""
-    exe = shutil.which("ffmpeg")
-    if exe:
-        return exe
+    """The ffmpeg that ``imageio-ffmpeg`` runs (its bundled binary, or ``IMAGEIO_FFMPEG_EXE`` / PATH), or None.
+
+    None when the ``morfic[video]`` extra (imageio-ffmpeg) is not installed or finds no ffmpeg: videos are GIFs.
+    """
     try:
         import imageio_ffmpeg  # type: ignore[import-not-found]
 
         return imageio_ffmpeg.get_ffmpeg_exe()
-    except Exception:  # not installed, or installed without a binary
+    except Exception:  # not installed, or installed without a binary and none on PATH
         return None
 
 
-def _encode_mp4(frames: np.ndarray, fps: float, ffmpeg: str) -> bytes:
-    """H.264 MP4 (yuv420p, even size by padding, moov atom first) by piping raw RGB frames into ffmpeg."""
+def _encode_mp4(frames: np.ndarray, fps: float) -> bytes:
+    """H.264 MP4 (yuv420p, moov atom first) through ``imageio_ffmpeg.write_frames``, at exactly ``fps``.
+
+    yuv420p needs an even width and height: an odd edge is padded by repeating the last row / column (no
+    resampling).
+    """
+    import imageio_ffmpeg  # type: ignore[import-not-found]
+
     n, h, w, _ = frames.shape
+    frames = np.pad(frames, ((0, 0), (0, h % 2), (0, w % 2), (0, 0)), mode="edge")
     with tempfile.TemporaryDirectory(prefix="morfic-video-") as tmp:
         out = os.path.join(tmp, "video.mp4")
-        cmd = [ffmpeg, "-hide_banner", "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24",
-               "-s", f"{w}x{h}", "-r", f"{fps:g}", "-i", "-", "-an", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2",
-               "-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", "23", "-preset", "medium",
-               "-movflags", "+faststart", out]
-        with open(os.path.join(tmp, "stderr.txt"), "w+b") as err:
-            # frame by frame into stdin (no copy of the whole clip); stderr to a file, so it cannot block ffmpeg
-            proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=err)
-            assert proc.stdin is not None
-            try:
-                for frame in frames:
-                    proc.stdin.write(np.ascontiguousarray(frame).tobytes())
-            except BrokenPipeError:
-                pass  # ffmpeg quit early; its exit status and stderr say why
-            finally:
-                proc.stdin.close()
-                code = proc.wait()
-            err.seek(0)
-            message = err.read().decode(errors="replace").strip()
-        if code != 0 or not os.path.exists(out):
-            raise RuntimeError(message or f"ffmpeg exited with status {code}")
+        writer = imageio_ffmpeg.write_frames(
+            out, (w + w % 2, h + h % 2), pix_fmt_in="rgb24", pix_fmt_out="yuv420p", fps=fps, codec="libx264",
+            quality=None, macro_block_size=1, ffmpeg_log_level="error",
+            output_params=["-crf", "23", "-preset", "medium", "-movflags", "+faststart", "-an"])
+        writer.send(None)  # start ffmpeg
+        try:
+            for frame in frames:
+                writer.send(np.ascontiguousarray(frame))
+        finally:
+            writer.close()
         with open(out, "rb") as fh:
             return fh.read()
 
@@ -436,9 +431,9 @@ def _encode_gif(frames: np.ndarray, fps: float) -> bytes:
 
 
 def encode_video(frames: np.ndarray, fps: float, *, fmt: str = "auto") -> tuple[bytes, str]:
-    """Encode frames as an MP4 (H.264) when ffmpeg is available, else as an animated GIF (Pillow).
+    """Encode frames as an MP4 (H.264, at ``fps``) through imageio-ffmpeg when installed, else an animated GIF (Pillow).
 
-    ffmpeg is :func:`find_ffmpeg`: ``ffmpeg`` on PATH or the binary of the ``imageio-ffmpeg`` package. The GIF is
+    The MP4 needs the ``morfic[video]`` extra (imageio-ffmpeg, :func:`find_ffmpeg`). The GIF is
     kept small: frames dropped to at most :data:`GIF_MAX_FPS`, downscaled to :data:`GIF_MAX_SIDE`, a
     :data:`GIF_COLORS`-colour global palette without dithering.
 
@@ -459,15 +454,14 @@ def encode_video(frames: np.ndarray, fps: float, *, fmt: str = "auto") -> tuple[
     if fmt not in ("auto", "mp4", "gif"):
         raise MorficError(f"unknown video format {fmt!r}; use auto, mp4 or gif.")
     if fmt != "gif":
-        ffmpeg = find_ffmpeg()
-        if ffmpeg is not None:
+        if find_ffmpeg() is not None:
             try:
-                return _encode_mp4(frames, fps, ffmpeg), "mp4"
-            except (OSError, RuntimeError) as exc:
+                return _encode_mp4(frames, fps), "mp4"
+            except (OSError, RuntimeError) as exc:  # imageio-ffmpeg raises RuntimeError / OSError for ffmpeg errors
                 if fmt == "mp4":
                     raise MorficError(f"ffmpeg could not encode the MP4: {exc}") from exc
         elif fmt == "mp4":
-            raise MorficError("MP4 needs ffmpeg: `apt install ffmpeg` or `pip install imageio-ffmpeg`.")
+            raise MorficError("MP4 needs ffmpeg through imageio-ffmpeg: `pip install 'morfic[video]'`.")
     return _encode_gif(frames, fps), "gif"
 
 

@@ -133,6 +133,9 @@ def transfer_rows(data: StoreData) -> list[dict[str, Any]]:
             "tracking_ratio": mean(r["tracking_ratio"] for r in rows),
             "valid_fraction": mean(r["valid_fraction"] for r in rows),
             "cell": f"{_num(vx, 2)} ± {_num(vx_std, 2)} / {_num(s, 3)}",
+            # the evaluation budget behind the cell (the smallest, when seeds differ): the caption names it
+            "num_envs": min((int(r["num_envs"]) for r in rows if r.get("num_envs") is not None), default=None),
+            "steps": min((int(r["steps"]) for r in rows if r.get("steps") is not None), default=None),
         })
     out.sort(key=lambda r: (r["preset"], r["mode"], r["command_vx"], variant_order(r["variant"]),
                             robot_order(r["robot"])))

@@ -75,12 +75,30 @@ def transfer_table(rows: Sequence[dict[str, Any]], *, key: str, title: str, comm
             for c, vb, sb in zip(cells, v_bold, s_bold, strict=True))))
     quantity = r"$v_x^{\max} \pm \sigma / S$" if use_max else r"$\bar{v}_x \pm \sigma / S$"
     meaning = r" ($v_x^{\max}$ as the paper uses it: the mean forward speed under this command)" if use_max else ""
-    where = ("the target descriptor on the Go2 template (the paper protocol)" if mode == "descriptor"
-             else "the target robot model itself")
+    where = (f"the target descriptor on the Go2 template ({protocol_text(sel)})" if mode == "descriptor"
+             else f"the target robot model itself ({protocol_text(sel)})")
     caption = (f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s{meaning}, "
                f"σ over all alive env-steps, {where}; bold: best speed and best survival per robot.")
     return Table(key, title, caption, "Target", tuple(method_label(v, p, multi) for p, v in cols),
                  tuple(out_rows), notes=(_seed_note(sel, pooled=True),))
+
+
+def protocol_text(rows: Sequence[dict[str, Any]]) -> str:
+    """Say whether ``rows`` were measured with the paper's protocol (envs x steps), naming a reduced one's budget.
+
+    Example: ``"a reduced protocol: 16 envs x 250 steps; the paper's is 64 x 500"``.
+    """
+    from morfic_cli.evaluation.protocol import EvalCfg
+
+    paper = (EvalCfg.num_envs, EvalCfg.steps)
+    sizes = sorted({(int(r["num_envs"]), int(r["steps"])) for r in rows
+                    if r.get("num_envs") is not None and r.get("steps") is not None})
+    if sizes == [paper]:
+        return f"the paper protocol: {paper[0]} envs x {paper[1]} steps"
+    if not sizes:
+        return "envs and steps not recorded"
+    shown = ", ".join(f"{n} envs x {t} steps" for n, t in sizes)
+    return f"a reduced protocol: {shown}; the paper's is {paper[0]} x {paper[1]}"
 
 
 def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor") -> Table | None:

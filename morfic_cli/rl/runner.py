@@ -193,15 +193,29 @@ class _Sink:
 class CurveLogger(Logger):
     """rsl-rl's Logger, but each iteration becomes a curve row handed to ``on_iteration`` (no console dump)."""
 
-    def __init__(self, *args: Any, dt: float, on_iteration: Callable[[dict[str, float]], None], **kwargs: Any):
+    def __init__(self, *args: Any, dt: float, on_iteration: Callable[[dict[str, float]], None],
+                 live: tuple[str, Path] | None = None, **kwargs: Any):
         super().__init__(*args, **kwargs)
         self.dt = dt
         self.on_iteration = on_iteration
         self.wall_time_s = 0.0
+        self.live_cfg = live
+        self.live: Any = None
 
     def init_logging_writer(self) -> None:
-        """No writer, no git snapshot: the store keeps the run."""
+        """No rsl-rl writer, no git snapshot (the store keeps the run); the live writer, if one is configured."""
         self.writer = _Sink()  # type: ignore[assignment]
+        if self.live_cfg is not None and self.live is None and not self.disable_logs:
+            from morfic_cli.rl.live_log import open_writer
+
+            kind, log_dir = self.live_cfg
+            self.live = open_writer(kind, log_dir, self.cfg)
+
+    def close_live(self) -> None:
+        """Flush and close the live writer (reopened by the next :meth:`init_logging_writer`)."""
+        if self.live is not None:
+            (self.live.stop if hasattr(self.live, "stop") else self.live.close)()
+            self.live = None
 
     def log(self, it: int, start_it: int, total_it: int, collect_time: float, learn_time: float, loss_dict: dict,
             learning_rate: float, action_std: torch.Tensor, rnd_weight: float | None, **_: Any) -> None:
@@ -231,6 +245,15 @@ class CurveLogger(Logger):
             if name.startswith("reward.") or name == "env.nonfinite_resets":
                 continue  # per-step means; the episode means below are what the curve shows
             row[name] = max(values) if name == "curriculum.vx_max" else sum(values) / len(values)
+        if self.live is not None:
+            from morfic_cli.rl.live_log import write_iteration
+
+            extras = {key: sum(float(e[key]) for e in self.ep_extras if key in e)
+                      / sum(1 for e in self.ep_extras if key in e) for key in keys}
+            write_iteration(self.live, it, size, collect_time, learn_time, {k: float(v) for k, v in loss_dict.items()},
+                            learning_rate, float(action_std.detach().mean()), extras,
+                            sum(self.rewbuffer) / len(self.rewbuffer) if self.rewbuffer else None,
+                            sum(self.lenbuffer) / len(self.lenbuffer) if self.lenbuffer else None)
         self.ep_extras.clear()
         self.on_iteration(row)
 
@@ -274,10 +297,14 @@ class Checkpoint:
 class TrainingRun:
     """One training run: env + rsl-rl runner + store checkpoints. Use :func:`new_run` or :func:`resume_run`."""
 
-    def __init__(self, store: Store, cfg: TrainCfg, name: str, device: str = "cpu") -> None:
+    def __init__(self, store: Store, cfg: TrainCfg, name: str, device: str = "cpu",
+                 live: tuple[str, Path] | None = None) -> None:
         from morfic_cli.envs.locomotion import LocomotionEnv
+        from morfic_cli.rl.live_log import run_log_dir
 
         self.dist = distributed_info()
+        self.live = (live[0], run_log_dir(live[1], name)) if live is not None and live[0] != "none" else None
+        """(logger, run folder) of the live curves, or None."""
         cfg = for_device(cfg, device)
         self.store, self.cfg, self.name, self.device = store, cfg, name, torch_device(device)
         self.git_commit = git_commit()  # the code this process runs (HEAD may move while it trains)
@@ -290,7 +317,7 @@ class TrainingRun:
             log_dir="", cfg=old.cfg, env_cfg=old.env_cfg, num_envs=old.num_envs,
             is_distributed=self.runner.is_distributed, gpu_world_size=self.runner.gpu_world_size,
             gpu_global_rank=self.runner.gpu_global_rank, device=old.device, dt=self.env.dt,
-            on_iteration=self._on_iteration,
+            on_iteration=self._on_iteration, live=self.live,
         ))
         self.rows: list[dict[str, float]] = []
         self.iteration = 0
@@ -312,6 +339,8 @@ class TrainingRun:
             self.runner.learn(remaining, init_at_random_ep_len=self._fresh and self.cfg.init_at_random_ep_len)
         except _Stop:
             pass
+        finally:
+            self.runner.logger.close_live()  # type: ignore[attr-defined]
         return self.checkpoints[-1] if self.checkpoints else None
 
     def _on_iteration(self, row: dict[str, float]) -> None:
@@ -461,8 +490,11 @@ def for_device(cfg: TrainCfg, device: str) -> TrainCfg:
     return apply_overrides(cfg, ["env.sim.device=cpu"])
 
 
-def new_run(store: Store, cfg: TrainCfg, name: str, device: str = "cpu") -> TrainingRun:
+def new_run(store: Store, cfg: TrainCfg, name: str, device: str = "cpu",
+            live: tuple[str, Path] | None = None) -> TrainingRun:
     """A fresh run under ``runs/NAME``.
+
+    ``live`` = (logger, log root) writes live curves into ``<log root>/NAME`` (:mod:`morfic_cli.rl.live_log`).
 
     Raises:
         MorficError: ``runs/NAME`` already exists (resume it or pick another --name).
@@ -471,10 +503,11 @@ def new_run(store: Store, cfg: TrainCfg, name: str, device: str = "cpu") -> Trai
     if store.has_ref(RUNS_PREFIX + name):
         raise MorficError(f"run '{RUNS_PREFIX}{name}' already exists in {store.root}; continue it with "
                           f"`--resume {RUNS_PREFIX}{name}` or choose another --name.")
-    return TrainingRun(store, cfg, name, device)
+    return TrainingRun(store, cfg, name, device, live)
 
 
-def resume_run(store: Store, spec: str, overrides: list[str] | None = None, device: str = "cpu") -> TrainingRun:
+def resume_run(store: Store, spec: str, overrides: list[str] | None = None, device: str = "cpu",
+               live: tuple[str, Path] | None = None) -> TrainingRun:
     """Continue the run whose checkpoint ``spec`` names (``runs/NAME`` = its latest checkpoint).
 
     ``overrides`` may change e.g. ``max_iterations``; the config otherwise is the checkpoint's.
@@ -487,7 +520,7 @@ def resume_run(store: Store, spec: str, overrides: list[str] | None = None, devi
     check_device(device)
     point = load_resume_point(store, spec)
     cfg = apply_overrides(train_cfg_from_dict(point.manifest.config), list(overrides or []))
-    run = TrainingRun(store, cfg, point.name, device)
+    run = TrainingRun(store, cfg, point.name, device, live)
     run._restore(point.manifest.id, point.trainer, point.rows)
     return run
 

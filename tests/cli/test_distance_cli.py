@@ -35,8 +35,22 @@ def test_distance_json_covers_all_robots_go2_zero_b1_farthest(run_cli):
         assert d[name] == pytest.approx(value, abs=1e-6), name
     # B1's outside-support marks as in the paper (thigh, calf, hip, base mass up, ...).
     b1 = next(r for r in rows if r["robot"] == "b1")
-    assert "thigh_mass↑" in b1["outside"] and "hip_limit_max↓" in b1["outside"]
-    assert "foot_mass" not in b1["outside"]
+    outside = {o["dim"]: o["side"] for o in b1["outside"]}
+    assert outside["thigh_mass"] == "above" and outside["hip_limit_max"] == "below"
+    assert "foot_mass" not in outside and b1["n_outside"] == len(b1["outside"])
+
+
+def test_distance_again_adds_no_ref_version(run_cli):
+    import os
+
+    from morfic_cli.store import Store
+
+    for _ in range(3):
+        assert run_cli("distance", "-q")[0] == 0
+    store = Store(os.environ["MORFIC_STORE"])
+    assert len(store.ref_history("tables/distance")) == 1 and len(store.ls("table")) == 1
+    assert run_cli("distance", "--normalize", "support", "-q")[0] == 0  # another result: a new version
+    assert len(store.ref_history("tables/distance")) == 2
 
 
 def test_distance_writes_a_table_artifact(run_cli):

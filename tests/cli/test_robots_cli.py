@@ -61,6 +61,9 @@ def test_show_json_has_facts_descriptor_marks_and_conflicts(capsys):
     hip = next(d for d in obj["descriptor"] if d["name"] == "hip_mass")
     assert hip["value"] == 1.0 and hip["mark"] == "↑"
     assert any(f["field"] == "links.hip.mass" and f["unit"] == "kg" for f in obj["facts"])
+    facts = {f["field"]: f["value"] for f in obj["facts"]}
+    assert isinstance(facts["base.mass"], float) and len(facts["base.size"]) == 3  # numbers, not text
+    assert all(isinstance(v, float) for v in facts["base.size"])
     assert any("hip_mass" in c["field"] for c in obj["conflicts"])
 
 

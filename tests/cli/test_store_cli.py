@@ -13,7 +13,7 @@ from morfic_cli.cli import app
 from morfic_cli.store import Store
 
 runner = CliRunner()
-COMMANDS = ["ls", "show", "verify", "gc", "export", "import"]
+COMMANDS = ["ls", "show", "get", "verify", "gc", "export", "import"]
 
 
 @pytest.fixture
@@ -175,3 +175,32 @@ def test_import_of_a_non_export_is_error(run_cli, tmp_path):
     bogus.write_text("hello")
     code, _, err = run_cli("store", "import", str(bogus))
     assert code == 1 and "Error:" in err and "not a readable tar" in err
+
+
+def test_get_writes_each_file_byte_identical_to_its_object(run_cli, filled, store, tmp_path):
+    out = tmp_path / "got"
+    code, stdout, err = run_cli("store", "get", "runs/film-s0@1", "--out", str(out), "-f", "json")
+    assert code == 0, err
+    (row,) = json.loads(stdout)
+    assert row["file"] == "c.csv" and row["path"] == str(out / "c.csv") and row["size"] == 1
+    manifest = store.read_manifest("runs/film-s0@1")
+    assert (out / "c.csv").read_bytes() == store.object_path(manifest.files["c.csv"].id).read_bytes() == b"1"
+    code, _, err = run_cli("store", "get", filled["ckpt"][:12], "--file", "model.pt", "--out", str(out))
+    assert code == 0, err
+    assert (out / "model.pt").read_bytes() == b"w"
+
+
+def test_get_names_a_rollout_after_what_it_recorded(run_cli, store, tmp_path):
+    mid = store.put_manifest("rollout", files={"rollout.mcap": b"mcap bytes"},
+                             meta={"robot": "go1", "mode": "descriptor", "command": [2, 0.0, 0.0]})
+    code, _, err = run_cli("store", "get", mid, "--out", str(tmp_path / "r"))
+    assert code == 0, err
+    assert (tmp_path / "r" / "go1-descriptor-vx2.0.mcap").read_bytes() == b"mcap bytes"
+
+
+def test_get_bad_input_is_an_error_and_writes_nothing(run_cli, filled, tmp_path):
+    (tmp_path / "afile").write_text("x")
+    code, _, err = run_cli("store", "get", "runs/film-s0", "--out", str(tmp_path / "afile"))
+    assert code == 1 and err.startswith("Error: ") and "is a file" in err
+    code, _, err = run_cli("store", "get", "runs/film-s0", "--file", "nope.pt", "--out", str(tmp_path / "o"))
+    assert code == 1 and "its files are: c.csv" in err and not (tmp_path / "o").exists()

@@ -125,23 +125,23 @@ def test_eval_of_a_trainer_state_is_refused(run_cli, store):
     assert os.environ["MORFIC_STORE"] == str(store.root)
 
 
-def test_video_is_stored_and_written_next_to_out(run_cli, store, tmp_path, gl_backend):
-    out = tmp_path / "results" / "go2.csv"
+def test_video_is_stored_and_written_into_out(run_cli, store, tmp_path, gl_backend):
+    out = tmp_path / "results"
     code, _, err = run_cli("eval", "runs/film-s0", "--robots", "go2", "--envs", "2", "--steps", "4",
                            "--command-vx", "1.0", "--video", "--out", str(out), "--format", "json", "--quiet")
     assert code == 0, err
-    videos = sorted(p.name for p in out.parent.iterdir())
+    videos = sorted(p.name for p in out.iterdir())
     ext = "mp4" if any(n.endswith(".mp4") for n in videos) else "gif"
-    assert videos == sorted(["go2-go2-descriptor-vx1-frames.png", f"go2-go2-descriptor-vx1.{ext}", "go2.csv",
-                             "go2-go2-descriptor-vx1-speed.png", "go2-go2-descriptor-vx1-speed.pdf"])
+    assert videos == sorted(["eval.csv", "go2-descriptor-vx1-frames.png", f"go2-descriptor-vx1.{ext}",
+                             "go2-descriptor-vx1-speed.png", "go2-descriptor-vx1-speed.pdf"])
     media = store.ls("media")
     assert len(media) == 1
     manifest = store.read_manifest(media[0]["id"])
     assert manifest.inputs["eval"] == store.resolve("evals/film-s0")
     assert store.read_manifest(manifest.inputs["rollout"]).kind == "rollout"
-    assert store.read_file(manifest.id, f"video.{ext}") == (out.parent / f"go2-go2-descriptor-vx1.{ext}").read_bytes()
-    # the eval figure beside --out is the one stored with the rollout
-    speed = (out.parent / "go2-go2-descriptor-vx1-speed.png").read_bytes()
+    assert store.read_file(manifest.id, f"video.{ext}") == (out / f"go2-descriptor-vx1.{ext}").read_bytes()
+    # the eval figure in --out is the one stored with the rollout
+    speed = (out / "go2-descriptor-vx1-speed.png").read_bytes()
     assert speed.startswith(b"\x89PNG") and store.read_file(manifest.inputs["rollout"], "speed.png") == speed
 
 

@@ -54,7 +54,7 @@ def _actor_outputs(actor, history, morphology):
 
 def test_onnx_export_through_the_cli_is_stored_verified_and_written(run_cli, store, tmp_path):
     out = tmp_path / "deploy"
-    code, stdout, err = run_cli("export", "runs/film-s0", "--robot", "go2", "--out", str(out))
+    code, stdout, err = run_cli("export", "runs/film-s0", "--robot", "go2", "--out", str(out), "-f", "json")
     assert code == 0, err
     result = json.loads(stdout)
     assert result["ref"] == "exports/film-s0/go2-onnx@1"
@@ -175,10 +175,10 @@ def test_metadata_observation_layout_and_control_are_the_envs(store):
 
 
 def test_check_reverifies_a_stored_export_and_an_out_directory(run_cli, store, tmp_path):
-    code, out, err = run_cli("export", "exports/film-s0/go1-onnx", "--check")
+    code, out, err = run_cli("export", "exports/film-s0/go1-onnx", "--check", "-f", "json")
     assert code == 0, err
     assert json.loads(out)["ok"] is True and "check: onnxruntime" in err
-    code, out, err = run_cli("export", str(tmp_path / "out"), "--check", "--samples", "16")
+    code, out, err = run_cli("export", str(tmp_path / "out"), "--check", "--samples", "16", "-f", "json")
     assert code == 0, err
     assert json.loads(out)["verification"]["samples"] == 16
 
@@ -188,7 +188,7 @@ def test_check_catches_edited_metadata_and_a_swapped_model(run_cli, store, tmp_p
     meta = json.loads((out / "policy.json").read_text())
     meta["observation"]["terms"][5]["scale"] = [0.1] * 12
     (out / "policy.json").write_text(json.dumps(meta))
-    code, stdout, err = run_cli("export", str(out), "--check")
+    code, stdout, err = run_cli("export", str(out), "--check", "-f", "json")
     assert code == 1 and "Error: " in err and "observation" in err
     assert json.loads(stdout)["ok"] is False
 
@@ -225,7 +225,7 @@ def test_missing_onnx_packages_name_the_extra(run_cli, store, monkeypatch):
     [
         (["runs/film-s0", "--targets"], "--targets needs --robot"),
         (["runs/film-s0", "--robot", "spot"], "unknown robot 'spot'"),
-        (["runs/film-s0", "--format", "tflite"], "unknown format 'tflite'"),
+        (["runs/film-s0", "--to", "tflite"], "'tflite' is not one of"),
         (["runs/nope"], "runs/nope"),
         (["exports/film-s0/go1-onnx"], "not a training checkpoint"),
         (["runs/film-s0", "--check"], "--check takes an export"),
@@ -245,3 +245,67 @@ def test_check_needs_the_checkpoint_in_the_store(run_cli, smoke_store, tmp_path)
 def test_check_result_object(store):
     result = check_export(store, "exports/film-s0/go1-onnx", samples=8)
     assert result.ok and result.problems == [] and result.verification.samples == 8
+
+
+MJLAB_KEYS = ("joint_names", "joint_stiffness", "joint_damping", "default_joint_pos", "action_scale",
+              "observation_names", "command_names")
+MORFIC_KEYS = ("history_length", "history_order", "observation_scales", "dt", "morfic_version", "run", "checkpoint")
+
+
+def _floats(text):
+    return [float(x) for x in text.split(",")]
+
+
+@pytest.mark.parametrize("robot", ["go1", None])
+def test_onnx_metadata_props_agree_with_policy_json(store, tmp_path, robot):
+    import onnx
+    import onnxruntime as ort
+
+    out = tmp_path / "onnx"
+    result = export_policy(store, "runs/film-s0", ExportCfg(robot=robot), out=out)
+    meta = json.loads((out / "policy.json").read_text())
+    props = {p.key: p.value for p in onnx.load(str(out / "policy.onnx")).metadata_props}
+    assert set(MJLAB_KEYS + MORFIC_KEYS) <= set(props)
+    who = robot or "go2"  # descriptor as input: the flat keys describe the training template
+    section = meta["robots"][who]
+    assert props["robot"] == who and props["joint_names"].split(",") == meta["joint_names"]
+    assert _floats(props["joint_stiffness"]) == section["kp"] and _floats(props["joint_damping"]) == section["kd"]
+    assert _floats(props["default_joint_pos"]) == section["default_joint_pos"]
+    assert _floats(props["action_scale"]) == [0.25] * 12 == [meta["control"]["action_scale"]] * 12
+    assert props["observation_names"].split(",") == [t["name"] for t in meta["observation"]["terms"]]
+    assert props["observation_names"].split(",")[:3] == ["base_lin_vel", "base_ang_vel", "projected_gravity"]
+    assert props["command_names"] == "vx,vy,yaw_rate"
+    assert int(props["history_length"]) == meta["observation"]["history_len"] == 15
+    assert props["history_order"] == meta["observation"]["history_order"]
+    scales = _floats(props["observation_scales"])
+    assert len(scales) == 48 and scales == [v for t in meta["observation"]["terms"] for v in t["scale"]]
+    assert float(props["dt"]) == meta["control"]["dt"] == pytest.approx(0.02)
+    assert props["run"] == "film-s0" and props["checkpoint"] == meta["checkpoint"]
+    assert props["morfic_version"] == meta["morfic_version"]
+    assert set(props["robots"].split(",")) == set(meta["robots"])
+    for name, sec in meta["robots"].items():
+        assert _floats(props[f"robot.{name}.joint_stiffness"]) == sec["kp"]
+    # the sha256 in policy.json is the file's, props included; --check also compares the props
+    assert meta["model_sha256"] == result.metadata["model_sha256"]
+    assert check_export(store, str(out), samples=8).ok
+    # onnxruntime's actions equal torch's on the deployed path
+    session = ort.InferenceSession(str(out / "policy.onnx"), providers=["CPUExecutionProvider"])
+    rng = np.random.default_rng(0)
+    history = rng.standard_normal((5, 15, 48)).astype(np.float32)
+    morphology = np.repeat(np.asarray([meta["robots"][who]["morphology"]], np.float32), 5, axis=0)
+    feeds = {"history": history} if robot else {"history": history, "morphology": morphology}
+    (actions,) = session.run(["actions"], feeds)
+    expected = _actor_outputs(load_trained(store, "runs/film-s0").actor, history, morphology)
+    np.testing.assert_allclose(actions, expected, atol=1e-5, rtol=0)
+
+
+def test_check_catches_edited_onnx_props(store, tmp_path):
+    import onnx
+
+    out = tmp_path / "onnx"
+    export_policy(store, "runs/film-s0", ExportCfg(robot="go1"), out=out)
+    model = onnx.load(str(out / "policy.onnx"))
+    next(p for p in model.metadata_props if p.key == "joint_stiffness").value = "1.0," * 11 + "1.0"
+    onnx.save(model, str(out / "policy.onnx"))
+    problems = check_export(store, str(out), samples=4).problems
+    assert any("metadata_props" in p for p in problems)

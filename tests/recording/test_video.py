@@ -198,10 +198,20 @@ def test_gif_forced_and_downscaled():
     assert max(im.size) == video.GIF_MAX_SIDE and im.n_frames == 3
 
 
-@pytest.mark.skipif(video.find_ffmpeg() is None, reason="no ffmpeg (PATH or imageio-ffmpeg)")
-def test_mp4_with_ffmpeg():
-    data, ext = encode_video(_synthetic(h=47, w=63), fps=25.0)  # odd size: padded to even for yuv420p
+@pytest.mark.skipif(video.find_ffmpeg() is None, reason="no imageio-ffmpeg (pip install 'morfic[video]')")
+def test_mp4_through_imageio_ffmpeg_has_the_requested_fps_and_frames(tmp_path):
+    import imageio_ffmpeg
+
+    frames = _synthetic(h=47, w=63)  # odd size: padded to even for yuv420p
+    data, ext = encode_video(frames, fps=25.0)
     assert ext == "mp4" and data[4:8] == b"ftyp"
+    path = tmp_path / "v.mp4"
+    path.write_bytes(data)
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = reader.__next__()
+    decoded = list(reader)
+    assert meta["fps"] == pytest.approx(25.0) and tuple(meta["size"]) == (64, 48)
+    assert len(decoded) == len(frames)
 
 
 def test_mp4_without_ffmpeg_is_an_error(monkeypatch):
