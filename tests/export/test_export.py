@@ -275,7 +275,7 @@ def test_onnx_metadata_props_agree_with_policy_json(store, tmp_path, robot):
     assert props["observation_names"].split(",") == [t["name"] for t in meta["observation"]["terms"]]
     assert props["observation_names"].split(",")[:3] == ["base_lin_vel", "base_ang_vel", "projected_gravity"]
     assert props["command_names"] == "vx,vy,yaw_rate"
-    assert int(props["history_length"]) == meta["observation"]["history_len"] == 15
+    assert int(props["history_length"]) == meta["observation"]["history_len"] == 16  # h_t (15 frames) + o_t
     assert props["history_order"] == meta["observation"]["history_order"]
     scales = _floats(props["observation_scales"])
     assert len(scales) == 48 and scales == [v for t in meta["observation"]["terms"] for v in t["scale"]]
@@ -291,7 +291,7 @@ def test_onnx_metadata_props_agree_with_policy_json(store, tmp_path, robot):
     # onnxruntime's actions equal torch's on the deployed path
     session = ort.InferenceSession(str(out / "policy.onnx"), providers=["CPUExecutionProvider"])
     rng = np.random.default_rng(0)
-    history = rng.standard_normal((5, 15, 48)).astype(np.float32)
+    history = rng.standard_normal((5, meta["observation"]["history_len"], 48)).astype(np.float32)
     morphology = np.repeat(np.asarray([meta["robots"][who]["morphology"]], np.float32), 5, axis=0)
     feeds = {"history": history} if robot else {"history": history, "morphology": morphology}
     (actions,) = session.run(["actions"], feeds)
