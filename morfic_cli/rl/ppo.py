@@ -10,6 +10,8 @@ PPO's loss, its mini-batch loop, the adaptive learning rate and the rollout stor
 
 It hooks in by wrapping the storage's mini-batch generator for the duration of ``update()`` (the code after each
 ``yield`` runs when PPO asks for the next mini-batch), so no line of PPO's loss is copied here.
+
+The optimiser is Adam with ``fused=True`` (one kernel over all parameters instead of a Python loop).
 """
 
 from __future__ import annotations
@@ -163,8 +165,12 @@ class MorficPPO(PPO):
         self.adaptation_learning_rate = (
             adaptation_learning_rate if adaptation_learning_rate is not None else self.learning_rate
         )
-        self.adaptation_optimizer = resolve_optimizer(kwargs.get("optimizer", "adam"))(
-            self._raw_actor.adaptation.parameters(), lr=self.adaptation_learning_rate
+        optimizer = resolve_optimizer(kwargs.get("optimizer", "adam"))
+        fused = {"fused": True} if optimizer is torch.optim.Adam else {}
+        if fused:  # rsl-rl's Adam, fused: same update, one kernel for all parameters
+            self.optimizer = optimizer(self.optimizer.param_groups[0]["params"], lr=self.learning_rate, **fused)
+        self.adaptation_optimizer = optimizer(
+            self._raw_actor.adaptation.parameters(), lr=self.adaptation_learning_rate, **fused
         )
 
     def update(self) -> dict[str, float]:
