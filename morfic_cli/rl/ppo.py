@@ -11,11 +11,17 @@ PPO's loss, its mini-batch loop, the adaptive learning rate and the rollout stor
 It hooks in by wrapping the storage's mini-batch generator for the duration of ``update()`` (the code after each
 ``yield`` runs when PPO asks for the next mini-batch), so no line of PPO's loss is copied here.
 
-The optimiser is Adam with ``fused=True`` (one kernel over all parameters instead of a Python loop).
+Mixed precision (``use_mixed_precision``, rsl-rl's flag; the ``cpu`` preset turns it on): rsl-rl runs the update's
+forward passes under bf16 autocast; MorficPPO also runs the rollout's ``act`` and the bootstrap value of
+``compute_returns`` under it, so the log-probabilities of the ratio pi_theta / pi_old are computed the same way on
+both sides, and keeps the two output layers (the action mean and the value) in float32, so actions, log-probabilities
+and values are not rounded to bf16's 8 bits (docs/benchmarks.md, "Levers"). Weights, gradients and Adam's state stay
+float32. The optimiser is Adam with ``fused=True`` (one kernel over all parameters instead of a Python loop).
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections.abc import Callable, Iterator
 
@@ -24,6 +30,7 @@ import torch.nn as nn
 from rsl_rl.algorithms import PPO
 from rsl_rl.storage import RolloutStorage
 from rsl_rl.utils import reduce_gradients_in_buckets, resolve_optimizer
+from tensordict import TensorDict
 
 from morfic_cli.rl.models import MorficActor, MorficCritic
 
@@ -104,6 +111,19 @@ class _UpdateStats:
         }
 
 
+class _Float32Linear(nn.Linear):
+    """``nn.Linear`` that always computes in float32, also inside a bf16 autocast region (same parameters)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        with torch.autocast(device_type=x.device.type, enabled=False):
+            return super().forward(x.float())
+
+
+def _output_layer(model: nn.Module) -> nn.Linear:
+    """The last ``nn.Linear`` of a model's MLP head (the action mean, or the value)."""
+    return [m for m in model.mlp.modules() if isinstance(m, nn.Linear)][-1]
+
+
 class MorficPPO(PPO):
     """rsl-rl PPO with the adaptation regression and the per-update metrics of :data:`EXTRA_LOSS_KEYS`.
 
@@ -173,6 +193,33 @@ class MorficPPO(PPO):
             self._raw_actor.adaptation.parameters(), lr=self.adaptation_learning_rate, **fused
         )
 
+    @contextlib.contextmanager
+    def _precision(self) -> Iterator[None]:
+        """bf16 autocast with float32 output layers while ``use_mixed_precision`` (module docstring); else nothing."""
+        if not self.use_mixed_precision:
+            yield
+            return
+        heads = [_output_layer(self._raw_actor), _output_layer(self._raw_critic)]
+        classes = [type(h) for h in heads]
+        for head in heads:
+            head.__class__ = _Float32Linear
+        try:
+            with torch.autocast(device_type=torch.device(self.device).type, dtype=torch.bfloat16):
+                yield
+        finally:
+            for head, cls in zip(heads, classes, strict=True):
+                head.__class__ = cls
+
+    def act(self, obs: TensorDict) -> torch.Tensor:
+        """PPO's act (actions, values, log-probabilities of the rollout), in the update's precision."""
+        with self._precision():
+            return super().act(obs)
+
+    def compute_returns(self, obs: TensorDict) -> None:
+        """PPO's GAE returns; the bootstrap value in the same precision as the rollout's values."""
+        with self._precision():
+            super().compute_returns(obs)
+
     def update(self) -> dict[str, float]:
         """PPO's update (rsl-rl), with the adaptation steps and metrics interleaved per mini-batch.
 
@@ -187,7 +234,8 @@ class MorficPPO(PPO):
             self._tap_mini_batches, storage.mini_batch_generator, stats
         )
         try:
-            loss_dict = super().update()
+            with self._precision():  # rsl-rl autocasts the losses itself; this adds the float32 output layers
+                loss_dict = super().update()
         finally:
             del storage.mini_batch_generator  # back to the class method
         loss_dict.update(stats.means())
