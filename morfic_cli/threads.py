@@ -20,6 +20,10 @@ import os
 OMP_WAIT_POLICY = "PASSIVE"
 
 
+_SET_HERE = "_MORFIC_SET_OMP_WAIT_POLICY"
+"""Marks (in the environment) that morfic, not the user, chose ``OMP_WAIT_POLICY``."""
+
+
 def configure_openmp(environ: dict[str, str] | None = None) -> str:
     """Set ``OMP_WAIT_POLICY`` to :data:`OMP_WAIT_POLICY` unless it is set; returns the policy in effect.
 
@@ -27,4 +31,15 @@ def configure_openmp(environ: dict[str, str] | None = None) -> str:
         environ: The environment to edit (default ``os.environ``; child processes inherit it).
     """
     env = os.environ if environ is None else environ
-    return env.setdefault("OMP_WAIT_POLICY", OMP_WAIT_POLICY)
+    if "OMP_WAIT_POLICY" not in env:
+        env["OMP_WAIT_POLICY"] = OMP_WAIT_POLICY
+        env[_SET_HERE] = "1"
+    return env["OMP_WAIT_POLICY"]
+
+
+def user_environment(environ: dict[str, str] | None = None) -> dict[str, str]:
+    """A copy of the environment without what :func:`configure_openmp` added (for a child running other code)."""
+    env = dict(os.environ if environ is None else environ)
+    if env.pop(_SET_HERE, None):
+        env.pop("OMP_WAIT_POLICY", None)
+    return env

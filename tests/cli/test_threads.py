@@ -5,16 +5,18 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from morfic_cli.threads import configure_openmp
+from morfic_cli.threads import configure_openmp, user_environment
 
 
 def test_passive_unless_the_user_chose_a_policy():
-    env: dict[str, str] = {}
+    env: dict[str, str] = {"HOME": "/h"}
     assert configure_openmp(env) == "PASSIVE"
-    assert env == {"OMP_WAIT_POLICY": "PASSIVE"}
+    assert env["OMP_WAIT_POLICY"] == "PASSIVE"
+    assert user_environment(env) == {"HOME": "/h"}  # a child running other code gets the user's environment
     mine = {"OMP_WAIT_POLICY": "ACTIVE"}
     assert configure_openmp(mine) == "ACTIVE"
     assert mine == {"OMP_WAIT_POLICY": "ACTIVE"}
+    assert user_environment(mine) == {"OMP_WAIT_POLICY": "ACTIVE"}
 
 
 def test_the_entry_point_sets_it_before_torch_is_imported():
