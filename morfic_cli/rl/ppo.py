@@ -194,8 +194,14 @@ class MorficPPO(PPO):
         )
 
     @contextlib.contextmanager
-    def _precision(self) -> Iterator[None]:
-        """bf16 autocast with float32 output layers while ``use_mixed_precision`` (module docstring); else nothing."""
+    def _precision(self, autocast: bool = True) -> Iterator[None]:
+        """Float32 output layers, and bf16 autocast when ``autocast``, while ``use_mixed_precision``; else nothing.
+
+        The update passes ``autocast=False``: rsl-rl opens one autocast region per mini-batch itself, and an
+        enclosing region, even a disabled one, would keep autocast's cache of bf16 weight copies alive across
+        mini-batches (the cache is cleared when the outermost region exits), so every mini-batch would run on the
+        weights of the first.
+        """
         if not self.use_mixed_precision:
             yield
             return
@@ -204,7 +210,9 @@ class MorficPPO(PPO):
         for head in heads:
             head.__class__ = _Float32Linear
         try:
-            with torch.autocast(device_type=torch.device(self.device).type, dtype=torch.bfloat16):
+            region = (torch.autocast(device_type=torch.device(self.device).type, dtype=torch.bfloat16) if autocast
+                      else contextlib.nullcontext())
+            with region:
                 yield
         finally:
             for head, cls in zip(heads, classes, strict=True):
@@ -234,7 +242,7 @@ class MorficPPO(PPO):
             self._tap_mini_batches, storage.mini_batch_generator, stats
         )
         try:
-            with self._precision():  # rsl-rl autocasts the losses itself; this adds the float32 output layers
+            with self._precision(autocast=False):  # rsl-rl autocasts each mini-batch; this adds float32 outputs
                 loss_dict = super().update()
         finally:
             del storage.mini_batch_generator  # back to the class method

@@ -233,3 +233,23 @@ def test_mixed_precision_rollout_and_update_see_the_same_policy():
     runner.learn(1)
     assert losses[0]["kl"] < 1e-4
     assert losses[0]["clip_fraction"] == 0.0
+
+
+def test_mixed_precision_mini_batches_run_on_the_updated_weights():
+    # One epoch of two mini-batches, no dropout: the KL of the second mini-batch is measured after the first one's
+    # step, so it is > 0 in both precisions and of the same size. (A regression: one autocast region around the whole
+    # update kept the bf16 weight copies of the first mini-batch, so KL stayed ~0 and the adaptive rate ran away.)
+    kls = {}
+    for mixed in (False, True):
+        torch.manual_seed(0)
+        cfg = tiny_train_cfg("film", num_learning_epochs=1, num_mini_batches=2, use_mixed_precision=mixed,
+                             schedule="fixed")
+        cfg["actor"]["latent_dropout"] = 0.0
+        runner = OnPolicyRunner(DummyEnv(), cfg, log_dir=None, device="cpu")
+        losses = []
+        update = runner.alg.update
+        runner.alg.update = lambda update=update, losses=losses: losses.append(update()) or losses[-1]
+        runner.learn(1)
+        kls[mixed] = losses[0]["kl"]
+    assert kls[False] > 1e-4
+    assert 0.5 * kls[False] < kls[True] < 2.0 * kls[False]
