@@ -39,6 +39,7 @@ from morfic_cli.cli import (
     train,
 )
 from morfic_cli.errors import MorficError
+from morfic_cli.threads import configure_openmp
 
 app = typer.Typer(
     name="morfic",
@@ -143,6 +144,7 @@ def _fail(message: str, code: int = 1) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point: run the app with central error handling."""
+    configure_openmp()  # before any command imports torch (morfic_cli/threads.py)
     debug = os.environ.get("MORFIC_DEBUG", "") not in ("", "0")
     try:
         rc = app(args=argv, prog_name="morfic", standalone_mode=False)

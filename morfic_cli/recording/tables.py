@@ -54,7 +54,8 @@ def write_distance_table(
 
 BENCH_ENV_COLUMNS: tuple[str, ...] = (
     "num_envs", "steps", "backend", "device", "threads", "env_steps_per_s", "physics_floor_steps_per_s",
-    "floor_env_steps_per_s", "ratio", "cpu_model", "cores",
+    "floor_env_steps_per_s", "ratio", "cpu_model", "cores", "repeats", "ratio_spread", "env_steps_per_s_spread",
+    "noisy", "load_before", "load_after",
 )
 """Columns of the env benchmark table (``morfic bench env``)."""
 
@@ -62,7 +63,8 @@ BENCH_ENV_COLUMNS: tuple[str, ...] = (
 BENCH_TRAIN_COLUMNS: tuple[str, ...] = (
     "preset", "variant", "backend", "device", "num_envs", "iterations", "transitions", "s_per_iteration",
     "collect_s_per_iteration", "learn_s_per_iteration", "train_steps_per_s", "floor_env_steps_per_s",
-    "fraction_of_floor", "torch_threads", "cpu_model", "cores",
+    "fraction_of_floor", "torch_threads", "cpu_model", "cores", "s_per_iteration_spread", "fraction_spread", "noisy",
+    "load_before", "load_after", "omp_wait_policy",
 )
 """Columns of the training benchmark table (``morfic bench train``)."""
 

@@ -47,6 +47,9 @@ class PPOCfg:
     """c_adapt of the adaptation regression (0 switches it off)."""
     adaptation_learning_rate: float | None = None
     """Adaptation optimiser learning rate; None = ``learning_rate``."""
+    use_mixed_precision: bool = False
+    """Forward passes of rollout and update under bf16 autocast, output layers float32 (rsl-rl's flag; the ``cpu``
+    preset turns it on: 2.6x faster matrix products on CPUs with AVX512-BF16 or AMX, docs/benchmarks.md)."""
 
 
 @dataclass(frozen=True)
@@ -110,13 +113,15 @@ def cpu_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
     latency is sampled in 0..2 policy steps instead of the paper's 0..6: with 3 % of the paper's transitions,
     up to 120 ms of latency is a third of a 3 Hz gait cycle, a hard start for a small budget (docs/training.md);
     the evaluation protocol has no latency either way. Everything else (morphology support, pushes, friction) is
-    the paper's.
+    the paper's. The networks run in bf16 mixed precision (``ppo.use_mixed_precision``; float32 weights and output
+    layers), which halves the update on CPUs with bf16 instructions (docs/benchmarks.md); on a CPU without them
+    ``--set ppo.use_mixed_precision=false`` is faster.
     """
     env = EnvCfg(num_envs=512)
     env = dataclasses.replace(env, rand=dataclasses.replace(env.rand, max_latency_steps=2))
     return TrainCfg(
         variant=variant, preset="cpu", seed=seed, max_iterations=1000, num_steps_per_env=24, save_interval=25,
-        env=env, ppo=PPOCfg(num_learning_epochs=2, num_mini_batches=4),
+        env=env, ppo=PPOCfg(num_learning_epochs=2, num_mini_batches=4, use_mixed_precision=True),
     )
 
 

@@ -11,10 +11,18 @@ PPO's loss, its mini-batch loop, the adaptive learning rate and the rollout stor
 It hooks in by wrapping the storage's mini-batch generator for the duration of ``update()`` (the code after each
 ``yield`` runs when PPO asks for the next mini-batch), so no line of PPO's loss is copied here; that wrap and the
 other reaches into rsl-rl internals are in :mod:`morfic_cli.rl.rsl_rl_patches`.
+
+Mixed precision (``use_mixed_precision``, rsl-rl's flag; the ``cpu`` preset turns it on): rsl-rl runs the update's
+forward passes under bf16 autocast; MorficPPO also runs the rollout's ``act`` and the bootstrap value of
+``compute_returns`` under it, so the log-probabilities of the ratio pi_theta / pi_old are computed the same way on
+both sides, and keeps the two output layers (the action mean and the value) in float32, so actions, log-probabilities
+and values are not rounded to bf16's 8 bits (docs/benchmarks.md, "Levers"). Weights, gradients and Adam's state stay
+float32. The optimiser is Adam with ``fused=True`` (one kernel over all parameters instead of a Python loop).
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections.abc import Callable, Iterator
 
@@ -23,6 +31,7 @@ import torch.nn as nn
 from rsl_rl.algorithms import PPO
 from rsl_rl.storage import RolloutStorage
 from rsl_rl.utils import reduce_gradients_in_buckets, resolve_optimizer
+from tensordict import TensorDict
 
 from morfic_cli.rl.models import MorficActor, MorficCritic, link_morphology_encoder
 from morfic_cli.rl.rsl_rl_patches import raw_models, tapped_mini_batches
@@ -104,6 +113,19 @@ class _UpdateStats:
         }
 
 
+class _Float32Linear(nn.Linear):
+    """``nn.Linear`` that always computes in float32, also inside a bf16 autocast region (same parameters)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        with torch.autocast(device_type=x.device.type, enabled=False):
+            return super().forward(x.float())
+
+
+def _output_layer(model: nn.Module) -> nn.Linear:
+    """The last ``nn.Linear`` of a model's MLP head (the action mean, or the value)."""
+    return [m for m in model.mlp.modules() if isinstance(m, nn.Linear)][-1]
+
+
 class MorficPPO(PPO):
     """rsl-rl PPO with the adaptation regression and the per-update metrics of :data:`EXTRA_LOSS_KEYS`.
 
@@ -166,9 +188,48 @@ class MorficPPO(PPO):
         self.adaptation_learning_rate = (
             adaptation_learning_rate if adaptation_learning_rate is not None else self.learning_rate
         )
-        self.adaptation_optimizer = resolve_optimizer(kwargs.get("optimizer", "adam"))(
-            raw_models(self)[0].adaptation.parameters(), lr=self.adaptation_learning_rate
+        optimizer = resolve_optimizer(kwargs.get("optimizer", "adam"))
+        fused = {"fused": True} if optimizer is torch.optim.Adam else {}
+        if fused:  # rsl-rl's Adam, fused: same update, one kernel for all parameters
+            self.optimizer = optimizer(self.optimizer.param_groups[0]["params"], lr=self.learning_rate, **fused)
+        self.adaptation_optimizer = optimizer(
+            raw_models(self)[0].adaptation.parameters(), lr=self.adaptation_learning_rate, **fused
         )
+
+    @contextlib.contextmanager
+    def _precision(self, autocast: bool = True) -> Iterator[None]:
+        """Float32 output layers, and bf16 autocast when ``autocast``, while ``use_mixed_precision``; else nothing.
+
+        The update passes ``autocast=False``: rsl-rl opens one autocast region per mini-batch itself, and an
+        enclosing region, even a disabled one, would keep autocast's cache of bf16 weight copies alive across
+        mini-batches (the cache is cleared when the outermost region exits), so every mini-batch would run on the
+        weights of the first.
+        """
+        if not self.use_mixed_precision:
+            yield
+            return
+        heads = [_output_layer(model) for model in raw_models(self)]
+        classes = [type(h) for h in heads]
+        for head in heads:
+            head.__class__ = _Float32Linear
+        try:
+            region = (torch.autocast(device_type=torch.device(self.device).type, dtype=torch.bfloat16) if autocast
+                      else contextlib.nullcontext())
+            with region:
+                yield
+        finally:
+            for head, cls in zip(heads, classes, strict=True):
+                head.__class__ = cls
+
+    def act(self, obs: TensorDict) -> torch.Tensor:
+        """PPO's act (actions, values, log-probabilities of the rollout), in the update's precision."""
+        with self._precision():
+            return super().act(obs)
+
+    def compute_returns(self, obs: TensorDict) -> None:
+        """PPO's GAE returns; the bootstrap value in the same precision as the rollout's values."""
+        with self._precision():
+            super().compute_returns(obs)
 
     def update(self) -> dict[str, float]:
         """PPO's update (rsl-rl), with the adaptation steps and metrics interleaved per mini-batch.
@@ -181,7 +242,8 @@ class MorficPPO(PPO):
         ev = explained_variance(storage.returns, storage.values)
         stats = _UpdateStats()
         with tapped_mini_batches(storage, functools.partial(self._tap_mini_batches, stats=stats)):
-            loss_dict = super().update()
+            with self._precision(autocast=False):  # rsl-rl autocasts each mini-batch; this adds float32 outputs
+                loss_dict = super().update()
         loss_dict.update(stats.means())
         loss_dict["explained_variance"] = ev
         loss_dict["value_loss"] = loss_dict["value"]

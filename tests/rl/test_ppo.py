@@ -191,3 +191,65 @@ def test_mismatched_latent_sizes_are_rejected():
     cfg["critic"]["privileged_latent_dim"] = 8
     with pytest.raises(ValueError, match="z_priv"):
         OnPolicyRunner(DummyEnv(), cfg, log_dir=None, device="cpu")
+
+
+def _bf16_exact(x: torch.Tensor) -> bool:
+    """True when every entry of x is a bf16 number (would survive a round trip through bf16 unchanged)."""
+    return bool(torch.equal(x.to(torch.bfloat16).float(), x))
+
+
+def test_mixed_precision_keeps_the_output_layers_in_float32_and_restores_them():
+    torch.manual_seed(0)
+    runner = OnPolicyRunner(DummyEnv(), tiny_train_cfg("film", use_mixed_precision=True), log_dir=None, device="cpu")
+    alg = runner.alg
+    obs = runner.env.get_observations()
+    with torch.inference_mode():
+        actions = alg.act(obs)
+    # hidden layers ran in bf16, the value and the action mean in float32: not every value is a bf16 number
+    assert alg.transition.values.dtype == torch.float32
+    assert not _bf16_exact(alg.transition.values)
+    assert not _bf16_exact(alg.transition.distribution_params[0])
+    assert actions.dtype == torch.float32
+    # outside act() the models are the plain rsl-rl modules again (checkpoints and export see nn.Linear)
+    assert type(alg.actor.mlp[-1]) is torch.nn.Linear and type(alg.critic.mlp[-1]) is torch.nn.Linear
+    # without mixed precision the hidden layers are float32 too: the same input gives a different (unrounded) value
+    with torch.inference_mode():
+        alg.use_mixed_precision = False
+        full = alg.critic(obs)
+    assert not torch.equal(full, alg.transition.values)
+    torch.testing.assert_close(full, alg.transition.values, rtol=0.05, atol=0.05)
+
+
+def test_mixed_precision_rollout_and_update_see_the_same_policy():
+    # As test_kl_and_clip_fraction_are_zero_when_nothing_moves, in bf16: the rollout's log-probabilities are computed
+    # in the update's precision, so a policy that does not move has ratio ~1 (bf16 sums in another order: not exact).
+    torch.manual_seed(0)
+    cfg = tiny_train_cfg("film", learning_rate=0.0, adaptation_learning_rate=0.0, use_mixed_precision=True)
+    cfg["actor"]["latent_dropout"] = 0.0
+    runner = OnPolicyRunner(DummyEnv(), cfg, log_dir=None, device="cpu")
+    losses = []
+    update = runner.alg.update
+    runner.alg.update = lambda: losses.append(update()) or losses[-1]
+    runner.learn(1)
+    assert losses[0]["kl"] < 1e-4
+    assert losses[0]["clip_fraction"] == 0.0
+
+
+def test_mixed_precision_mini_batches_run_on_the_updated_weights():
+    # One epoch of two mini-batches, no dropout: the KL of the second mini-batch is measured after the first one's
+    # step, so it is > 0 in both precisions and of the same size. (A regression: one autocast region around the whole
+    # update kept the bf16 weight copies of the first mini-batch, so KL stayed ~0 and the adaptive rate ran away.)
+    kls = {}
+    for mixed in (False, True):
+        torch.manual_seed(0)
+        cfg = tiny_train_cfg("film", num_learning_epochs=1, num_mini_batches=2, use_mixed_precision=mixed,
+                             schedule="fixed")
+        cfg["actor"]["latent_dropout"] = 0.0
+        runner = OnPolicyRunner(DummyEnv(), cfg, log_dir=None, device="cpu")
+        losses = []
+        update = runner.alg.update
+        runner.alg.update = lambda update=update, losses=losses: losses.append(update()) or losses[-1]
+        runner.learn(1)
+        kls[mixed] = losses[0]["kl"]
+    assert kls[False] > 1e-4
+    assert 0.5 * kls[False] < kls[True] < 2.0 * kls[False]
