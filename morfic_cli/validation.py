@@ -409,7 +409,7 @@ def _robot_list(text: str, flag: str) -> list[str]:
 
 def _variant_list(text: str) -> list[str]:
     from morfic_cli.errors import UnknownNameError
-    from morfic_cli.rl.models import VARIANTS
+    from morfic_cli.rl.variants import VARIANTS
 
     if text.strip().lower() == "all":
         return list(VARIANTS)
