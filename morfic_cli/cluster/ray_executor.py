@@ -236,7 +236,11 @@ class RayExecutor:
             with tempfile.TemporaryDirectory(prefix="morfic-result-") as tmp:
                 path = Path(tmp) / "result.tar"
                 path.write_bytes(out.bundle)
-                self.pipeline.store.import_tar(path)
+                try:
+                    self.pipeline.store.import_tar(path, append=True)
+                except MorficError as exc:  # nothing was imported (all or nothing)
+                    js.state, js.detail = "failed", f"import: {exc}"
+                    return StepResult(job.kind, job.label, "failed", detail=js.detail)
         step = out.step
         js.state = "done"
         js.seconds = time.time() - js.started if js.started else 0.0
