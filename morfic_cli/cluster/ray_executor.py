@@ -14,9 +14,12 @@ message and fails the job once; a job whose input failed fails with that reason.
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import tempfile
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -179,6 +182,7 @@ class RayExecutor:
             if found is not None:
                 steps[job.key] = found
                 js.state, js.detail = "skipped", "in the store"
+                self.pipeline.progress.step_end(found)
                 continue
             if job.kind == "train":
                 inputs = [self._export([job.label], with_resume=True)] if store.has_ref(job.label) else []
@@ -189,21 +193,35 @@ class RayExecutor:
             if job.kind == "train":
                 train_refs[job.label] = ref
         self.on_update(self.state)
-        try:
-            while pending:
+        # Results are imported in plan order (a finished job waits for the jobs before it), so refs that every
+        # job of a kind appends to (diagnoses/calibration) get their versions in the order --executor local gives.
+        order = [j for j in self.jobs if j.key not in steps]
+        finished: dict[str, Any] = {}
+
+        def import_ready(all_finished: bool = False) -> None:
+            while order and (order[0].key in finished or all_finished):
+                job = order.pop(0)
+                if job.key in finished:
+                    steps[job.key] = self._finish(ray, finished.pop(job.key), job, Outcome)
+
+        with _ctrl_c() as stop:
+            while pending and not stop.is_set():
                 ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.5)
                 self._poll(ray, board)
                 for ref in ready:
                     job = pending.pop(ref)
-                    steps[job.key] = self._finish(ray, ref, job, Outcome)
+                    finished[job.key] = ref
+                    self.state.jobs[job.key].detail = "finished; imported after the jobs before it"
+                import_ready()  # an import is never cut by Ctrl-C: the flag is read between jobs
                 self.on_update(self.state)
-        except KeyboardInterrupt:
-            for ref, job in pending.items():
-                ray.cancel(ref, force=True)
-                js = self.state.jobs[job.key]
-                js.state, js.detail = "cancelled", "Ctrl-C"
-            result.interrupted = True
-            self.on_update(self.state)
+            import_ready(all_finished=True)
+            if pending:
+                for ref, job in pending.items():
+                    ray.cancel(ref, force=True, recursive=True)
+                    js = self.state.jobs[job.key]
+                    js.state, js.detail = "cancelled", "Ctrl-C"
+                result.interrupted = True
+                self.on_update(self.state)
         return [steps[j.key] for j in self.jobs if j.key in steps]
 
     def _poll(self, ray, board) -> None:
@@ -245,9 +263,29 @@ class RayExecutor:
         js.state = "done"
         js.seconds = time.time() - js.started if js.started else 0.0
         step.seconds = js.seconds
-        step.detail = "; ".join(x for x in (step.detail, f"on {out.node}") if x)
+        step.detail = "; ".join(x for x in (step.detail, f"on {out.node} pid {out.pid}") if x)
         self.pipeline.progress.step_end(step)
         return step
+
+
+@contextlib.contextmanager
+def _ctrl_c() -> Iterator[threading.Event]:
+    """A flag that the first Ctrl-C sets (the second aborts at once); the old handler comes back after."""
+    stop = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+
+    def handler(signum, frame):  # noqa: ARG001
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield stop
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _short(exc: BaseException) -> str:
