@@ -14,7 +14,7 @@ from morfic_cli.store import Store
 
 
 def differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
-    """Human-readable differences between two :func:`contents` (empty when equal)."""
+    """Human-readable differences between two :func:`comparable` (empty when equal)."""
     out = []
     for name in sorted(set(a) | set(b)):
         if name not in a or name not in b:
