@@ -14,15 +14,24 @@ from morfic_cli.store import Store
 
 
 def differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
-    """Human-readable differences between two :func:`comparable` (empty when equal)."""
-    out = []
-    for name in sorted(set(a) | set(b)):
-        if name not in a or name not in b:
-            out.append(f"{name}: only in {'b' if name not in a else 'a'}")
-        elif a[name] != b[name]:
-            files = [(va["kind"], va["files"], vb["files"]) for va, vb in zip(a[name], b[name], strict=False)
-                     if va != vb]
-            out.append(f"{name}: {len(a[name])} vs {len(b[name])} versions; differing: {files[:1]}")
+    """Where two :func:`comparable` differ: one line per differing leaf (path, then both values); empty when equal."""
+    out: list[str] = []
+
+    def walk(x: Any, y: Any, path: str) -> None:
+        if isinstance(x, dict) and isinstance(y, dict):
+            for key in sorted(set(x) | set(y), key=str):
+                walk(x.get(key, "<missing>"), y.get(key, "<missing>"), f"{path}/{key}")
+        elif isinstance(x, list | tuple) and isinstance(y, list | tuple) and len(x) == len(y):
+            for i, (p, q) in enumerate(zip(x, y, strict=True)):
+                walk(p, q, f"{path}[{i}]")
+        elif x != y:
+            if isinstance(x, str) and isinstance(y, str):
+                lines = [(p, q) for p, q in zip(x.splitlines(), y.splitlines(), strict=False) if p != q][:2]
+                out.append(f"{path}: {lines or (x[:200], y[:200])}")
+            else:
+                out.append(f"{path}: {str(x)[:300]} != {str(y)[:300]}")
+
+    walk(a, b, "")
     return out
 
 
@@ -34,17 +43,18 @@ _HEX64 = re.compile(r"\b[0-9a-f]{12}(?:[0-9a-f]{52})?\b")
 def _csv(data: bytes) -> str:
     frame = pd.read_csv(io.BytesIO(data))
     frame = frame[[c for c in frame.columns if not any(w in c for w in TIMING_WORDS)]]
-    return _HEX64.sub("<id>", frame.to_csv(index=False))
+    header, *rows = _HEX64.sub("<id>", frame.to_csv(index=False)).splitlines()
+    return "\n".join([header, *sorted(rows)])  # some tables (provenance.csv) list rows in manifest-id order
 
 
 def comparable(root: Path) -> dict[str, Any]:
     """``{ref: [version, ...]}`` reduced to what the same command must reproduce on CPU.
 
     Each version is its kind, its config, its inputs (recursively, by content) and its files: a ``.pt`` file
-    (weights, trainer state) by its id, which must match bit for bit; a CSV by its values without the
-    wall-clock columns and with every manifest id (full or 12-digit) written as ``<id>`` (a manifest id hashes
-    its ``created`` time, so no two runs share one); every other file (figures, MCAP logs, report text, which
-    render timings or ids) by its name. Versions keep their order.
+    (weights, trainer state) by its id, which must match bit for bit; a CSV by its rows (as a set: some list
+    theirs in manifest-id order) without the wall-clock columns and with every manifest id (full or 12-digit)
+    written as ``<id>`` (a manifest id hashes its ``created`` time, so no two runs share one); every other file
+    (figures, MCAP logs, report text, which render timings or ids) by its name. Versions keep their order.
     """
     store = Store(root)
     cache: dict[str, Any] = {}

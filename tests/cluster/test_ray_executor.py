@@ -114,6 +114,7 @@ def test_ray_store_matches_local(cluster, stores):
                          "diagnoses/fixed-rollout/mini_cheetah", "evals/film-smoke-s0", "evals/ppo-smoke-s0",
                          "reports/smoke", "runs/film-smoke-s0", "runs/ppo-smoke-s0", "tables/compare-baselines",
                          "tables/morphology-support"]
+    assert [len(v["files"]["model.pt"]) for v in b["runs/film-smoke-s0"]] == [64, 64]  # weights by id, 2 checkpoints
     assert differences(a, b) == []
     _verify(cluster, ray_store)
 
