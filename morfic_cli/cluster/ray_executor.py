@@ -134,9 +134,11 @@ class RayExecutor:
         return result
 
     def _connect(self, ray) -> None:
-        try:
-            ray.init(address=self.address, log_to_driver=False, configure_logging=True, logging_level="ERROR",
-                     include_dashboard=False if self.address is None else None)
+        if self.address is not None and self.address != "auto":
+            _probe(self.address)
+        try:  # "local": always a new instance (None would join whatever cluster /tmp/ray last recorded)
+            ray.init(address=self.address or "local", log_to_driver=False, configure_logging=True,
+                     logging_level="ERROR", include_dashboard=False if self.address is None else None)
         except (ConnectionError, RuntimeError, ValueError) as exc:
             where = f"the Ray cluster at {self.address}" if self.address else "a local Ray instance"
             raise MorficError(f"cannot connect to {where}: {str(exc).splitlines()[0] if str(exc) else exc!r}; "
@@ -266,6 +268,18 @@ class RayExecutor:
         step.detail = "; ".join(x for x in (step.detail, f"on {out.node} pid {out.pid}") if x)
         self.pipeline.progress.step_end(step)
         return step
+
+
+def _probe(address: str, timeout_s: float = 10.0) -> None:
+    """MorficError unless something listens at ``HOST:PORT`` (Ray itself would retry for minutes)."""
+    import socket
+
+    host, port = address.rsplit(":", 1)
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        raise MorficError(f"cannot reach a Ray cluster at --address {address} ({exc.strerror or exc}); start one "
+                          f"with `ray start --head` there and pass the address it prints (docs/cluster.md).") from exc
 
 
 @contextlib.contextmanager

@@ -97,3 +97,16 @@ def test_bad_executor_options_are_error_lines(run_cli, tmp_path, args, message):
     code, _, err = run_cli("reproduce", "--preset", "smoke", "--variants", "film", *args, "--store", str(store))
     assert code == 1 and err.startswith("Error:") and message in err, err
     assert not store.exists()
+
+
+def test_an_address_where_nothing_listens_is_an_error_line(run_cli, tmp_path):
+    pytest.importorskip("ray")
+    import socket
+
+    with socket.socket() as s:  # a port that was free a moment ago
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    code, _, err = run_cli("reproduce", "--preset", "smoke", "--variants", "film", "--executor", "ray",
+                           "--address", f"127.0.0.1:{port}", "--store", str(tmp_path / "store"))
+    assert code == 1 and "\nError: cannot reach a Ray cluster at --address 127.0.0.1:" in err, err
+    assert not (tmp_path / "store" / "refs").exists()
