@@ -18,7 +18,7 @@ from morfic_cli.evaluation.episodes import (
 )
 from morfic_cli.evaluation.training_check import check_env_cfg, ladder
 from morfic_cli.rl.config import cpu_preset
-from morfic_cli.rl.models import VARIANTS
+from morfic_cli.rl.variants import VARIANTS
 
 F, T_ = False, True
 
