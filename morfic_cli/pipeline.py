@@ -268,24 +268,38 @@ class Pipeline:
 
         return apply_overrides(preset_cfg(self.cfg.preset, variant, seed), list(self.cfg.train_overrides))
 
+    def stored_train(self, variant: str, seed: int, spec: str) -> StepResult | None:
+        """The skipped result when the store holds ``spec`` finished; None when it must train (or resume).
+
+        Raises:
+            MorficError: ``spec`` exists but was trained with another config.
+        """
+        from morfic_cli.rl.config import train_cfg_to_dict
+
+        if not self.store.has_ref(spec):
+            return None
+        manifest = self.store.read_manifest(spec)
+        if experiment_config(manifest.config) != experiment_config(train_cfg_to_dict(self.train_cfg(variant, seed))):
+            raise MorficError(
+                f"{spec} exists in {self.store.root} but was trained with another config than this "
+                f"reproduce asks for; use another --store, or move it aside (it stays in the store's history).")
+        if manifest.meta.get("finished"):
+            return StepResult("train", spec, "skipped", manifest.id, spec,
+                              detail=f"finished at iteration {manifest.meta.get('iteration')}")
+        return None
+
     def train(self, variant: str, seed: int, spec: str) -> StepResult:
         """Train ``spec`` (skip when finished, resume when interrupted)."""
-        from morfic_cli.rl.config import train_cfg_to_dict
         from morfic_cli.rl.runner import new_run, resume_run
 
         cfg = self.train_cfg(variant, seed)
         name = run_of(spec)
         self._start("train", spec, cfg.max_iterations, "it")
         status = "done"
+        found = self.stored_train(variant, seed, spec)
+        if found is not None:
+            return found
         if self.store.has_ref(spec):
-            manifest = self.store.read_manifest(spec)
-            if experiment_config(manifest.config) != experiment_config(train_cfg_to_dict(cfg)):
-                raise MorficError(
-                    f"{spec} exists in {self.store.root} but was trained with another config than this "
-                    f"reproduce asks for; use another --store, or move it aside (it stays in the store's history).")
-            if manifest.meta.get("finished"):
-                return StepResult("train", spec, "skipped", manifest.id, spec,
-                                  detail=f"finished at iteration {manifest.meta.get('iteration')}")
             run = resume_run(self.store, spec, device=self.cfg.device)
             status = "resumed"
         else:
@@ -314,16 +328,23 @@ class Pipeline:
         return EvalCfg(robots=c.robots, modes=c.modes, command_vx=c.command_vx, num_envs=c.eval_envs,
                        steps=c.eval_steps, seed=0)
 
+    def stored_eval(self, spec: str) -> StepResult | None:
+        """The skipped result when the store holds this evaluation of ``spec``'s checkpoint, else None."""
+        if not self.store.has_ref(spec):
+            return None
+        config = _json({"spec": spec, **dataclasses.asdict(self.eval_cfg())})
+        found = find_manifest(self.store, "eval", config, inputs_subset={"checkpoint": self.store.resolve(spec)},
+                              files=("eval.csv",))
+        return StepResult("eval", spec, "skipped", found) if found else None
+
     def evaluate(self, spec: str) -> StepResult:
         """Evaluate a run's checkpoint on every robot, mode and command (skip when stored)."""
         from morfic_cli.evaluation.protocol import evaluate
 
         cfg = self.eval_cfg()
-        ckpt = self.store.resolve(spec)
-        config = _json({"spec": spec, **dataclasses.asdict(cfg)})
-        found = find_manifest(self.store, "eval", config, inputs_subset={"checkpoint": ckpt}, files=("eval.csv",))
-        if found:
-            return StepResult("eval", spec, "skipped", found)
+        found = self.stored_eval(spec)
+        if found is not None:
+            return found
         units = len(cfg.robots) * len(cfg.modes) * len(cfg.command_vx) * cfg.steps
         self._start("eval", spec, units, "steps")
         res = evaluate(self.store, spec, cfg,
@@ -339,38 +360,58 @@ class Pipeline:
         return DiagnoseCfg(robots=robots, mode="descriptor", command_vx=2.0, num_envs=c.diagnose_envs,
                            steps=c.diagnose_steps, seed=0, trunc_eps=c.trunc_eps)
 
+    def stored_diagnosis(self, spec: str) -> StepResult | None:
+        """The skipped result when the store holds this diagnosis of ``spec``'s checkpoint, else None."""
+        if not self.store.has_ref(spec):
+            return None
+        config = _json({"specs": [spec], **dataclasses.asdict(self.diagnose_cfg(self.cfg.robots))})
+        found = find_manifest(self.store, "diagnosis", config,
+                              inputs_subset={f"checkpoint/{spec}": self.store.resolve(spec)},
+                              files=("calibration.csv",))
+        return StepResult("diagnose", spec, "skipped", found) if found else None
+
     def diagnose(self, spec: str) -> StepResult:
         """Critic calibration of a run on every robot (skip when stored)."""
         from morfic_cli.diagnostics.calibration import diagnose_runs
 
         cfg = self.diagnose_cfg(self.cfg.robots)
-        ckpt = self.store.resolve(spec)
-        config = _json({"specs": [spec], **dataclasses.asdict(cfg)})
-        found = find_manifest(self.store, "diagnosis", config, inputs_subset={f"checkpoint/{spec}": ckpt},
-                              files=("calibration.csv",))
-        if found:
-            return StepResult("diagnose", spec, "skipped", found)
+        found = self.stored_diagnosis(spec)
+        if found is not None:
+            return found
         self._start("diagnose", spec, len(cfg.robots) * cfg.steps, "steps")
         res = diagnose_runs(self.store, [spec], cfg,
                             on_rollout_start=lambda _r, robot: self.progress.step_advance(detail=robot),
                             on_step=lambda _t: self.progress.step_advance(advance=1))
         return StepResult("diagnose", spec, "done", res.id, f"{res.ref}@{res.version}")
 
-    def fixed_rollout(self, robot: str) -> StepResult:
-        """One frozen actor (the seed-0 run of ``actor_variant``), every run's critic, on ``robot``."""
-        from morfic_cli.diagnostics.fixed_rollout import fixed_rollout, load_models
-
+    def fixed_rollout_models(self) -> tuple[str, list[str]]:
+        """(actor spec, critic specs) of the fixed-rollout analysis."""
         runs = self.run_specs()
         actor = next((spec for v, s, spec in runs if v == self.cfg.actor_variant and s == 0), runs[0][2])
-        critics = [spec for _, _, spec in runs]
-        cfg = self.diagnose_cfg((robot,))
-        config = {"robot": robot, "actor": actor, "critics": critics, **dataclasses.asdict(cfg)}
+        return actor, [spec for _, _, spec in runs]
+
+    def stored_fixed_rollout(self, robot: str) -> StepResult | None:
+        """The skipped result when the store holds this fixed-rollout analysis on ``robot``, else None."""
+        actor, critics = self.fixed_rollout_models()
+        if not all(self.store.has_ref(spec) for spec in critics):
+            return None
+        config = {"robot": robot, "actor": actor, "critics": critics,
+                  **dataclasses.asdict(self.diagnose_cfg((robot,)))}
         config.pop("robots")
         subset = {"actor": self.store.resolve(actor), **{f"critic/{c}": self.store.resolve(c) for c in critics}}
         found = find_manifest(self.store, "diagnosis", _json(config), inputs_subset=subset,
                               files=("fixed_rollout.csv",))
-        if found:
-            return StepResult("fixed-rollout", robot, "skipped", found)
+        return StepResult("fixed-rollout", robot, "skipped", found) if found else None
+
+    def fixed_rollout(self, robot: str) -> StepResult:
+        """One frozen actor (the seed-0 run of ``actor_variant``), every run's critic, on ``robot``."""
+        from morfic_cli.diagnostics.fixed_rollout import fixed_rollout, load_models
+
+        actor, critics = self.fixed_rollout_models()
+        cfg = self.diagnose_cfg((robot,))
+        found = self.stored_fixed_rollout(robot)
+        if found is not None:
+            return found
         self._start("fixed-rollout", robot, cfg.steps, "steps")
         models = load_models(self.store, actor, critics, cfg)
         res = fixed_rollout(self.store, robot, models, cfg, on_step=lambda _t: self.progress.step_advance(advance=1))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import sys
+from enum import Enum
 from pathlib import Path
 from typing import Annotated
 
@@ -22,6 +23,14 @@ from morfic_cli.cli._options import (
 from morfic_cli.cli._render import emit_object, info
 from morfic_cli.rl.variants import VARIANTS
 from morfic_cli.validation import check_args
+
+
+class Executor(str, Enum):
+    """Where the jobs run."""
+
+    local = "local"
+    ray = "ray"
+
 
 _MARKS = {"done": "[green]done[/]", "resumed": "[green]resumed[/]", "skipped": "[dim]skipped (in the store)[/]",
           "interrupted": "[yellow]interrupted[/]"}
@@ -44,6 +53,19 @@ def reproduce(
                                        "(as `morfic train --set`), e.g. max_iterations=1.")
     ] = None,
     device: DeviceOpt = Device.cpu,
+    executor: Annotated[
+        Executor, typer.Option("--executor", help="local: every step here, one after another (default). ray: "
+                               "train/eval/diagnose/fixed-rollout jobs as Ray tasks, results imported into the "
+                               "store (pip install 'morfic[cluster]'; docs/cluster.md).")
+    ] = Executor.local,
+    address: Annotated[
+        str | None, typer.Option("--address", help="With --executor ray: the cluster's HOST:PORT (from `ray start "
+                                 "--head`); default: start a local Ray instance on this machine.")
+    ] = None,
+    retries: Annotated[
+        int, typer.Option("--retries", help="With --executor ray: times a job is retried when its worker process "
+                          "dies (user errors are never retried).")
+    ] = 3,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
@@ -61,6 +83,7 @@ def reproduce(
     Example: morfic reproduce --preset smoke
     """
     check_args(store=store, out_dir=out, variants=variants)
+    _check_executor(executor, address, retries)
     from morfic_cli.pipeline import Pipeline, reproduce_cfg
     from morfic_cli.rl.runner import check_device
     from morfic_cli.store import Store
@@ -76,14 +99,22 @@ def reproduce(
         apply_overrides(preset_cfg(cfg.preset), list(overrides))  # unknown keys fail before anything runs
         cfg = dataclasses.replace(cfg, train_overrides=tuple(overrides))
     check_device(cfg.device)
+    if executor is Executor.ray:
+        from morfic_cli.cluster.ray_executor import import_ray
+
+        import_ray()  # not installed: Error saying what to install, before the store is touched
     st = Store(store)
     out_dir = out if out is not None else st.root / "reports" / cfg.preset
-    view = _View(quiet)
+    view = _View(quiet) if executor is Executor.local else _RayView(quiet)
     pipeline = Pipeline(st, cfg, out=out_dir, progress=view)
     view.total = len(pipeline.plan())
     if not quiet:
+        where = "" if executor is Executor.local else f", executor ray ({address or 'local instance'})"
         info(f"reproduce: preset {cfg.preset}, {len(cfg.variants)} variants x {cfg.seeds} seed(s), "
-             f"{len(pipeline.plan())} steps, store {st.root}")
+             f"{len(pipeline.plan())} steps, store {st.root}{where}")
+    if executor is Executor.ray:
+        _run_ray(pipeline, view, address, retries, quiet, fmt, out_dir)
+        return
 
     def on_sigint(signum, frame):  # noqa: ARG001
         if pipeline.interrupt():
@@ -102,6 +133,36 @@ def reproduce(
         info("stopped after Ctrl-C; the checkpoint is in the store. Run the same `morfic reproduce` command again "
              "to continue where it stopped.")
         sys.exit(130)
+    _summary(result, quiet, fmt, out_dir)
+
+
+def _check_executor(executor: Executor, address: str | None, retries: int) -> None:
+    from morfic_cli.errors import MorficError
+
+    if address is not None and executor is not Executor.ray:
+        raise MorficError("--address is the Ray cluster to run on; use it with --executor ray.")
+    if address is not None and (":" not in address or not address.rsplit(":", 1)[1].isdigit()):
+        if address != "auto":
+            raise MorficError(f"--address {address!r} is not HOST:PORT (or 'auto'), e.g. --address 127.0.0.1:6379 "
+                              f"as printed by `ray start --head`.")
+    if retries < 0:
+        raise MorficError(f"--retries must be 0 or more, got {retries}.")
+
+
+def _run_ray(pipeline, view, address: str | None, retries: int, quiet: bool, fmt, out_dir: Path) -> None:
+    from morfic_cli.cluster.ray_executor import RayExecutor
+
+    runner = RayExecutor(pipeline, address=address, retries=retries, on_update=view.update)
+    with view:
+        result = runner.run()
+    if result.interrupted:
+        info("stopped after Ctrl-C: outstanding jobs were cancelled; every finished job is in the store. Run the "
+             "same `morfic reproduce` command again to continue (it skips what the store holds).")
+        sys.exit(130)
+    _summary(result, quiet, fmt, out_dir)
+
+
+def _summary(result, quiet: bool, fmt, out_dir: Path) -> None:
     rep = result.report
     done = result.work_done
     if not quiet:
@@ -187,3 +248,69 @@ class _View:
     def __exit__(self, *exc) -> None:
         if self.bar is not None:
             self.bar.__exit__(*exc)
+
+
+class _RayView(_View):
+    """The ``--executor ray`` view: a live table of jobs (queued / running / done / failed, where each ran)."""
+
+    _STYLE = {"queued": "dim", "running": "yellow", "done": "green", "skipped": "dim", "failed": "red",
+              "cancelled": "red"}
+
+    def __init__(self, quiet: bool) -> None:
+        super().__init__(quiet)
+        self.live_view = None
+        self.run = None
+
+    def __enter__(self) -> _RayView:
+        if self.quiet:
+            return self
+        from rich.console import Console
+        from rich.live import Live
+
+        self.console = Console(stderr=True)
+        if self.console.is_terminal:
+            self.live_view = Live(console=self.console, refresh_per_second=2, transient=False)
+            self.live_view.__enter__()
+        return self
+
+    def update(self, run) -> None:
+        self.run = run
+        if self.live_view is not None:
+            self.live_view.update(self._table(run))
+
+    def _table(self, run):
+        from rich.table import Table
+
+        counts: dict[str, int] = {}
+        for js in run.jobs.values():
+            counts[js.state] = counts.get(js.state, 0) + 1
+        title = (f"reproduce on Ray ({run.address}: {run.resources}): "
+                 + ", ".join(f"{n} {state}" for state, n in sorted(counts.items())))
+        table = Table(title=title, title_justify="left")
+        for col in ("job", "state", "where", "detail"):
+            table.add_column(col)
+        for js in run.jobs.values():
+            style = self._STYLE.get(js.state, "")
+            table.add_row(js.job.key, f"[{style}]{js.state}[/]" if style else js.state, js.node, js.detail[:80])
+        return table
+
+    def step_end(self, result) -> None:
+        self.done += 1
+        if self.quiet or self.console is None:
+            return
+        line = f"{result.kind} {result.label}: {_MARKS.get(result.status, result.status)}"
+        if result.status != "skipped":
+            line += f" in {result.seconds:.1f} s"
+        if result.detail:
+            line += f" ({result.detail})"
+        if result.id:
+            line += f" [dim]{result.id[:12]}[/]"
+        self.console.print(line, highlight=False)
+
+    def __exit__(self, *exc) -> None:
+        if self.live_view is not None:
+            self.live_view.__exit__(*exc)
+        if not self.quiet and self.console is not None and self.run is not None:
+            for js in self.run.jobs.values():
+                if js.state in ("failed", "cancelled"):
+                    self.console.print(f"{js.job.key}: [red]{js.state}[/] {js.detail}", highlight=False)

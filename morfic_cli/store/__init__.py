@@ -424,7 +424,7 @@ class Store:
         """Write the closure of ``refs`` (every version, or only the current one with ``latest``) to the tar ``out``."""
         return export_tar(self, refs, Path(out), latest=latest)
 
-    def import_tar(self, path: Path) -> ImportReport:
-        """Import a tar made by :meth:`export_tar`; idempotent (see :class:`ImportReport`)."""
-        return import_tar(self, Path(path))
+    def import_tar(self, path: Path, *, append: bool = False) -> ImportReport:
+        """Import a tar made by :meth:`export_tar`; idempotent (see :class:`ImportReport`; ``append``: there)."""
+        return import_tar(self, Path(path), append=append)
 

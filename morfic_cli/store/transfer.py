@@ -34,7 +34,15 @@ from morfic_cli.errors import ArtifactNotFoundError, StoreError
 from morfic_cli.store.gc import closure
 from morfic_cli.store.manifest import MAX_MANIFEST_BYTES, parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, is_object_id, object_relpath, store_os_error, unlink_quiet
-from morfic_cli.store.refs import RefEntry, check_ref_name, decode_history, encode_history, is_ref_name, merge_status
+from morfic_cli.store.refs import (
+    RefEntry,
+    check_ref_name,
+    decode_history,
+    encode_history,
+    is_ref_name,
+    merge_status,
+    next_entry,
+)
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -244,8 +252,12 @@ class _Plan:
     histories: dict[str, list[RefEntry]] = field(default_factory=dict)
 
 
-def import_tar(store: Store, path: Path) -> ImportReport:
+def import_tar(store: Store, path: Path, *, append: bool = False) -> ImportReport:
     """Import an export tar, all or nothing.
+
+    With ``append``, a ref's history is not merged but extended: the import's versions whose ids this ref
+    never pointed at are appended, in the import's order (how ``reproduce --executor ray`` brings home jobs
+    that each add one version to a ref all of them share, such as ``diagnoses/calibration``).
 
     Everything is checked before anything becomes visible: the header, every object against its
     hash and declared size (objects this store already has are rehashed, and a corrupt local copy is
@@ -262,19 +274,21 @@ def import_tar(store: Store, path: Path) -> ImportReport:
     path = Path(path)
     report = ImportReport()
     with _open_tar(path) as tar:
-        _checked_stage(store, tar, path, None)  # a first pass that writes nothing, not even a new store's folders
+        # a first pass that writes nothing, not even a new store's folders
+        _checked_stage(store, tar, path, None, append)
         with store.writing():
             staging = Path(tempfile.mkdtemp(dir=store.root / "tmp", prefix="import-"))
             try:
-                _commit(store, _checked_stage(store, tar, path, staging), report)
+                _commit(store, _checked_stage(store, tar, path, staging, append), report, append)
             finally:
                 shutil.rmtree(staging, ignore_errors=True)
     return report
 
 
-def _checked_stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None) -> _Plan:
+def _checked_stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
+                   append: bool = False) -> _Plan:
     try:
-        return _stage(store, tar, path, staging)
+        return _stage(store, tar, path, staging, append)
     except (tarfile.TarError, EOFError, zlib.error, lzma.LZMAError) as exc:
         raise StoreError(f"{path} is damaged or truncated ({exc}); nothing was imported. Copy the whole file "
                          "again, or re-export it.") from exc
@@ -282,7 +296,7 @@ def _checked_stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path
         raise store_os_error(exc, f"reading {path}", store.root) from exc
 
 
-def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None) -> _Plan:
+def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None, append: bool = False) -> _Plan:
     """Read and check the whole tar; stage the objects this store lacks or has corrupt (none without ``staging``)."""
     members = _classify(tar, path)
     header = _read_header(tar, members, path)
@@ -327,8 +341,19 @@ def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None)
         raise StoreError(f"{path} is inconsistent: its header lists refs {header['refs'][:5]}, it holds "
                          f"{sorted(plan.histories)[:5]}; nothing was imported. Re-export it.")
     for name, history in plan.histories.items():
-        merge_status(name, store.refs.history(name), history)  # diverged: refuse before writing anything
+        if not append:
+            merge_status(name, store.refs.history(name), history)  # diverged: refuse before writing anything
     return plan
+
+
+def _appended(local: list[RefEntry], incoming: list[RefEntry]) -> list[RefEntry]:
+    """``local`` extended by the entries of ``incoming`` whose ids it never pointed at (re-chained)."""
+    out, seen = list(local), {e.id for e in local}
+    for entry in incoming:
+        if entry.id not in seen:
+            out.append(next_entry(out, entry.id, entry.time))
+            seen.add(entry.id)
+    return out
 
 
 def _read_small(tar: tarfile.TarFile, member: tarfile.TarInfo, what: str, path: Path) -> bytes:
@@ -407,10 +432,12 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
                              "manifest in the export or in this store; nothing was imported. Re-export it.")
 
 
-def _commit(store: Store, plan: _Plan, report: ImportReport) -> None:
+def _commit(store: Store, plan: _Plan, report: ImportReport, append: bool = False) -> None:
     """Make a checked import visible: objects, then index markers, then refs (rolled back on failure)."""
     with store.refs.locked():
         previous = {name: store.refs.history(name) for name in plan.histories}
+        if append:
+            plan.histories = {name: _appended(previous[name], hist) for name, hist in plan.histories.items()}
         statuses = {name: merge_status(name, previous[name], hist) for name, hist in sorted(plan.histories.items())}
         try:
             for oid, tmp in sorted(plan.staged.items()):

@@ -1,0 +1,120 @@
+"""One job on a worker: a store of its own, input bundles in, the job's refs out as one export bundle.
+
+No shared filesystem is assumed: a job's inputs arrive as export tars (bytes, the ``morfic store export``
+closure: a checkpoint bundle for an eval), it runs its pipeline step against a fresh store in a temporary folder,
+and returns every ref the step created or extended as one export tar. The driver imports that tar into the
+user's store (all or nothing; content addressing makes a retried or duplicated job import to the same ids).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from morfic_cli import __version__
+from morfic_cli.cluster.jobs import Job, run_job
+from morfic_cli.errors import MorficError
+from morfic_cli.pipeline import Pipeline, ReproduceCfg, StepResult
+
+
+@dataclass
+class Outcome:
+    """What a job sends back to the driver.
+
+    Attributes:
+        key: The job's ``kind label``.
+        node: Host name and IP of the worker it ran on.
+        pid: The worker process.
+        step: Its step result (ids are the worker store's, which are the ids the import gives).
+        bundle: The export tar of the refs it created or extended (empty when it failed).
+        error: The ``Error:`` message of a user error (MorficError): the job fails once, it is not retried.
+        refs: The refs in ``bundle``.
+    """
+
+    key: str
+    node: str
+    pid: int
+    step: StepResult | None = None
+    bundle: bytes = b""
+    error: str = ""
+    refs: list[str] = field(default_factory=list)
+
+
+def where() -> str:
+    """``host (ip)`` of this process."""
+    host = socket.gethostname()
+    try:
+        import ray
+
+        return f"{host} ({ray.util.get_node_ip_address()})"
+    except Exception:  # noqa: BLE001 -- outside Ray: the host name is enough
+        return host
+
+
+def check_version(driver_version: str) -> None:
+    """Raise MorficError when this worker's morfic is not the driver's version."""
+    if driver_version != __version__:
+        raise MorficError(
+            f"the worker on {where()} runs morfic {__version__}, the driver morfic {driver_version}; install the "
+            f"same morfic on every node of the cluster (docs/cluster.md), then run the command again.")
+
+
+def _histories(store) -> dict[str, list[str]]:
+    return {name: [e.id for e in store.ref_history(name)] for name in store.list_refs()}
+
+
+def input_bundle(result: Outcome | bytes) -> bytes:
+    """The export tar of one input: a finished job's bundle, or a tar exported from the user's store.
+
+    Raises:
+        MorficError: The job that should have produced it failed.
+    """
+    if isinstance(result, Outcome):
+        if result.error or not result.bundle:
+            raise MorficError(f"its input job {result.key} failed: {result.error or 'no result'}")
+        return result.bundle
+    return result
+
+
+def execute(job: Job, cfg: ReproduceCfg, driver_version: str, *inputs: Outcome | bytes,
+            board=None) -> Outcome:
+    """Run ``job`` in a fresh store fed with ``inputs``; return its refs as one export bundle.
+
+    A :class:`MorficError` (a user error: bad config, a mismatched morfic version, an input job that failed) is
+    returned in ``Outcome.error``, so Ray does not retry it; anything else raises (a bug keeps its traceback).
+    A killed worker process returns nothing and Ray retries the job.
+    """
+    import torch
+
+    from morfic_cli.store import Store
+
+    out = Outcome(job.key, where(), os.getpid())
+    if board is not None:
+        board.start.remote(job.key, out.node, out.pid)
+    root = Path(tempfile.mkdtemp(prefix="morfic-job-"))
+    try:
+        check_version(driver_version)
+        store = Store(root / "store")
+        for i, item in enumerate(inputs):
+            tar = root / f"input-{i}.tar"
+            tar.write_bytes(input_bundle(item))
+            store.import_tar(tar)
+        before = _histories(store)
+        if cfg.torch_threads:
+            torch.set_num_threads(cfg.torch_threads)
+        out.step = run_job(Pipeline(store, cfg), job)
+        after = _histories(store)
+        out.refs = sorted(name for name, ids in after.items() if before.get(name) != ids)
+        if out.refs:
+            tar = root / "result.tar"
+            store.export_tar(out.refs, tar)
+            out.bundle = tar.read_bytes()
+    except MorficError as exc:
+        out.error = str(exc)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    return out
