@@ -25,6 +25,17 @@ from morfic_cli.rl.variants import VARIANTS
 from morfic_cli.validation import check_args
 
 
+def _step_line(result) -> str:
+    """One finished pipeline step as a console line: kind, label, status, seconds, detail, short id."""
+    line = f"{result.kind} {result.label}: {_MARKS.get(result.status, result.status)}"
+    if result.status != "skipped":
+        line += f" in {result.seconds:.1f} s"
+    if result.detail:
+        line += f" ({result.detail})"
+    if result.id:
+        line += f" [dim]{result.id[:12]}[/]"
+    return line
+
 class Executor(str, Enum):
     """Where the jobs run."""
 
@@ -229,13 +240,7 @@ class _View:
         self.done += 1
         if self.quiet:
             return
-        line = f"{result.kind} {result.label}: {_MARKS.get(result.status, result.status)}"
-        if result.status != "skipped":
-            line += f" in {result.seconds:.1f} s"
-        if result.detail:
-            line += f" ({result.detail})"
-        if result.id:
-            line += f" [dim]{result.id[:12]}[/]"
+        line = _step_line(result)
         if self.bar is not None:
             if self.current is not None:
                 self.bar.remove_task(self.current)
@@ -298,13 +303,7 @@ class _RayView(_View):
         self.done += 1
         if self.quiet or self.console is None:
             return
-        line = f"{result.kind} {result.label}: {_MARKS.get(result.status, result.status)}"
-        if result.status != "skipped":
-            line += f" in {result.seconds:.1f} s"
-        if result.detail:
-            line += f" ({result.detail})"
-        if result.id:
-            line += f" [dim]{result.id[:12]}[/]"
+        line = _step_line(result)
         self.console.print(line, highlight=False)
 
     def __exit__(self, *exc) -> None:
