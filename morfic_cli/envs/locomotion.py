@@ -168,8 +168,8 @@ class LocomotionEnv(VecEnv):
             self.episode_sums[name] += value
         self.episode_lin_tracking += torch.nan_to_num(raw[TRACKING_TERM])  # unweighted: --set w_lin=0 keeps it
 
-        log: dict[str, float] = {f"/reward/{k}": float(torch.nan_to_num(v).mean()) * self.dt for k, v in terms.items()}
-        log.update({f"/reward_raw/{k}": float(torch.nan_to_num(v).mean()) for k, v in raw.items()})
+        log: dict[str, float] = {f"/reward/{k}": m * self.dt for k, m in _term_means(terms).items()}
+        log.update({f"/reward_raw/{k}": m for k, m in _term_means(raw).items()})
         vx_err = torch.nan_to_num(state.command[:, 0] - state.base_lin_vel_b[:, 0]).abs()
         log["/tracking/vx_error"] = float(vx_err.mean())
         reset_ids = dones.nonzero(as_tuple=False).flatten()
@@ -401,4 +401,16 @@ class LocomotionEnv(VecEnv):
     def close(self) -> None:
         """Release the backend."""
         self.backend.close()
+
+
+def _term_means(terms: dict[str, torch.Tensor]) -> dict[str, float]:
+    """Mean over envs of each term (non-finite values as 0), read back to Python in one transfer, not one per term.
+
+    Shape: each value (num_envs,).
+    """
+    names = list(terms)
+    if not names:
+        return {}
+    means = torch.nan_to_num(torch.stack([terms[k] for k in names])).mean(dim=1).tolist()
+    return dict(zip(names, means, strict=True))
 
