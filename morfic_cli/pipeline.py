@@ -1,5 +1,9 @@
 """``morfic reproduce``: train every variant (x seeds) -> evaluate -> diagnose -> fixed-rollout -> compare -> report.
 
+The ``shipped`` preset trains nothing: each run is imported from its bundle (``<bundles>/<run name>.tar``, the
+trained ``cpu``-preset runs shipped under ``artifacts/bundles/``), then evaluated and diagnosed with a reduced
+protocol sized to finish in minutes on 2 cores (``--protocol full``: the paper's).
+
 Every step is idempotent through the store: before it runs, it looks for a result of the same inputs and config
 (:func:`~morfic_cli.store.publish.find_manifest`) and, when there is one, is skipped. Training is keyed by its run
 ref ``runs/<variant>-<preset>-s<seed>``: a finished run is skipped, an interrupted one (Ctrl-C) is resumed from its
@@ -50,6 +54,9 @@ class ReproduceCfg:
         device: Training device.
         torch_threads: torch intra-op threads while the pipeline runs (None: leave torch's default). The smoke
             preset's batches of 2-8 envs run several times faster on one thread than on two that contend.
+        bundles: Folder of run bundles (``<run name>.tar``); when set, runs are imported from it instead of
+            trained (the ``shipped`` preset).
+        name: The report's name (``reports/<name>``); default the preset.
     """
 
     preset: str = "smoke"
@@ -68,34 +75,98 @@ class ReproduceCfg:
     actor_variant: str = "film"
     device: str = "cpu"
     torch_threads: int | None = None
+    bundles: str | None = None
+    name: str | None = None
+
+    @property
+    def report_name(self) -> str:
+        """``reports/<report_name>``."""
+        return self.name or self.preset
+
+
+#: The pipeline presets: the training presets, and ``shipped`` (import the shipped ``cpu`` runs, train nothing).
+SHIPPED = "shipped"
+#: The preset of the shipped runs.
+SHIPPED_TRAIN_PRESET = "cpu"
+#: The ``shipped`` preset's quick protocol, sized so that seven variants are evaluated, diagnosed and reported in
+#: about 10 minutes on 2 cores (docs/reproducing.md): the paper's main zero-shot table only (descriptor mode,
+#: 2.0 m/s) and its episode and diagnostic lengths, with 16 envs instead of 64 (at 16 envs a policy step costs
+#: little more than its fixed Python overhead, so fewer steps, not fewer envs, would be the real saving).
+SHIPPED_PROTOCOL: dict[str, Any] = {"modes": ("descriptor",), "command_vx": (2.0,), "eval_envs": 16,
+                                    "eval_steps": 500, "diagnose_envs": 16, "diagnose_steps": 800}
+
+
+def default_bundles() -> Path:
+    """The repository's ``artifacts/bundles`` (where a source checkout keeps the shipped runs)."""
+    return Path(__file__).resolve().parents[1] / "artifacts" / "bundles"
+
+
+def bundle_path(bundles: str | Path, spec: str) -> Path:
+    """The bundle of run ``spec`` (``runs/NAME``): ``<bundles>/NAME.tar``."""
+    return Path(bundles) / f"{run_of(spec)}.tar"
+
+
+def shipped_variants(bundles: str | Path, seed: int = 0) -> tuple[str, ...]:
+    """The stock variants (in :data:`VARIANTS` order) whose seed-``seed`` bundle is in ``bundles``."""
+    return tuple(v for v in VARIANTS
+                 if bundle_path(bundles, RUNS_PREFIX + run_name(v, seed, SHIPPED_TRAIN_PRESET)).is_file())
 
 
 def reproduce_cfg(preset: str, *, seeds: int = 1, variants: tuple[str, ...] | None = None,
-                  device: str = "cpu") -> ReproduceCfg:
+                  device: str = "cpu", bundles: str | Path | None = None, full_protocol: bool = False) -> ReproduceCfg:
     """The pipeline of a preset.
 
     ``smoke`` exercises every stage in minutes on 2 cores: 2 envs x 25 steps per evaluation rollout, 2 envs x 80
     steps per diagnostic rollout with eps = 0.5 (H_eps = 69 steps instead of 299). Its numbers are not results.
     ``cpu`` and ``paper`` use the paper's protocol: 64 envs x 500 steps, diagnostics 64 envs x 800 steps, eps 0.05.
+    ``shipped`` imports the seed-0 ``cpu`` runs from ``bundles`` (default :func:`default_bundles`; every variant
+    with a bundle there unless ``variants`` names some) and evaluates them with :data:`SHIPPED_PROTOCOL`, or the
+    paper's protocol with ``full_protocol``.
 
     Raises:
         UnknownNameError: Unknown preset or variant.
-        MorficError: Fewer than one seed.
+        MorficError: Fewer than one seed; for ``shipped``, no bundle folder, no bundles in it, a named variant
+            without a bundle, or more than one seed.
     """
     from morfic_cli.errors import UnknownNameError
     from morfic_cli.rl.config import PRESETS
 
-    if preset not in PRESETS:
-        raise UnknownNameError("preset", preset, PRESETS)
+    if preset not in (*PRESETS, SHIPPED):
+        raise UnknownNameError("preset", preset, (*PRESETS, SHIPPED))
     for v in variants or ():
         resolve_variant(v)
     if seeds < 1:
         raise MorficError(f"--seeds must be at least 1, got {seeds}.")
+    if preset == SHIPPED:
+        return _shipped_cfg(seeds, variants, device, Path(bundles) if bundles else default_bundles(), full_protocol)
     base = ReproduceCfg(preset=preset, seeds=seeds, variants=tuple(variants or VARIANTS), device=device)
     if preset == "smoke":
         return dataclasses.replace(base, eval_envs=2, eval_steps=25, diagnose_envs=2, diagnose_steps=80,
                                    trunc_eps=0.5, torch_threads=1)
     return base
+
+
+def _shipped_cfg(seeds: int, variants: tuple[str, ...] | None, device: str, bundles: Path,
+                 full_protocol: bool) -> ReproduceCfg:
+    if seeds != 1:
+        raise MorficError("--preset shipped has one seed per variant (seed 0); leave out --seeds.")
+    if not bundles.is_dir():
+        raise MorficError(f"no bundle folder {bundles}: run from a source checkout of morfic (it ships the trained "
+                          f"runs under artifacts/bundles/), or pass --bundles DIR.")
+    if variants:
+        missing = [str(bundle_path(bundles, RUNS_PREFIX + run_name(v, 0, SHIPPED_TRAIN_PRESET))) for v in variants
+                   if not bundle_path(bundles, RUNS_PREFIX + run_name(v, 0, SHIPPED_TRAIN_PRESET)).is_file()]
+        if missing:
+            raise MorficError(f"no shipped bundle {', '.join(missing)}; the shipped variants are "
+                              f"{', '.join(shipped_variants(bundles)) or 'none'} (or train one: morfic reproduce "
+                              f"--preset cpu --variants ...).")
+    else:
+        variants = shipped_variants(bundles)
+        if not variants:
+            raise MorficError(f"no shipped bundles (<variant>-cpu-s0.tar) in {bundles}; pass --bundles DIR.")
+    base = ReproduceCfg(preset=SHIPPED_TRAIN_PRESET, seeds=1, variants=tuple(variants), device=device,
+                        bundles=str(bundles), name=SHIPPED)
+    return base if full_protocol else dataclasses.replace(base, **SHIPPED_PROTOCOL)
 
 
 class Progress(Protocol):
@@ -204,7 +275,10 @@ class Pipeline:
         runs = self.run_specs()
         steps: list[tuple[str, str, Callable[[], StepResult]]] = []
         for v, s, spec in runs:
-            steps.append(("train", spec, lambda v=v, s=s, spec=spec: self.train(v, s, spec)))
+            if self.cfg.bundles:
+                steps.append(("import", spec, lambda v=v, spec=spec: self.import_run(v, spec)))
+            else:
+                steps.append(("train", spec, lambda v=v, s=s, spec=spec: self.train(v, s, spec)))
         for _, _, spec in runs:
             steps.append(("eval", spec, lambda spec=spec: self.evaluate(spec)))
         for _, _, spec in runs:
@@ -212,7 +286,7 @@ class Pipeline:
         for robot in self.cfg.fixed_rollout_robots:
             steps.append(("fixed-rollout", robot, lambda robot=robot: self.fixed_rollout(robot)))
         steps.append(("compare", "compare-baselines", self.compare))
-        steps.append(("report", f"reports/{self.cfg.preset}", self.report))
+        steps.append(("report", f"reports/{self.cfg.report_name}", self.report))
         return steps
 
     # ------------------------------------------------------------------ run
@@ -319,6 +393,37 @@ class Pipeline:
             status = "interrupted"
         detail = f"iterations {start_it}->{last.iteration}"
         return StepResult("train", spec, status, last.id, f"{spec}@{last.version}", detail=detail)
+
+    def import_run(self, variant: str, spec: str) -> StepResult:
+        """Import the shipped run ``spec`` from its bundle (skip when the store holds it finished).
+
+        The run is taken as shipped: its config is the one it was trained with (recorded in it), not
+        re-checked against today's preset; it must be a finished run of ``variant``.
+
+        Raises:
+            MorficError: No bundle, or the bundle (or the store's ``spec``) is not a finished run of ``variant``.
+            StoreError: A damaged bundle (nothing imported).
+        """
+        from morfic_cli.store.transfer import import_tar
+
+        self._start("import", spec, 1, "bundle")
+        path = bundle_path(self.cfg.bundles or "", spec)
+        status, detail = "skipped", "in the store"
+        if not self.store.has_ref(spec):
+            if not path.is_file():
+                raise MorficError(f"no bundle {path} for {spec}; pass --bundles DIR holding {path.name}.")
+            report = import_tar(self.store, path)
+            status, detail = "done", f"{path.name}: {report.objects_added} new objects"
+        manifest = self.store.read_manifest(spec)
+        if manifest.kind != "checkpoint" or not manifest.meta.get("finished") or manifest.config.get(
+                "variant") != variant:
+            where = f"{path}" if status == "done" else f"{self.store.root}"
+            raise MorficError(f"{spec} in {where} is not a finished {variant} run (kind {manifest.kind}, variant "
+                              f"{manifest.config.get('variant')}, finished {bool(manifest.meta.get('finished'))}); "
+                              f"use another --store, or re-export the bundle from a finished run.")
+        self.progress.step_advance(completed=1)
+        it = manifest.meta.get("iteration")
+        return StepResult("import", spec, status, manifest.id, spec, detail=f"{detail}, iteration {it}")
 
     def eval_cfg(self):
         """The evaluation config of every run."""
@@ -432,9 +537,10 @@ class Pipeline:
     def report(self) -> StepResult:
         """The report (LaTeX, Markdown, figures, the paper's tables beside ours), copied to ``out``."""
         specs = tuple(spec for _, _, spec in self.run_specs())
-        cfg = ReportCfg(runs=specs, latex=True, markdown=True, figures=True, with_paper=True, name=self.cfg.preset,
-                        title=f"MorFiC reproduction report ({self.cfg.preset} preset)")
-        self._start("report", f"reports/{self.cfg.preset}", 1, "report")
+        name = self.cfg.report_name
+        cfg = ReportCfg(runs=specs, latex=True, markdown=True, figures=True, with_paper=True, name=name,
+                        title=f"MorFiC reproduction report ({name} preset)")
+        self._start("report", f"reports/{name}", 1, "report")
         res = build_report(self.store, cfg, out=self.out,
                            on_stage=lambda s: self.progress.step_advance(detail=s))
         self.report_result = res

@@ -16,7 +16,6 @@ from morfic_cli.cli._options import (
     DeviceOpt,
     FormatOpt,
     OutputFormat,
-    Preset,
     QuietOpt,
     StoreOpt,
 )
@@ -36,6 +35,15 @@ def _step_line(result) -> str:
         line += f" [dim]{result.id[:12]}[/]"
     return line
 
+class PipelinePreset(str, Enum):
+    """``reproduce``'s presets: the training presets and ``shipped`` (the shipped trained runs)."""
+
+    smoke = "smoke"
+    cpu = "cpu"
+    paper = "paper"
+    shipped = "shipped"
+
+
 class Executor(str, Enum):
     """Where the jobs run."""
 
@@ -48,8 +56,10 @@ _MARKS = {"done": "[green]done[/]", "resumed": "[green]resumed[/]", "skipped": "
 
 
 def reproduce(
-    preset: Annotated[Preset, typer.Option("--preset", help="Budget: smoke (minutes on 2 cores; exercises the "
-                                           "pipeline), cpu (~10 h per seed on 2 cores), paper (GPU).")] = Preset.smoke,
+    preset: Annotated[PipelinePreset, typer.Option(
+        "--preset", help="shipped: no training; import the trained cpu runs shipped in artifacts/bundles/ and "
+        "evaluate, diagnose and report them (~10 min on 2 cores). smoke: minutes, exercises the pipeline (its "
+        "numbers are not results). cpu: trains, ~1 h per run on 2 cores. paper: GPU.")] = PipelinePreset.smoke,
     seeds: Annotated[int, typer.Option("--seeds", help="Seeds per variant (0..N-1).")] = 1,
     variants: Annotated[
         str, typer.Option("--variants", help=f"Comma-separated variants to train, or 'all' (the paper's: "
@@ -63,6 +73,15 @@ def reproduce(
         list[str] | None, typer.Option("--set", help="Training config override key=value for every run "
                                        "(as `morfic train --set`), e.g. max_iterations=1.")
     ] = None,
+    bundles: Annotated[
+        Path | None, typer.Option("--bundles", help="With --preset shipped: the folder of run bundles "
+                                  "(<variant>-cpu-s0.tar; default the checkout's artifacts/bundles).")
+    ] = None,
+    full_protocol: Annotated[
+        bool, typer.Option("--full-protocol", help="With --preset shipped: evaluate and diagnose with the paper's "
+                           "protocol (both modes at 2.0 and 2.5 m/s, 64 envs; ~10 min per variant on 2 cores) "
+                           "instead of the quick one (descriptor mode at 2.0 m/s, 16 envs).")
+    ] = False,
     device: DeviceOpt = Device.cpu,
     executor: Annotated[
         Executor, typer.Option("--executor", help="local: every step here, one after another (default). ray: "
@@ -91,17 +110,24 @@ def reproduce(
     checkpoints first) continues where it stopped. The smoke preset takes minutes on 2 cores and only exercises
     the pipeline; cpu is sized for a 2-core machine (hours per variant), paper for a GPU.
 
-    Example: morfic reproduce --preset smoke
+    --preset shipped trains nothing: it imports the seed-0 cpu runs shipped under artifacts/bundles/ and runs
+    the paper's main zero-shot table (descriptor mode, 2.0 m/s) and the diagnostics with 16 envs per rollout
+    (--full-protocol: the paper's whole protocol), so a fresh checkout shows real results in minutes.
+
+    Example: morfic reproduce --preset shipped
     """
     check_args(store=store, out_dir=out, variants=variants)
     _check_executor(executor, address, retries)
+    _check_shipped(preset, bundles, full_protocol, executor, overrides)
     from morfic_cli.pipeline import Pipeline, reproduce_cfg
     from morfic_cli.rl.runner import check_device
     from morfic_cli.store import Store
 
     names = VARIANTS if variants.strip().lower() == "all" else tuple(
         v.strip() for v in variants.split(",") if v.strip())
-    cfg = reproduce_cfg(preset.value, seeds=seeds, variants=names, device=device.value)
+    shipped = preset is PipelinePreset.shipped
+    cfg = reproduce_cfg(preset.value, seeds=seeds, variants=None if shipped and names == VARIANTS else names,
+                        device=device.value, bundles=bundles, full_protocol=full_protocol)
     if overrides:
         import dataclasses
 
@@ -115,13 +141,14 @@ def reproduce(
 
         import_ray()  # not installed: Error saying what to install, before the store is touched
     st = Store(store)
-    out_dir = out if out is not None else st.root / "reports" / cfg.preset
+    out_dir = out if out is not None else st.root / "reports" / cfg.report_name
     view = _View(quiet) if executor is Executor.local else _RayView(quiet)
     pipeline = Pipeline(st, cfg, out=out_dir, progress=view)
     view.total = len(pipeline.plan())
     if not quiet:
         where = "" if executor is Executor.local else f", executor ray ({address or 'local instance'})"
-        info(f"reproduce: preset {cfg.preset}, {len(cfg.variants)} variants x {cfg.seeds} seed(s), "
+        info(f"reproduce: preset {preset.value}, {len(cfg.variants)} variants ({', '.join(cfg.variants)}) x "
+             f"{cfg.seeds} seed(s), "
              f"{len(pipeline.plan())} steps, store {st.root}{where}")
     if executor is Executor.ray:
         _run_ray(pipeline, view, address, retries, quiet, fmt, out_dir)
@@ -145,6 +172,22 @@ def reproduce(
              "to continue where it stopped.")
         sys.exit(130)
     _summary(result, quiet, fmt, out_dir)
+
+
+def _check_shipped(preset: PipelinePreset, bundles: Path | None, full_protocol: bool, executor: Executor,
+                   overrides: list[str] | None) -> None:
+    from morfic_cli.errors import MorficError
+
+    if preset is not PipelinePreset.shipped:
+        for flag, given in (("--bundles", bundles is not None), ("--full-protocol", full_protocol)):
+            if given:
+                raise MorficError(f"{flag} is for --preset shipped (the shipped runs); the {preset.value} preset "
+                                  f"trains its own.")
+        return
+    if executor is not Executor.local:
+        raise MorficError("--preset shipped trains nothing and runs here; use it without --executor ray.")
+    if overrides:
+        raise MorficError("--set changes training configs; --preset shipped trains nothing (leave out --set).")
 
 
 def _check_executor(executor: Executor, address: str | None, retries: int) -> None:
