@@ -22,6 +22,7 @@ from typing import Any
 from morfic_cli import __version__
 from morfic_cli.report import paper
 from morfic_cli.report import tables as T
+from morfic_cli.report.claims import Claim, check_claims
 from morfic_cli.report.compare import COMPARE_REF, compare_tables, store_comparison
 from morfic_cli.report.gather import Provenance, StoreData, gather, read_csv_rows, resolve_runs
 from morfic_cli.report.model import Table
@@ -39,6 +40,11 @@ FIGURES: dict[str, str] = {
     "compute": "Training device-hours normalised to 400M transitions, per run (and the paper's methods).",
     "curves": "Training curves: mean episode return and the critic's explained variance.",
 }
+
+#: The text above the claims (docs/results.md reads them with the reasons behind each).
+CLAIMS_INTRO = ("Each of the paper's five claims checked against the results below (morfic_cli/report/claims.py): "
+                "holds (on every robot the claim names), holds partly, does not hold, or cannot tell (results "
+                "missing, or differences within the seeds' spread).")
 
 SPEED_PREFIX = "speed-"
 """Figure names ``speed-<run>-<robot>``: the eval figure of that run on that robot (descriptor mode, 2.0 m/s)."""
@@ -123,6 +129,7 @@ class _Section:
     heading: str
     tables: list[Table] = field(default_factory=list)
     text: str = ""
+    claims: list[Claim] = field(default_factory=list)
 
 
 def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support: list[dict[str, Any]],
@@ -130,7 +137,8 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
     transfer, calib = tables.get("transfer", []), tables.get("calibration", [])
     fixed, compute = tables.get("fixed_rollout", []), tables.get("compute", [])
     P = (lambda *ts: [T.paper_table(t) for t in ts]) if with_paper else (lambda *ts: [])  # noqa: E731
-    out: list[_Section] = []
+    out: list[_Section] = [_Section(
+        "The paper's claims", text=CLAIMS_INTRO, claims=check_claims(data.evals, data.calibration, data.fixed))]
 
     main = T.transfer_table(transfer, key="zero_shot_transfer", title="Zero-shot cross-morphology transfer",
                             command_vx=2.0, mode="descriptor", variants=T.MAIN_VARIANTS)
@@ -213,8 +221,8 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
     run_names = [r.name for r in data.runs]
     files: dict[str, bytes] = {}
     doc = {"title": cfg.title, "morfic_version": __version__, "runs": [asdict(r) for r in data.runs],
-           "sections": [{"heading": s.heading, "text": s.text, "tables": [t.to_dict() for t in s.tables]}
-                        for s in sections],
+           "sections": [{"heading": s.heading, "text": s.text, "tables": [t.to_dict() for t in s.tables],
+                         **({"claims": [asdict(c) for c in s.claims]} if s.claims else {})} for s in sections],
            "figures": sorted(figures), "provenance": prov_rows}
     files["report.json"] = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False, default=str).encode()
     files["provenance.csv"] = rows_to_csv(prov_rows, ("kind", "ref", "id", "role"))
@@ -223,11 +231,12 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
         files[f"figures/{name}.pdf"] = pdf
     intro = _intro(data, cfg.with_paper)
     if cfg.markdown:
-        from morfic_cli.report.markdown import document_markdown, table_markdown
+        from morfic_cli.report.markdown import claims_markdown, document_markdown, table_markdown
 
         md = []
         for s in sections:
-            body = "\n\n".join(x for x in [s.text, *(table_markdown(_paper_title(t)) for t in s.tables)] if x)
+            body = "\n\n".join(x for x in [s.text, claims_markdown(s.claims),
+                                            *(table_markdown(_paper_title(t)) for t in s.tables)] if x)
             md.append((s.heading, body))
         if figures:
             fixed = [n for n in figures if not n.startswith(SPEED_PREFIX)]
@@ -242,6 +251,7 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
         files["report.md"] = document_markdown(cfg.title, md, intro=intro).encode()
     if cfg.latex:
         from morfic_cli.report.latex import (
+            claims_latex,
             document_latex,
             escape,
             figure_grid_latex,
@@ -252,7 +262,7 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
 
         tex = []
         for s in sections:
-            body = "\n\n".join(x for x in [escape(s.text) if s.text else "",
+            body = "\n\n".join(x for x in [escape(s.text) if s.text else "", claims_latex(s.claims),
                                             *(table_latex(_paper_title(t)) for t in s.tables)] if x)
             tex.append((s.heading, body or escape("Nothing in the store for this section.")))
         if figures:

@@ -13,9 +13,13 @@ import subprocess
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from morfic_cli.report.model import Part, Table, number_text
 from morfic_cli.store.manifest import safe_join
+
+if TYPE_CHECKING:
+    from morfic_cli.report.claims import Claim
 
 _ESCAPES = {
     "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{",
@@ -193,3 +197,16 @@ def compile_pdf(tex: str, files: Mapping[str, bytes] | None = None, *, timeout_s
                 tail = "\n".join(proc.stdout.splitlines()[-25:])
                 raise RuntimeError(f"pdflatex failed (exit {proc.returncode}):\n{tail}")
         return (root / "report.pdf").read_bytes()
+
+
+def claims_latex(claims: Sequence[Claim]) -> str:
+    """The paper's claims as an itemize list (see :func:`~morfic_cli.report.markdown.claims_markdown`)."""
+    if not claims:
+        return ""
+    items = []
+    for c in claims:
+        ids = ", ".join(f"`{i[:12]}`" for i in c.artifacts) or "-"
+        items.append(rf"\item \textbf{{({c.key}) {escape(c.claim)}}} Verdict: \textbf{{{escape(c.verdict)}}}."
+                     rf" Paper: {escape(c.paper)} Ours: {escape(c.ours) or '-'}. Why: {escape(c.reason)}"
+                     rf" From: {escape(ids)}.")
+    return "\\begin{itemize}\n" + "\n".join(items) + "\n\\end{itemize}"

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from morfic_cli.report.model import Part, Table, number_text
+
+if TYPE_CHECKING:
+    from morfic_cli.report.claims import Claim
 
 _ARROWS = {"up": "↑", "down": "↓"}
 
@@ -52,4 +56,15 @@ def document_markdown(title: str, sections: Sequence[tuple[str, str]], *, intro:
         out += [intro, ""]
     for heading, body in sections:
         out += [f"## {heading}", "", body.rstrip(), ""]
+    return "\n".join(out)
+
+
+def claims_markdown(claims: Sequence[Claim]) -> str:
+    """The paper's claims as a list: each claim with its verdict, the paper's numbers, ours, why, and the ids."""
+    out = []
+    for c in claims:
+        ids = ", ".join(f"`{i[:12]}`" for i in c.artifacts) or "-"
+        out.append(f"- **({c.key}) {_escape(c.claim)}** Verdict: **{c.verdict}**.\n"
+                   f"  - Paper: {_escape(c.paper)}\n  - Ours: {_escape(c.ours) or '-'}\n"
+                   f"  - Why: {_escape(c.reason)}\n  - From: {ids}")
     return "\n".join(out)

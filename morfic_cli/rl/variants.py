@@ -40,6 +40,9 @@ CRITIC_CLASS = "morfic_cli.rl.models:MorficCritic"
 ENTRY_POINT_GROUP = "morfic.variants"
 """Entry-point group under which an installed package may name its variants."""
 
+MULTIPLICATIVE_CONDITIONING = ("film", "hyper", "adaln")
+"""Critic conditionings that scale the critic's features by z_m (paper Sec. "Method"); concat and none are additive."""
+
 PAPER_TRUNK = (512, 256, 128)
 """Hidden widths of the actor and of every critic trunk but film-scaled's (paper Table "architecture")."""
 
@@ -69,6 +72,12 @@ class Variant:
     critic_morphology: bool = True
     critic_defaults: dict[str, Any] = field(default_factory=dict)
     stock: bool = True
+
+    @property
+    def multiplicative(self) -> bool:
+        """Whether the critic is conditioned multiplicatively on z_m (FiLM, AdaLN, hypernetwork: the paper's MorFiC
+        family); False for the additive baselines (concat, or no critic conditioning)."""
+        return self.critic_defaults.get("conditioning") in MULTIPLICATIVE_CONDITIONING
 
     def model_cfgs(self) -> tuple[dict, dict, dict[str, list[str]]]:
         """The rsl-rl ``actor``, ``critic`` and ``obs_groups`` config entries (paper sizes); fresh dicts per call."""
