@@ -109,3 +109,16 @@ def test_help_reads_well(monkeypatch):
     assert "<bool>" not in quiet and "No progress" in quiet  # a flag looks like a flag
     out = runner.invoke(app, ["eval", "--help"]).stdout
     assert "[default: 500]" in out
+
+
+def test_a_flag_at_the_start_of_a_source_line_continues_the_sentence(monkeypatch):
+    from morfic_cli.cli import unwrap_help
+
+    assert unwrap_help("Intro.\n\n  Runs are grouped;\n  --with-paper adds [x].\n  - an item\n  Example: morfic a\n") \
+        == "Intro.\n\nRuns are grouped; --with-paper adds \\[x].\n- an item\nExample: morfic a"
+    monkeypatch.setenv("COLUMNS", "250")
+    out = runner.invoke(app, ["compare-baselines", "--help"]).stdout
+    assert "aggregated over seeds, plus training compute. --with-paper adds" in out
+    out = runner.invoke(app, ["bench", "--help"]).stdout
+    assert "or the GPU; bench train --device cuda trains as" in out
+    assert "Example: morfic bench train --preset cpu --iterations 5" in [line.strip() for line in out.splitlines()]
