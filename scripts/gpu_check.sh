@@ -196,7 +196,7 @@ check() {
     record train null 0 0 skipped
   fi
   if step export 30 "$WORK/export.log" "$PY" -m morfic_cli store export runs/gpu-check --latest \
-      --out "$OUT/checkpoint.tar"; then
+      --out "$OUT" --name checkpoint; then
     step show 30 "$WORK/bundle.json" "$PY" -m morfic_cli store show runs/gpu-check --format json
   fi
   MORFIC_GPU_CHECK_DEVICE=$DEVICE "$PY" scripts/gpu_check.py summary "$WORK" "$OUT" > "$WORK/summary.log" 2>> "$LOG" \

@@ -87,14 +87,15 @@ app.command("bench")(bench.bench)
 def unwrap_help(doc: str) -> str:
     """A docstring as help text: source line breaks inside a paragraph joined, rich markup escaped.
 
-    Paragraphs (blank-line separated) stay apart; a line starting with ``Example`` or ``Your own`` or indented
-    starts a new line (command examples). ``[gpu]`` in ``pip install 'morfic[gpu]'`` is escaped so rich shows it.
+    Paragraphs (blank-line separated) stay apart; a line starting with ``Example``, ``Your own``, ``- `` (a list
+    item) or indented starts a new line (command examples); a line starting with a flag (``--device``) continues
+    the sentence before it. ``[gpu]`` in ``pip install 'morfic[gpu]'`` is escaped so rich shows it.
     """
     paragraphs = []
     for para in inspect.cleandoc(doc or "").split("\n\n"):
         lines: list[str] = []
         for line in para.splitlines():
-            if lines and not line.startswith(("Example", "Your own", " ", "-")):
+            if lines and not line.startswith(("Example", "Your own", " ", "- ")):
                 lines[-1] += " " + line.strip()
             else:
                 lines.append(line)

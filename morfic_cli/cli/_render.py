@@ -30,6 +30,8 @@ class Column:
         fmt: Formatter for the rich table cell; json/csv always get the raw value.
         justify: rich justification ("left", "right", "center").
         no_wrap: Keep the cell on one line (rich shrinks other columns first).
+        overflow: What a cell too long for its column does: "ellipsis" (cut, rich's default) or "fold" (wrap
+            at any character, nothing lost: paths a user copies).
     """
 
     key: str
@@ -37,6 +39,7 @@ class Column:
     fmt: Callable[[Any], str] | None = None
     justify: str = "left"
     no_wrap: bool = False
+    overflow: str = "ellipsis"
 
 
 def _cell(value: Any, col: Column) -> str:
@@ -78,7 +81,8 @@ def emit_rows(
     cols = list(columns) if columns else [Column(k) for k in (rows[0].keys() if rows else [])]
     table = Table(title=title, caption=caption)
     for col in cols:
-        table.add_column(col.header or col.key, justify=col.justify, no_wrap=col.no_wrap)  # type: ignore[arg-type]
+        table.add_column(col.header or col.key, justify=col.justify, no_wrap=col.no_wrap,  # type: ignore[arg-type]
+                         overflow=col.overflow)  # type: ignore[arg-type]
     for row in rows:
         table.add_row(*(Text(_cell(row.get(col.key), col)) for col in cols))  # Text: no markup in cells
     out_console.print(table)

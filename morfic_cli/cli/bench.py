@@ -54,10 +54,10 @@ def bench(
     code of commit REF and this checkout side by side (--rounds alternating runs each) and prints the s/iteration
     ratio.
 
-    Examples: morfic bench env --envs 256,1024 --steps 50 --format json;
-    morfic bench env --backend warp --device cuda --envs 4096,8192;
-    morfic bench train --preset cpu --iterations 5;
-    morfic bench train --preset cpu --iterations 3 --compare main --rounds 3
+    Example: morfic bench env --envs 256,1024 --steps 50 --format json
+    Example: morfic bench env --backend warp --device cuda --envs 4096,8192
+    Example: morfic bench train --preset cpu --iterations 5
+    Example: morfic bench train --preset cpu --iterations 3 --compare main --rounds 3
     """
     check_args(store=store, env_counts=envs if what is _options.Benchmark.env else None, steps=steps, seed=seed)
     backend = backend.value

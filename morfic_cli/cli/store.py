@@ -13,6 +13,8 @@ from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, Stor
 from morfic_cli.cli._render import Column, emit_object, emit_rows, err_console, info
 from morfic_cli.errors import StoreError
 from morfic_cli.store import MANIFEST_KINDS, Store
+from morfic_cli.store.transfer import export_path
+from morfic_cli.validation import check_args
 
 app = typer.Typer(
     help=(
@@ -108,14 +110,15 @@ def show(
 @app.command("get")
 def get(
     spec: Annotated[str, typer.Argument(help="Ref (runs/film-s0), ref@N, id or unique id prefix.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Directory to write the files into (created).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Directory to write the files into (created if "
+                                      "missing); each file's path is printed.")],
     files: Annotated[
         Optional[list[str]], typer.Option("--file", help="Only this file of the artifact (repeatable).")
     ] = None,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Copy an artifact's files out of the store, byte for byte, under readable names.
+    """Copy an artifact's files out of the store into DIR, byte for byte, under readable names; print their paths.
 
     Files keep their names in the artifact (model.pt, eval.csv, table.csv, policy.onnx); a rollout's
     rollout.mcap is named after its robot, mode and command (go1-descriptor-vx2.0.mcap).
@@ -126,7 +129,7 @@ def get(
 
     got = get_files(Store(store), spec, out, files)
     rows = [{"file": g.name, "path": str(g.path), "id": g.id, "size": g.size} for g in got]
-    columns = [Column("file"), Column("path"), Column("id", fmt=_short_id),
+    columns = [Column("file"), Column("path", overflow="fold"), Column("id", fmt=_short_id),
                Column("size", fmt=human_size, justify="right")]
     _emit(rows, fmt, columns, title=f"files of {spec}")
 
@@ -177,20 +180,37 @@ def gc(
 @app.command("export")
 def export(
     refs: Annotated[list[str], typer.Argument(help="Ref names to export, with every version.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Tar file to write.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Directory to write the tar into (created if missing).")],
+    name: Annotated[
+        Optional[str],
+        typer.Option("--name", help="The tar's file name, NAME.tar (default: one ref's last part, e.g. "
+                     "film-cpu-s0.tar; several refs' last parts joined by '+').")
+    ] = None,
     latest: Annotated[bool, typer.Option("--latest", help="Only each ref's current version (a small snapshot, "
                                          "e.g. a trained policy without its earlier checkpoints).")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite the tar if it exists.")] = False,
+    fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Write the named refs and everything they reach into one tar file.
+    """Write the named refs and everything they reach into one tar file, DIR/NAME.tar; print its path.
 
-    With --latest only the current version of each ref goes in; it arrives as version 1 of that ref.
+    The tar is named after the refs unless --name says otherwise: runs/film-cpu-s0 -> film-cpu-s0.tar;
+    runs/film-s0 runs/film-s1 -> film-s0+film-s1.tar; five refs -> film-s0+4-more.tar. An existing
+    tar is kept unless --force. With --latest only the current version of each ref goes in; it arrives as version
+    1 of that ref.
 
-    Example: morfic store export runs/film-s0 runs/film-s1 --out film.tar
+    Example: morfic store export runs/film-s0 runs/film-s1 --out bundles/ --name film
     """
-    report = Store(store).export_tar(refs, out, latest=latest)
+    check_args(store=store, out_dir=out, specs=refs)
+    path = export_path(out, refs, name, force=force)
+    report = Store(store).export_tar(refs, path, latest=latest)
     info(f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
          f"to {escape(str(report.path))}")
+    if fmt == OutputFormat.table:  # the path alone, whole (a table would fold a long one), for `$(...)`
+        sys.stdout.write(f"{report.path}\n")
+        return
+    emit_object({"path": str(report.path), "refs": report.refs, "objects": report.objects, "bytes": report.bytes},
+                fmt)
 
 
 @app.command("import")

@@ -20,6 +20,7 @@ import io
 import json
 import lzma
 import os
+import re
 import shutil
 import tarfile
 import tempfile
@@ -104,6 +105,50 @@ def _add_bytes(tar: tarfile.TarFile, name: str, data: bytes, mode: int = 0o644) 
     tar.addfile(_info(name, len(data), mode), io.BytesIO(data))
 
 
+#: At most this many refs are named in a default tar name; more give ``<first>+<N-1>-more``.
+MAX_NAMED_REFS = 3
+
+_TAR_NAME = re.compile(r"[A-Za-z0-9_+-][A-Za-z0-9._+-]*")
+
+
+def bundle_name(refs: list[str]) -> str:
+    """The file name ``morfic store export --out DIR`` gives the tar of ``refs`` when no ``--name`` is given.
+
+    One ref: its last part (``runs/film-cpu-s0`` -> ``film-cpu-s0.tar``). Several: the last parts of the sorted
+    refs joined by ``+`` (``runs/film-s0 runs/film-s1`` -> ``film-s0+film-s1.tar``); more than
+    :data:`MAX_NAMED_REFS`: the first one and how many more (``film-s0+4-more.tar``).
+    """
+    parts = [name.rsplit("/", 1)[-1] for name in sorted(set(refs))]
+    if len(parts) > MAX_NAMED_REFS:
+        parts = [parts[0], f"{len(parts) - 1}-more"]
+    return "+".join(parts) + ".tar"
+
+
+def export_path(out_dir: Path, refs: list[str], name: str | None = None, *, force: bool = False) -> Path:
+    """Where ``morfic store export REFS --out DIR [--name NAME]`` writes: ``DIR/NAME.tar``.
+
+    ``NAME`` defaults to :func:`bundle_name`; a trailing ``.tar`` in ``name`` is not doubled. Nothing is created
+    here (the export creates ``DIR`` once the refs are known to exist).
+
+    Raises:
+        StoreError: ``name`` is not a plain file name, or the tar exists and ``force`` is not set.
+    """
+    if name is None:
+        file_name = bundle_name(refs)
+    else:
+        stem = name[:-4] if name.endswith(".tar") else name
+        if not _TAR_NAME.fullmatch(stem):
+            raise StoreError(f"--name {name!r} is not a file name: use letters, digits, '.', '_', '+' and '-' (not "
+                             "first: '.'), no '/' or spaces, e.g. --name film-cpu (writes film-cpu.tar).")
+        file_name = stem + ".tar"
+    path = Path(out_dir) / file_name
+    if path.is_dir():
+        raise StoreError(f"{path} is a folder; choose another --name or --out.")
+    if path.exists() and not force:
+        raise StoreError(f"{path} exists; pass --force to overwrite it, or choose another --name or --out.")
+    return path
+
+
 def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False) -> ExportReport:
     """Write the closure of ``refs`` (objects and ref histories) to the tar file ``out``.
 
@@ -118,14 +163,14 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
     names = sorted(set(refs))
     out = Path(out)
     if out.is_dir() or not out.name:
-        raise StoreError(f"--out {out} is a folder; give the tar file to write, e.g. --out {out / 'export.tar'}.")
+        raise StoreError(f"{out} is a folder; give the tar file to write, e.g. {out / 'export.tar'}.")
     for parent in out.parents:
         if parent.exists():
             if not parent.is_dir():
-                raise StoreError(f"--out {out}: {parent} is a file, so the tar cannot be written there.")
+                raise StoreError(f"{out}: {parent} is a file, so the tar cannot be written there.")
             break
     if not names:
-        raise StoreError("name at least one ref to export, e.g. `morfic store export runs/film-s0 --out x.tar`.")
+        raise StoreError("name at least one ref to export, e.g. `morfic store export runs/film-s0 --out bundles/`.")
     for name in names:
         if not store.refs.exists(check_ref_name(name)):
             raise ArtifactNotFoundError(f"no ref '{name}' in store {store.root}; try `morfic store ls`.")

@@ -35,15 +35,11 @@ def _option(cmd, flag: str):
     return next((p for p in cmd.params if flag in getattr(p, "opts", ())), None)
 
 
-#: The one --out that is not a directory: a bundle is one tar file (`morfic store export ... --out film.tar`).
-OUT_IS_A_FILE = {"store export"}
-
-
 def test_every_out_is_a_directory_and_every_format_the_stdout_format():
     commands = _commands()
     with_out = {name for name, cmd in commands.items() if _option(cmd, "--out")}
     assert with_out >= {"eval", "diagnose", "export", "report", "reproduce", "store get", "store export"}
-    for name in sorted(with_out - OUT_IS_A_FILE):
+    for name in sorted(with_out):
         text = (_option(commands[name], "--out").help or "").lower()
         assert "director" in text or "folder" in text, name
     for name, cmd in sorted(commands.items()):
@@ -62,8 +58,9 @@ def test_out_given_a_file_is_an_error_for_every_directory_out(run_cli, tmp_path)
     argv = {
         "eval": ["eval", "runs/x"], "diagnose": ["diagnose", "runs/x"], "export": ["export", "runs/x"],
         "report": ["report"], "reproduce": ["reproduce"], "store get": ["store", "get", "runs/x"],
+        "store export": ["store", "export", "runs/x"],
     }
-    assert set(argv) | OUT_IS_A_FILE == {n for n, c in _commands().items() if _option(c, "--out")}
+    assert set(argv) == {n for n, c in _commands().items() if _option(c, "--out")}
     for name, args in argv.items():
         code, _, err = run_cli(*args, "--out", str(afile))
         assert code == 1 and err.startswith("Error: ") and "a-file" in err, (name, err)
@@ -112,3 +109,16 @@ def test_help_reads_well(monkeypatch):
     assert "<bool>" not in quiet and "No progress" in quiet  # a flag looks like a flag
     out = runner.invoke(app, ["eval", "--help"]).stdout
     assert "[default: 500]" in out
+
+
+def test_a_flag_at_the_start_of_a_source_line_continues_the_sentence(monkeypatch):
+    from morfic_cli.cli import unwrap_help
+
+    assert unwrap_help("Intro.\n\n  Runs are grouped;\n  --with-paper adds [x].\n  - an item\n  Example: morfic a\n") \
+        == "Intro.\n\nRuns are grouped; --with-paper adds \\[x].\n- an item\nExample: morfic a"
+    monkeypatch.setenv("COLUMNS", "250")
+    out = runner.invoke(app, ["compare-baselines", "--help"]).stdout
+    assert "aggregated over seeds, plus training compute. --with-paper adds" in out
+    out = runner.invoke(app, ["bench", "--help"]).stdout
+    assert "or the GPU; bench train --device cuda trains as" in out
+    assert "Example: morfic bench train --preset cpu --iterations 5" in [line.strip() for line in out.splitlines()]

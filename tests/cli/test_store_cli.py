@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import tarfile
 
 import pytest
 from typer.testing import CliRunner
@@ -106,14 +107,52 @@ def test_verify_and_gc(filled, store):
 
 
 def test_export_import_round_trip(filled, tmp_path):
-    out = tmp_path / "film.tar"
-    assert "exported 1 ref" in _invoke("export", "runs/film-s0", "--out", str(out)).stderr
+    out = tmp_path / "bundles"  # created
+    result = _invoke("export", "runs/film-s0", "--out", str(out), "-f", "json")
+    assert "exported 1 ref" in result.stderr
+    tar = out / "film-s0.tar"
+    with tarfile.open(tar) as t:
+        objects = [m for m in t.getmembers() if m.name.startswith("objects/")]
+    # 3 manifests (checkpoint, both run versions) and 3 files (model.pt, c.csv twice)
+    assert json.loads(result.stdout) == {"path": str(tar), "refs": ["runs/film-s0"], "objects": 6,
+                                         "bytes": sum(m.size for m in objects)} and len(objects) == 6
     dst = tmp_path / "dst"
-    rows = json.loads(_invoke("import", str(out), "--store", str(dst), "-f", "json").stdout)
+    rows = json.loads(_invoke("import", str(tar), "--store", str(dst), "-f", "json").stdout)
     assert rows == [{"ref": "runs/film-s0", "status": "created"}]
-    rows = json.loads(_invoke("import", str(out), "--store", str(dst), "-f", "json").stdout)
+    rows = json.loads(_invoke("import", str(tar), "--store", str(dst), "-f", "json").stdout)
     assert rows == [{"ref": "runs/film-s0", "status": "unchanged"}]
     assert Store(dst).resolve("runs/film-s0@1") == filled["old"]
+
+
+def test_export_names_the_tar_after_the_refs_and_prints_its_path(filled, store, tmp_path):
+    for name in ("runs/film-s1", "diagnoses/calibration", "tables/distance"):
+        store.set_ref(name, filled["ckpt"])
+    out = tmp_path / "b"
+    table = _invoke("export", "runs/film-s0", "runs/film-s1", "--out", str(out)).stdout
+    assert table == f"{out / 'film-s0+film-s1.tar'}\n"  # --format table: the path alone
+    assert (out / "film-s0+film-s1.tar").is_file()
+    many = json.loads(_invoke("export", "runs/film-s0", "runs/film-s1", "tables/distance", "diagnoses/calibration",
+                              "--out", str(out), "-f", "json").stdout)
+    assert many["path"] == str(out / "calibration+3-more.tar")  # sorted: diagnoses/ first
+    assert many["refs"] == ["diagnoses/calibration", "runs/film-s0", "runs/film-s1", "tables/distance"]
+    named = json.loads(_invoke("export", "runs/film-s0", "--out", str(out), "--name", "film.tar", "-f",
+                               "json").stdout)
+    assert named["path"] == str(out / "film.tar")
+    assert sorted(p.name for p in out.iterdir()) == ["calibration+3-more.tar", "film-s0+film-s1.tar", "film.tar"]
+
+
+def test_export_keeps_an_existing_tar_unless_force(run_cli, filled, store, tmp_path):
+    tar = tmp_path / "film-s0.tar"
+    tar.write_bytes(b"old")
+    code, out, err = run_cli("store", "export", "runs/film-s0", "--out", str(tmp_path))
+    assert code == 1 and out == "" and err.startswith(f"Error: {tar} exists; pass --force")
+    assert tar.read_bytes() == b"old"
+    code, out, err = run_cli("store", "export", "runs/film-s0", "--out", str(tmp_path), "--force", "-f", "json")
+    assert code == 0, err
+    assert json.loads(out)["path"] == str(tar) and tar.read_bytes()[:3] != b"old"
+    dst = Store(tmp_path / "dst")
+    dst.import_tar(tar)
+    assert dst.resolve("runs/film-s0") == filled["new"]
 
 
 # -- `Error:` on stderr and exit 1, through the real entry point ---------------------------------
@@ -154,8 +193,8 @@ def test_bad_kind_is_error(run_cli):
 
 
 def test_disk_full_during_import_is_error_and_store_consistent(run_cli, filled, tmp_path, monkeypatch):
-    out = tmp_path / "film.tar"
-    assert run_cli("store", "export", "runs/film-s0", "--out", str(out))[0] == 0
+    assert run_cli("store", "export", "runs/film-s0", "--out", str(tmp_path))[0] == 0
+    out = tmp_path / "film-s0.tar"
     dst = tmp_path / "dst"
 
     def full(fd):
@@ -204,3 +243,12 @@ def test_get_bad_input_is_an_error_and_writes_nothing(run_cli, filled, tmp_path)
     assert code == 1 and err.startswith("Error: ") and "is a file" in err
     code, _, err = run_cli("store", "get", "runs/film-s0", "--file", "nope.pt", "--out", str(tmp_path / "o"))
     assert code == 1 and "its files are: c.csv" in err and not (tmp_path / "o").exists()
+
+
+def test_get_prints_each_whole_path_in_the_table(filled, store, tmp_path):
+    out = tmp_path / "a-rather-long-folder-name" / "so-that-the-path-is-wider-than-its-column"
+    table = _invoke("get", "runs/film-s0", "--out", str(out)).stdout  # 80 columns: the path cell folds
+    cells = [line.split("│")[2].strip() for line in table.splitlines() if line.count("│") == 5]
+    assert "…" not in table and "".join(cells) == str(out / "c.csv")
+    assert (out / "c.csv").read_bytes() == store.object_path(store.read_manifest("runs/film-s0").files["c.csv"].id) \
+        .read_bytes() == b"2"

@@ -180,3 +180,31 @@ def test_export_latest_is_a_one_version_snapshot(src, tmp_path):
     with pytest.raises(StoreError, match="diverged"):
         dst.import_tar(full)
     assert _history(dst, "runs/a") == [(1, head.id, head.time)]
+
+
+def test_bundle_name_follows_the_refs():
+    from morfic_cli.store.transfer import bundle_name
+
+    assert bundle_name(["runs/film-cpu-s0"]) == "film-cpu-s0.tar"
+    assert bundle_name(["runs/film-s1", "runs/film-s0", "runs/film-s1"]) == "film-s0+film-s1.tar"  # sorted, once
+    assert bundle_name(["runs/b", "runs/a", "tables/c"]) == "a+b+c.tar"
+    assert bundle_name(["runs/d", "runs/b", "runs/a", "tables/c"]) == "a+3-more.tar"
+
+
+def test_export_path_is_dir_slash_name_and_refuses_to_overwrite(tmp_path):
+    from morfic_cli.store.transfer import export_path
+
+    assert export_path(tmp_path / "new", ["runs/a"]) == tmp_path / "new" / "a.tar"
+    assert not (tmp_path / "new").exists()  # nothing created before the export
+    assert export_path(tmp_path, ["runs/a"], "film") == export_path(tmp_path, ["runs/a"], "film.tar") \
+        == tmp_path / "film.tar"
+    (tmp_path / "a.tar").write_bytes(b"x")
+    with pytest.raises(StoreError, match="exists; pass --force"):
+        export_path(tmp_path, ["runs/a"])
+    assert export_path(tmp_path, ["runs/a"], force=True) == tmp_path / "a.tar"
+    (tmp_path / "d.tar").mkdir()
+    with pytest.raises(StoreError, match="is a folder"):
+        export_path(tmp_path, ["runs/d"], force=True)
+    for bad in ("", ".tar", "../x", "a/b", "a b", ".hidden"):
+        with pytest.raises(StoreError, match="is not a file name"):
+            export_path(tmp_path, ["runs/a"], bad)
