@@ -146,8 +146,9 @@ def verify(store: StoreOpt = DEFAULT_STORE) -> None:
                          "matters and run `morfic store gc`.")
     leftovers = f"; {report.temp_files} leftover temp file(s), `morfic store gc --yes` removes them" \
         if report.temp_files else ""
+    omitted = f"; {report.omitted} trainer state(s) left out by a weights-only import" if report.omitted else ""
     info(f"store {escape(str(store))} OK: {report.objects} objects ({human_size(report.bytes)}), "
-         f"{report.manifests} manifests, {report.refs} refs checked{leftovers}")
+         f"{report.manifests} manifests, {report.refs} refs checked{leftovers}{omitted}")
 
 
 @app.command("gc")
@@ -180,17 +181,27 @@ def export(
     out: Annotated[Path, typer.Option("--out", "-o", help="Tar file to write.")],
     latest: Annotated[bool, typer.Option("--latest", help="Only each ref's current version (a small snapshot, "
                                          "e.g. a trained policy without its earlier checkpoints).")] = False,
+    without_trainer_state: Annotated[bool, typer.Option(
+        "--without-trainer-state", help="A weights-only bundle: leave out the runs' trainer states (optimiser, env "
+        "state, RNG; about 80% of a run); it evaluates and exports, but cannot be resumed.")] = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Write the named refs and everything they reach into one tar file.
 
     With --latest only the current version of each ref goes in; it arrives as version 1 of that ref.
+    With --without-trainer-state the checkpoints' trainer states stay out (listed in the tar's header).
 
     Example: morfic store export runs/film-s0 runs/film-s1 --out film.tar
     """
-    report = Store(store).export_tar(refs, out, latest=latest)
+    report = Store(store).export_tar(refs, out, latest=latest, without_trainer_state=without_trainer_state)
     info(f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
-         f"to {escape(str(report.path))}")
+         f"to {escape(str(report.path))}{_left_out(report.omitted)}")
+
+
+def _left_out(omitted: Any) -> str:
+    """The note on trainer states a (weights-only) export left out or an import lacks; empty if none."""
+    return f"; {len(omitted)} trainer state(s) left out (weights only: evaluates and exports, cannot be " \
+        "resumed)" if omitted else ""
 
 
 @app.command("import")
@@ -207,5 +218,6 @@ def import_(
     rows = [{"ref": name, "status": status} for name, status in report.refs.items()]
     _emit(rows, fmt, [Column("ref"), Column("status")], title=f"refs imported from {path.name}")
     repaired = f", {report.objects_repaired} corrupt here and repaired" if report.objects_repaired else ""
+    filled = f"; {len(report.filled)} trainer state(s) filled in" if report.filled else ""
     info(f"imported {report.objects_added} new object(s) ({report.objects_present} already present{repaired}), "
-         f"{len(rows)} ref(s) into {escape(str(store))}")
+         f"{len(rows)} ref(s) into {escape(str(store))}{_left_out(report.omitted)}{filled}")
