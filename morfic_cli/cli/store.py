@@ -183,7 +183,7 @@ def export(
                                          "e.g. a trained policy without its earlier checkpoints).")] = False,
     without_trainer_state: Annotated[bool, typer.Option(
         "--without-trainer-state", help="A weights-only bundle: leave out the runs' trainer states (optimiser, env "
-        "state, RNG; about 80% of a run); it evaluates and exports, but cannot be resumed.")] = False,
+        "state, RNG; most of a run's size); it evaluates and exports, but cannot be resumed.")] = False,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Write the named refs and everything they reach into one tar file.

@@ -550,9 +550,9 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
     if state_id is not None and store.is_omitted(state_id):
         raise MorficError(f"{spec} was imported without its trainer state (a weights-only bundle); it evaluates and "
-                          "exports, but cannot be resumed. Import the full bundle (`morfic store export "
-                          f"{RUNS_PREFIX}{name} --latest` in the store that trained it, without "
-                          "--without-trainer-state) to resume it, or start a new run with `morfic train`.")
+                          "exports, but cannot be resumed. Import the full bundle (made by `morfic store export "
+                          f"{RUNS_PREFIX}{name} --latest`, without --without-trainer-state, in the store that trained "
+                          "it) to resume it, or start a new run with `morfic train`.")
     if state_id is not None:
         state = store.read_manifest(state_id)
         trainer = trainer_state.decode(store.read_file(state.id, trainer_state.JSON_FILE),

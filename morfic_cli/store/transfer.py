@@ -289,10 +289,11 @@ def import_tar(store: Store, path: Path, *, append: bool = False) -> ImportRepor
     Everything is checked before anything becomes visible: the header, every object against its
     hash and declared size (objects this store already has are rehashed, and a corrupt local copy is
     replaced by the export's good one), every manifest against the schema (safe file names, sizes
-    that match the objects, inputs that are manifests), every ref history (entries, hash chain,
+    that match the objects, inputs that are manifests or, in a weights-only export, declared left out under
+    their own role ``trainer_state``), every ref history (entries, hash chain,
     targets that are manifests) and how it merges with the local one. Only then are objects renamed
-    into place, manifests indexed and refs written (under the ref lock; a failure while writing refs
-    puts the old histories back).
+    into place, manifests indexed, left-out inputs recorded under ``shallow/`` (and those this import brings
+    unrecorded) and refs written (under the ref lock; a failure while writing refs puts the old histories back).
 
     Raises:
         StoreError: Not an export, a damaged or truncated tar, a corrupt object, an invalid manifest or
