@@ -86,6 +86,21 @@ def test_a_weights_only_run_evaluates_diagnoses_and_exports(run_cli, bundles, tm
     assert dst.export_tar([RUN], tmp_path / "again.tar", latest=True).omitted == shallow.omitted
 
 
+def test_a_weights_only_run_exports_to_onnx(run_cli, bundles, tmp_path):
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("onnxscript")
+    src, _, shallow = bundles
+    dst = _imported(tmp_path, shallow)
+    out = tmp_path / "deploy"
+    code, stdout, err = run_cli("export", RUN, "--robot", "go2", "--out", str(out), "--store", str(dst.root),
+                                "-f", "json")
+    assert code == 0, err
+    assert json.loads(stdout)["verification"]["ok"]
+    manifest = dst.read_manifest("exports/film-s0/go2-onnx")
+    assert manifest.inputs == {"checkpoint": src.resolve(RUN)} and sorted(p.name for p in out.iterdir()) == [
+        "policy.json", "policy.onnx"]
+
+
 def test_resume_of_a_weights_only_run_is_an_error_and_changes_nothing(run_cli, bundles, tmp_path):
     _, _, shallow = bundles
     dst = _imported(tmp_path, shallow)
