@@ -35,6 +35,11 @@ def human_size(size: Any) -> str:
     return f"{value:.1f} GiB"
 
 
+def _left_out(omitted: Any) -> str:
+    """The note on the trainer states a weights-only export left out (``omitted``: their ids)."""
+    return f"{len(omitted)} trainer state(s) left out (weights only: evaluates and exports, cannot be resumed)"
+
+
 def _short_id(oid: Any) -> str:
     return str(oid)[:12] if oid else "-"
 
@@ -189,19 +194,14 @@ def export(
     """Write the named refs and everything they reach into one tar file.
 
     With --latest only the current version of each ref goes in; it arrives as version 1 of that ref.
-    With --without-trainer-state the checkpoints' trainer states stay out (listed in the tar's header).
 
     Example: morfic store export runs/film-s0 runs/film-s1 --out film.tar
     """
     report = Store(store).export_tar(refs, out, latest=latest, without_trainer_state=without_trainer_state)
     info(f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
-         f"to {escape(str(report.path))}{_left_out(report.omitted)}")
-
-
-def _left_out(omitted: Any) -> str:
-    """The note on trainer states a (weights-only) export left out or an import lacks; empty if none."""
-    return f"; {len(omitted)} trainer state(s) left out (weights only: evaluates and exports, cannot be " \
-        "resumed)" if omitted else ""
+         f"to {escape(str(report.path))}")
+    if report.omitted:
+        info(_left_out(report.omitted))
 
 
 @app.command("import")
@@ -218,6 +218,7 @@ def import_(
     rows = [{"ref": name, "status": status} for name, status in report.refs.items()]
     _emit(rows, fmt, [Column("ref"), Column("status")], title=f"refs imported from {path.name}")
     repaired = f", {report.objects_repaired} corrupt here and repaired" if report.objects_repaired else ""
+    left_out = f"; {_left_out(report.omitted)}" if report.omitted else ""
     filled = f"; {len(report.filled)} trainer state(s) filled in" if report.filled else ""
     info(f"imported {report.objects_added} new object(s) ({report.objects_present} already present{repaired}), "
-         f"{len(rows)} ref(s) into {escape(str(store))}{_left_out(report.omitted)}{filled}")
+         f"{len(rows)} ref(s) into {escape(str(store))}{left_out}{filled}")
