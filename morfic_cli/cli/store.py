@@ -37,6 +37,11 @@ def human_size(size: Any) -> str:
     return f"{value:.1f} GiB"
 
 
+def _left_out(omitted: Any) -> str:
+    """The note on the trainer states a weights-only export left out (``omitted``: their ids)."""
+    return f"{len(omitted)} trainer state(s) left out (weights only: evaluates and exports, cannot be resumed)"
+
+
 def _short_id(oid: Any) -> str:
     return str(oid)[:12] if oid else "-"
 
@@ -149,8 +154,9 @@ def verify(store: StoreOpt = DEFAULT_STORE) -> None:
                          "matters and run `morfic store gc`.")
     leftovers = f"; {report.temp_files} leftover temp file(s), `morfic store gc --yes` removes them" \
         if report.temp_files else ""
+    omitted = f"; {report.omitted} trainer state(s) left out by a weights-only import" if report.omitted else ""
     info(f"store {escape(str(store))} OK: {report.objects} objects ({human_size(report.bytes)}), "
-         f"{report.manifests} manifests, {report.refs} refs checked{leftovers}")
+         f"{report.manifests} manifests, {report.refs} refs checked{leftovers}{omitted}")
 
 
 @app.command("gc")
@@ -188,6 +194,9 @@ def export(
     ] = None,
     latest: Annotated[bool, typer.Option("--latest", help="Only each ref's current version (a small snapshot, "
                                          "e.g. a trained policy without its earlier checkpoints).")] = False,
+    without_trainer_state: Annotated[bool, typer.Option(
+        "--without-trainer-state", help="A weights-only bundle: leave out the runs' trainer states (optimiser, env "
+        "state, RNG; most of a run's size); it evaluates and exports, but cannot be resumed.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the tar if it exists.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
@@ -203,14 +212,16 @@ def export(
     """
     check_args(store=store, out_dir=out, specs=refs)
     path = export_path(out, refs, name, force=force)
-    report = Store(store).export_tar(refs, path, latest=latest)
+    report = Store(store).export_tar(refs, path, latest=latest, without_trainer_state=without_trainer_state)
     info(f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
          f"to {escape(str(report.path))}")
+    if report.omitted:
+        info(_left_out(report.omitted))
     if fmt == OutputFormat.table:  # the path alone, whole (a table would fold a long one), for `$(...)`
         sys.stdout.write(f"{report.path}\n")
         return
-    emit_object({"path": str(report.path), "refs": report.refs, "objects": report.objects, "bytes": report.bytes},
-                fmt)
+    emit_object({"path": str(report.path), "refs": report.refs, "objects": report.objects, "bytes": report.bytes,
+                 "omitted": sorted(report.omitted)}, fmt)
 
 
 @app.command("import")
@@ -227,5 +238,7 @@ def import_(
     rows = [{"ref": name, "status": status} for name, status in report.refs.items()]
     _emit(rows, fmt, [Column("ref"), Column("status")], title=f"refs imported from {path.name}")
     repaired = f", {report.objects_repaired} corrupt here and repaired" if report.objects_repaired else ""
+    left_out = f"; {_left_out(report.omitted)}" if report.omitted else ""
+    filled = f"; {len(report.filled)} trainer state(s) filled in" if report.filled else ""
     info(f"imported {report.objects_added} new object(s) ({report.objects_present} already present{repaired}), "
-         f"{len(rows)} ref(s) into {escape(str(store))}")
+         f"{len(rows)} ref(s) into {escape(str(store))}{left_out}{filled}")

@@ -7,9 +7,9 @@ optimiser in the trainer state (:mod:`morfic_cli.rl.trainer_state`), so this mod
 layout. The files of the export:
 
 - ``model_<iteration>.pt``: rsl-rl's checkpoint dict (plus ``adaptation_optimizer_state_dict``, which
-  :class:`~morfic_cli.rl.ppo.MorficPPO` loads). A checkpoint without a trainer state (a weights-only policy bundle)
-  gets the state of a fresh, never-stepped optimiser of the config's type and learning rate, and
-  ``infos["optimizer"] == "fresh"``; otherwise ``"trained"``.
+  :class:`~morfic_cli.rl.ppo.MorficPPO` loads). A checkpoint without a trainer state (a weights-only policy
+  bundle, old or made by ``store export --without-trainer-state``) gets the state of a fresh, never-stepped
+  optimiser of the config's type and learning rate, and ``infos["optimizer"] == "fresh"``; otherwise ``"trained"``.
 - ``agent.json``: the runner config ``OnPolicyRunner(env, train_cfg)`` takes (:func:`~morfic_cli.rl.runner.rsl_rl_cfg`);
   its ``class_name`` entries name morfic's classes, so morfic must be installed to load it.
 - ``train.json``: morfic's full :class:`~morfic_cli.rl.config.TrainCfg` (env config included), to rebuild the env.
@@ -42,7 +42,7 @@ def _trained_optimizer(store: Store, checkpoint_id: str) -> dict[str, Any] | Non
     """The ``alg`` part of the checkpoint's trainer state (optimiser states), or None when it has none."""
     manifest = store.read_manifest(checkpoint_id)
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
-    if state_id is None:
+    if state_id is None or store.is_omitted(state_id):  # an older policy bundle, or a weights-only one
         return None
     state = trainer_state.decode(store.read_file(state_id, trainer_state.JSON_FILE),
                                  store.read_file(state_id, trainer_state.TENSORS_FILE),

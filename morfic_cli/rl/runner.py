@@ -51,9 +51,7 @@ from morfic_cli.rl.variants import resolve_variant
 from morfic_cli.runs import RESUME_PREFIX, RUNS_PREFIX, run_of
 from morfic_cli.sim.args import NUM_JOINTS
 from morfic_cli.store import Store
-
-TRAINER_STATE_ROLE = "trainer_state"
-"""The checkpoint manifest's input role naming its trainer state (one ref update per checkpoint)."""
+from morfic_cli.store.shallow import TRAINER_STATE_ROLE  # defined by the store: weights-only bundles leave it out
 
 
 def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
@@ -514,8 +512,8 @@ def resume_run(store: Store, spec: str, overrides: list[str] | None = None, devi
 
     Raises:
         ArtifactNotFoundError: No such checkpoint.
-        MorficError: Not a checkpoint, or its trainer state is missing (a policy bundle of an older morfic) or
-            cannot be loaded as tensors.
+        MorficError: Not a checkpoint, or its trainer state is missing (a weights-only bundle, or a policy bundle
+            of an older morfic) or cannot be loaded as tensors.
     """
     check_device(device)
     point = load_resume_point(store, spec)
@@ -550,6 +548,11 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
         raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-s0.")
     name = run_of(spec, manifest.meta)
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
+    if state_id is not None and store.is_omitted(state_id):
+        raise MorficError(f"{spec} was imported without its trainer state (a weights-only bundle); it evaluates and "
+                          "exports, but cannot be resumed. Import the full bundle (made by `morfic store export "
+                          f"{RUNS_PREFIX}{name} --latest`, without --without-trainer-state, in the store that trained "
+                          "it) to resume it, or start a new run with `morfic train`.")
     if state_id is not None:
         state = store.read_manifest(state_id)
         trainer = trainer_state.decode(store.read_file(state.id, trainer_state.JSON_FILE),

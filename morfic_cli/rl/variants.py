@@ -75,8 +75,10 @@ class Variant:
 
     @property
     def multiplicative(self) -> bool:
-        """Whether the critic is conditioned multiplicatively on z_m (FiLM, AdaLN, hypernetwork: the paper's MorFiC
-        family); False for the additive baselines (concat, or no critic conditioning)."""
+        """Whether the critic is conditioned multiplicatively on z_m (FiLM, AdaLN, hypernetwork: the MorFiC family).
+
+        False for the additive baselines (concat, or no critic conditioning).
+        """
         return self.critic_defaults.get("conditioning") in MULTIPLICATIVE_CONDITIONING
 
     def model_cfgs(self) -> tuple[dict, dict, dict[str, list[str]]]:

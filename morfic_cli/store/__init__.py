@@ -2,9 +2,10 @@
 
 :class:`Store` is the one entry point; the modules beside it do the file work:
 ``objects`` (immutable blobs), ``manifest`` (manifest schema and index), ``refs`` (named, versioned
-pointers), ``lock`` (flock-based locks), ``gc`` (reachability, verify, gc) and ``transfer``
-(export/import tar files). ``docs/concepts.md`` describes the layout and guarantees. The store
-knows nothing about RL and never imports torch or mujoco.
+pointers), ``lock`` (flock-based locks), ``gc`` (reachability, verify, gc), ``transfer``
+(export/import tar files) and ``shallow`` (inputs a weights-only bundle leaves out).
+``docs/concepts.md`` describes the layout and guarantees. The store knows nothing about RL beyond the
+name of the one input role a weights-only bundle may leave out, and never imports torch or mujoco.
 
 Example::
 
@@ -46,6 +47,7 @@ from morfic_cli.store.manifest import (
 from morfic_cli.store.objects import ObjectDB, store_os_error
 from morfic_cli.store.publish import Published, publish
 from morfic_cli.store.refs import RefDB, RefEntry, check_ref_name, pick_version, split_spec
+from morfic_cli.store.shallow import OMITTABLE_ROLES, OmittedIndex
 from morfic_cli.store.transfer import ExportReport, ImportReport, export_tar, import_tar
 
 __all__ = [
@@ -91,6 +93,7 @@ class Store:
         self.objects = ObjectDB(self.root)
         self.index = ManifestIndex(self.root)
         self.refs = RefDB(self.root)
+        self.omitted = OmittedIndex(self.root)
         self._lock = StoreLock(self.root / "locks" / "store.lock", lock_timeout)
 
     def __repr__(self) -> str:
@@ -153,6 +156,15 @@ class Store:
             StoreError: The object is corrupt.
         """
         return self.objects.get_bytes(oid)
+
+    def is_omitted(self, oid: str) -> bool:
+        """Whether ``oid`` was left out of a weights-only import (``shallow/<id>``) and is still not stored."""
+        return self.omitted.has(oid) and not self.objects.has(oid)
+
+    def omitted_inputs(self, manifest: Manifest) -> dict[str, str]:
+        """Role -> id of the inputs of ``manifest`` that a weights-only import left out (empty for a full store)."""
+        return {role: oid for role, oid in manifest.inputs.items()
+                if role in OMITTABLE_ROLES and self.is_omitted(oid)}
 
     def object_path(self, oid: str) -> Path:
         """Path of object ``oid`` (read-only; never write to it)."""
@@ -312,6 +324,9 @@ class Store:
         if len(hexid) == 64:
             if self.objects.has(hexid):
                 return hexid
+            if self.is_omitted(hexid):
+                raise ArtifactNotFoundError(f"artifact {hexid} is not in store {self.root}: a weights-only bundle "
+                                            "left it out (a trainer state); import the full bundle to get it.")
             raise self._not_found(text)
         if len(hexid) < MIN_PREFIX or len(hexid) > 64:
             raise ArtifactNotFoundError(f"id prefix '{text}' is too short: give at least {MIN_PREFIX} hex "
@@ -398,7 +413,8 @@ class Store:
             manifest = load_manifest_if_any(self, oid, strict=False)
         if manifest is None:
             return {"id": oid, "kind": None, "size": self.objects.size(oid), "refs": refs}
-        return {"id": oid, "refs": refs, **manifest.to_dict()}
+        omitted = self.omitted_inputs(manifest)
+        return {"id": oid, "refs": refs, **manifest.to_dict(), **({"omitted": omitted} if omitted else {})}
 
     # -- maintenance --------------------------------------------------------------------------
 
@@ -420,9 +436,13 @@ class Store:
         with self._lock.exclusive():
             return collect_garbage(self, dry_run=dry_run)
 
-    def export_tar(self, refs: list[str], out: Path, *, latest: bool = False) -> ExportReport:
-        """Write the closure of ``refs`` (every version, or only the current one with ``latest``) to the tar ``out``."""
-        return export_tar(self, refs, Path(out), latest=latest)
+    def export_tar(self, refs: list[str], out: Path, *, latest: bool = False,
+                   without_trainer_state: bool = False) -> ExportReport:
+        """Write the closure of ``refs`` (every version, or only the current one with ``latest``) to the tar ``out``.
+
+        ``without_trainer_state``: a weights-only bundle (see :func:`morfic_cli.store.transfer.export_tar`).
+        """
+        return export_tar(self, refs, Path(out), latest=latest, without_trainer_state=without_trainer_state)
 
     def import_tar(self, path: Path, *, append: bool = False) -> ImportReport:
         """Import a tar made by :meth:`export_tar`; idempotent (see :class:`ImportReport`; ``append``: there)."""

@@ -1,9 +1,10 @@
 """Store maintenance: reachability, ``verify`` and ``gc``.
 
 Reachability (like git): the roots are *every version of every ref*; from a manifest, its files and
-its inputs are reachable, recursively. ``gc`` deletes every object outside that closure, the index
-markers of deleted manifests, and leftover temp files, under the exclusive store lock so no writer
-can be between "object written" and "ref updated" while it runs.
+its inputs are reachable, recursively; an input a weights-only import left out on purpose
+(:mod:`morfic_cli.store.shallow`) is known-absent, not damage. ``gc`` deletes every object outside
+that closure, the index markers of deleted manifests, and leftover temp files, under the exclusive
+store lock so no writer can be between "object written" and "ref updated" while it runs.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import TYPE_CHECKING
 from morfic_cli.errors import StoreError
 from morfic_cli.store.manifest import MANIFEST_MAGIC, Manifest, parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, unlink_quiet
+from morfic_cli.store.shallow import OMITTABLE_ROLES
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -32,6 +34,7 @@ class VerifyReport:
         manifests: Index entries checked.
         refs: Refs checked.
         temp_files: Leftover temp files (harmless; ``gc`` removes them).
+        omitted: Manifest inputs known to be absent (trainer states left out of a weights-only import).
         problems: One line per problem; empty for a healthy store.
     """
 
@@ -40,6 +43,7 @@ class VerifyReport:
     manifests: int = 0
     refs: int = 0
     temp_files: int = 0
+    omitted: int = 0
     problems: list[str] = field(default_factory=list)
 
     @property
@@ -72,12 +76,14 @@ class GcReport:
         reachable: Objects reachable from some version of some ref (kept).
         removed: The unreachable objects, by id.
         temp_files: Leftover temp files under ``tmp/``.
+        omitted: Reachable inputs known to be absent (trainer states left out of a weights-only import).
     """
 
     dry_run: bool
     reachable: int = 0
     removed: list[GcItem] = field(default_factory=list)
     temp_files: int = 0
+    omitted: int = 0
 
     @property
     def removed_bytes(self) -> int:
@@ -105,53 +111,90 @@ def load_manifest_if_any(store: Store, oid: str, *, strict: bool) -> Manifest | 
         return None
 
 
-def closure(store: Store, roots: Iterable[str], *, strict: bool = True) -> set[str]:
-    """Every id reachable from ``roots`` (manifest -> files and inputs, recursively).
+@dataclass
+class Walk:
+    """What :func:`walk` reached.
 
-    Roots and inputs must be manifests. Ids that are not stored are included (they are referenced) but
-    not followed.
+    Attributes:
+        ids: Every id reachable, stored or not, except the known-absent inputs.
+        absent: Known-absent inputs (id -> role): left out of a weights-only import (``shallow/``) or, by
+            ``omit_roles``, left out of this walk (and reached by nothing else).
+    """
+
+    ids: set[str] = field(default_factory=set)
+    absent: dict[str, str] = field(default_factory=dict)
+
+
+def walk(store: Store, roots: Iterable[str], *, strict: bool = True,
+         omit_roles: frozenset[str] = frozenset()) -> Walk:
+    """Every id reachable from ``roots`` (manifest -> files and inputs, recursively), and the known-absent inputs.
+
+    Roots and inputs must be manifests. Ids that are not stored are included (they are referenced) but not
+    followed. An input under a role of :data:`~morfic_cli.store.shallow.OMITTABLE_ROLES` that is missing but
+    marked omitted (``shallow/<id>``) is known-absent, not damage; inputs under ``omit_roles`` are not followed
+    (a weights-only export) unless something else reaches them.
 
     Args:
         store: The store.
         roots: Manifest ids (every version of the refs).
-        strict: Raise when a root or input is missing or is not a readable manifest: what it names is
-            then unknown, so gc and export must not guess.
+        strict: Raise when a root or input is missing (and not known-absent) or is not a readable manifest:
+            what it names is then unknown, so gc and export must not guess.
+        omit_roles: Input roles to leave out (a subset of ``OMITTABLE_ROLES``).
 
     Raises:
         StoreError: ``strict`` and some reachable manifest cannot be read; the message lists them.
     """
+    assert omit_roles <= OMITTABLE_ROLES, omit_roles
     seen: set[str] = set()
     manifests: set[str] = set()
     damaged: dict[str, str] = {}
-    stack = [(oid, True) for oid in roots]
+    absent: dict[str, str] = {}
+    skipped: dict[str, str] = {}
+    stack: list[tuple[str, str | None]] = [(oid, "") for oid in roots]  # role: "" root, None a file
     while stack:
-        oid, must_be_manifest = stack.pop()
-        if oid in seen and not (must_be_manifest and oid not in manifests and oid not in damaged):
-            continue
-        seen.add(oid)
-        if not store.objects.has(oid):
-            if must_be_manifest:
-                damaged[oid] = "missing"
-            continue
-        expected = must_be_manifest or store.index.has(oid)
-        if not expected and store.objects.read_head(oid, len(MANIFEST_MAGIC)) != MANIFEST_MAGIC:
-            continue
-        try:
-            manifest = parse_manifest(oid, store.objects.get_bytes(oid))
-        except StoreError as exc:
-            if expected:
-                damaged[oid] = "corrupt" if "corrupt" in str(exc) else "not a readable manifest"
-            continue
-        manifests.add(oid)
-        stack.extend((f.id, False) for f in manifest.files.values())
-        stack.extend((i, True) for i in manifest.inputs.values())
+        while stack:
+            oid, role = stack.pop()
+            must_be_manifest = role is not None
+            if oid in seen and not (must_be_manifest and oid not in manifests and oid not in damaged):
+                continue
+            seen.add(oid)
+            if not store.objects.has(oid):
+                if must_be_manifest and role in OMITTABLE_ROLES and store.omitted.has(oid):
+                    absent[oid] = role
+                elif must_be_manifest:
+                    damaged[oid] = "missing"
+                continue
+            expected = must_be_manifest or store.index.has(oid)
+            if not expected and store.objects.read_head(oid, len(MANIFEST_MAGIC)) != MANIFEST_MAGIC:
+                continue
+            try:
+                manifest = parse_manifest(oid, store.objects.get_bytes(oid))
+            except StoreError as exc:
+                if expected:
+                    damaged[oid] = "corrupt" if "corrupt" in str(exc) else "not a readable manifest"
+                continue
+            manifests.add(oid)
+            stack.extend((f.id, None) for f in manifest.files.values())
+            for input_role, input_id in manifest.inputs.items():
+                if input_role in omit_roles:
+                    skipped.setdefault(input_id, input_role)
+                else:
+                    stack.append((input_id, input_role))
+        # an omitted input that something else reaches (seen, say, as a plain file) is walked after all
+        stack = [(oid, skipped.pop(oid)) for oid in sorted(skipped) if oid in seen and oid not in manifests]
+    absent.update((oid, role) for oid, role in skipped.items() if oid not in seen)
     if strict and damaged:
         listed = ", ".join(f"{oid} ({why})" for oid, why in sorted(damaged.items())[:10])
         more = f" and {len(damaged) - 10} more" if len(damaged) > 10 else ""
         raise StoreError(f"{len(damaged)} manifest(s) reachable from refs cannot be read: {listed}{more}; what "
                          "they name is unknown, so refusing to delete or export anything. Run `morfic store "
                          "verify`, restore them (`morfic store import` of an export that holds them), then retry.")
-    return seen
+    return Walk(ids=seen - set(absent), absent=absent)
+
+
+def closure(store: Store, roots: Iterable[str], *, strict: bool = True) -> set[str]:
+    """Every id reachable from ``roots`` (:attr:`Walk.ids` of :func:`walk`: known-absent inputs left out)."""
+    return walk(store, roots, strict=strict).ids
 
 
 def ref_roots(store: Store, names: Iterable[str] | None = None) -> list[str]:
@@ -172,7 +215,8 @@ def collect_garbage(store: Store, *, dry_run: bool = True) -> GcReport:
     Call with the exclusive store lock held.
     """
     report = GcReport(dry_run=dry_run)
-    keep = closure(store, ref_roots(store))
+    reached = walk(store, ref_roots(store))
+    keep = reached.ids
     report.reachable = sum(1 for oid in keep if store.objects.has(oid))
     for oid in store.objects.iter_ids():
         if oid not in keep:
@@ -181,18 +225,22 @@ def collect_garbage(store: Store, *, dry_run: bool = True) -> GcReport:
             report.removed.append(GcItem(id=oid, kind=kind, size=store.objects.size(oid)))
     leftovers = temp_files(store)
     report.temp_files = len(leftovers)
+    report.omitted = len(reached.absent)
     if not dry_run:
-        _delete(store, [item.id for item in report.removed], leftovers)
+        _delete(store, [item.id for item in report.removed], leftovers, set(reached.absent))
     return report
 
 
-def _delete(store: Store, oids: list[str], leftovers: list[str]) -> None:
+def _delete(store: Store, oids: list[str], leftovers: list[str], absent: set[str]) -> None:
     for oid in oids:
         store.index.remove(oid)
         store.objects.remove(oid)
     for oid in list(store.index.ids()):
         if not store.objects.has(oid):
             store.index.remove(oid)
+    for oid in list(store.omitted.ids()):
+        if oid not in absent:  # filled since, or no longer reached: the marker says nothing any more
+            store.omitted.remove(oid)
     for name in leftovers:
         unlink_quiet(store.root / "tmp" / name)
 
@@ -235,6 +283,8 @@ def _verify_objects(store: Store, report: VerifyReport) -> None:
 def _verify_index(store: Store, report: VerifyReport) -> None:
     for name in store.index.stray():
         report.problems.append(f"unexpected file in manifests/: {name}")
+    for name in store.omitted.stray():
+        report.problems.append(f"unexpected file in shallow/: {name}")
     for oid in store.index.ids():
         report.manifests += 1
         if not store.objects.has(oid):
@@ -256,7 +306,9 @@ def _verify_manifest_links(store: Store, manifest: Manifest, report: VerifyRepor
             report.problems.append(f"manifest {manifest.id}: file '{name}' size {entry.size} does not "
                                    f"match its object ({store.objects.size(entry.id)} bytes)")
     for role, oid in manifest.inputs.items():
-        if not store.objects.has(oid):
+        if role in OMITTABLE_ROLES and store.is_omitted(oid):
+            report.omitted += 1
+        elif not store.objects.has(oid):
             report.problems.append(f"manifest {manifest.id}: input '{role}' {oid} is missing")
         elif not store.index.has(oid):
             report.problems.append(f"manifest {manifest.id}: input '{role}' {oid} is not an indexed manifest")

@@ -3,6 +3,7 @@
 The tar mirrors the store layout and holds the closure of the named refs::
 
     morfic-export.json           {"format": 1, "morfic_version": ..., "refs": [...], "objects": N}
+                                 (+ "omitted": {id: "trainer_state"} in a weights-only export)
     objects/ab/cdef...           every object reachable from any version of those refs
     manifests/<id>               index markers of the manifests among them
     refs/<name>                  the full history of each named ref
@@ -11,6 +12,11 @@ Members are written in sorted order with fixed owner, mode and mtime, so exporti
 twice gives the same bytes. Import treats the tar as untrusted: it checks everything before anything
 becomes visible (see :func:`import_tar`), adds only what is missing or corrupt here, and merges each
 ref history (see :func:`morfic_cli.store.refs.merge_status`); it is idempotent and all or nothing.
+
+A weights-only export (``without_trainer_state``) leaves out the ``trainer_state`` inputs of the checkpoints
+and lists them under ``omitted``; its manifests are the store's, byte for byte. Importing one records the
+omitted ids the store lacks under ``shallow/`` (:mod:`morfic_cli.store.shallow`); exporting from such a store
+stays weights-only by itself.
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ from typing import IO, TYPE_CHECKING
 
 from morfic_cli import __version__
 from morfic_cli.errors import ArtifactNotFoundError, StoreError
-from morfic_cli.store.gc import closure
+from morfic_cli.store.gc import walk
 from morfic_cli.store.manifest import MAX_MANIFEST_BYTES, parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, is_object_id, object_relpath, store_os_error, unlink_quiet
 from morfic_cli.store.refs import (
@@ -44,6 +50,7 @@ from morfic_cli.store.refs import (
     merge_status,
     next_entry,
 )
+from morfic_cli.store.shallow import OMITTABLE_ROLES
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -64,12 +71,14 @@ class ExportReport:
         refs: The exported ref names.
         objects: Objects in the tar.
         bytes: Their total size.
+        omitted: Inputs left out (id -> role ``trainer_state``), listed in the header; empty for a full export.
     """
 
     path: Path
     refs: list[str]
     objects: int = 0
     bytes: int = 0
+    omitted: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -82,6 +91,8 @@ class ImportReport:
         objects_repaired: Of those, copies that were corrupt here and were replaced by the export's.
         manifests: Manifests indexed.
         refs: Ref name -> ``created``, ``extended`` or ``unchanged``.
+        omitted: Inputs the (weights-only) export left out and this store lacks, now recorded under ``shallow/``.
+        filled: Inputs this store had recorded as left out and that this import brought.
     """
 
     objects_added: int = 0
@@ -89,6 +100,8 @@ class ImportReport:
     objects_repaired: int = 0
     manifests: int = 0
     refs: dict[str, str] = field(default_factory=dict)
+    omitted: list[str] = field(default_factory=list)
+    filled: list[str] = field(default_factory=list)
 
 
 def _info(name: str, size: int, mode: int) -> tarfile.TarInfo:
@@ -149,12 +162,18 @@ def export_path(out_dir: Path, refs: list[str], name: str | None = None, *, forc
     return path
 
 
-def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False) -> ExportReport:
+def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False,
+               without_trainer_state: bool = False) -> ExportReport:
     """Write the closure of ``refs`` (objects and ref histories) to the tar file ``out``.
 
     With ``latest``, only each ref's current version goes in, as a one-version history (version 1 in the
     importing store): a small snapshot, e.g. a trained policy without its earlier checkpoints. Such a
     snapshot and a full export of the same ref do not merge into one store (their histories differ).
+
+    With ``without_trainer_state``, the ``trainer_state`` inputs (and what only they reach) stay out and
+    the header lists them (``"omitted"``): a weights-only bundle that evaluates and exports but cannot be
+    resumed. Inputs this store itself lacks because it imported such a bundle are left out (and listed) in
+    any case.
 
     Raises:
         ArtifactNotFoundError: A name that is not a ref.
@@ -179,11 +198,14 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
         histories = {name: store.refs.history(name) for name in names}
         if latest:
             histories = {name: [RefEntry(1, h[-1].id, h[-1].time)] for name, h in histories.items()}
-        ids = sorted(closure(store, [entry.id for h in histories.values() for entry in h]))
+        reached = walk(store, [entry.id for h in histories.values() for entry in h],
+                       omit_roles=OMITTABLE_ROLES if without_trainer_state else frozenset())
+        ids = sorted(reached.ids)
         missing = [oid for oid in ids if not store.objects.has(oid)]
         if missing:
             raise StoreError(f"cannot export: {len(missing)} reachable object(s) are missing (first: "
                              f"{missing[0]}); run `morfic store verify`.")
+        report.omitted = dict(sorted(reached.absent.items()))
         _write_tar(store, out, names, histories, ids, report)
     return report
 
@@ -197,6 +219,8 @@ def _write_tar(store: Store, out: Path, names: list[str], histories: dict[str, l
     try:
         with tarfile.open(tmp, "w", format=tarfile.PAX_FORMAT) as tar:
             header = {"format": EXPORT_FORMAT, "morfic_version": __version__, "objects": len(ids), "refs": names}
+            if report.omitted:  # a full export's header (and bytes) stay what they always were
+                header["omitted"] = report.omitted
             _add_bytes(tar, HEADER, json.dumps(header, sort_keys=True, indent=1).encode())
             for oid in ids:
                 path = store.objects.path(oid)
@@ -223,6 +247,7 @@ def _write_tar(store: Store, out: Path, names: list[str], histories: dict[str, l
 MAX_SMALL_MEMBER = 16 << 20
 
 _HEADER_KEYS = frozenset({"format", "morfic_version", "objects", "refs"})
+_OPTIONAL_HEADER_KEYS = frozenset({"omitted"})
 
 
 @dataclass
@@ -295,6 +320,8 @@ class _Plan:
     """Bytes of the exported manifests (read while hashing)."""
     manifests: list[str] = field(default_factory=list)
     histories: dict[str, list[RefEntry]] = field(default_factory=dict)
+    omitted: list[str] = field(default_factory=list)
+    """Ids the export declares left out (``trainer_state`` inputs of its manifests)."""
 
 
 def import_tar(store: Store, path: Path, *, append: bool = False) -> ImportReport:
@@ -307,10 +334,11 @@ def import_tar(store: Store, path: Path, *, append: bool = False) -> ImportRepor
     Everything is checked before anything becomes visible: the header, every object against its
     hash and declared size (objects this store already has are rehashed, and a corrupt local copy is
     replaced by the export's good one), every manifest against the schema (safe file names, sizes
-    that match the objects, inputs that are manifests), every ref history (entries, hash chain,
+    that match the objects, inputs that are manifests or, in a weights-only export, declared left out under
+    their own role ``trainer_state``), every ref history (entries, hash chain,
     targets that are manifests) and how it merges with the local one. Only then are objects renamed
-    into place, manifests indexed and refs written (under the ref lock; a failure while writing refs
-    puts the old histories back).
+    into place, manifests indexed, left-out inputs recorded under ``shallow/`` (and those this import brings
+    unrecorded) and refs written (under the ref lock; a failure while writing refs puts the old histories back).
 
     Raises:
         StoreError: Not an export, a damaged or truncated tar, a corrupt object, an invalid manifest or
@@ -370,9 +398,20 @@ def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
         raise StoreError(f"{path} is incomplete: its header lists {header['objects']} objects, it holds "
                          f"{len(sizes)}; nothing was imported. Re-export it.")
     exported = set(members.manifests)
+    omitted: dict[str, str] = header["omitted"]
+    both = sorted(set(omitted) & (exported | set(sizes)))
+    if both:
+        raise StoreError(f"{path} is inconsistent: its header lists {both[0]} as left out, yet it holds it; "
+                         "nothing was imported. Re-export it.")
+    named: set[str] = set()
     for oid in sorted(exported):
-        _check_manifest(store, oid, plan, sizes, exported)
+        named |= _check_manifest(store, oid, plan, sizes, exported, omitted)
+    unnamed = sorted(set(omitted) - named)
+    if unnamed:
+        raise StoreError(f"{path} is inconsistent: its header lists {unnamed[0]} as a left-out trainer state, but "
+                         "no manifest in it names that input; nothing was imported. Re-export it.")
     plan.manifests = sorted(exported)
+    plan.omitted = sorted(omitted)
     for name, member in sorted(members.refs.items()):
         history = decode_history(name, _read_small(tar, member, f"ref '{name}'", path))
         if not history:
@@ -418,7 +457,7 @@ def _read_header(tar: tarfile.TarFile, members: _Members, path: Path) -> dict:
         header = json.loads(_read_small(tar, members.header, HEADER, path), parse_constant=_no_constant)
     except ValueError:
         raise bad from None
-    if not isinstance(header, dict) or set(header) != _HEADER_KEYS:
+    if not isinstance(header, dict) or not _HEADER_KEYS <= set(header) <= _HEADER_KEYS | _OPTIONAL_HEADER_KEYS:
         raise bad
     if header["format"] != EXPORT_FORMAT or isinstance(header["format"], bool):
         raise bad
@@ -430,7 +469,21 @@ def _read_header(tar: tarfile.TarFile, members: _Members, path: Path) -> dict:
     if not isinstance(header["morfic_version"], str) or len(header["morfic_version"]) > 100:
         raise bad
     header["refs"] = sorted(refs)
+    header["omitted"] = _read_omitted(header.get("omitted", {}), bad, path)
     return header
+
+
+def _read_omitted(omitted: object, bad: StoreError, path: Path) -> dict[str, str]:
+    """The header's ``omitted`` map (id -> role), checked: full ids, and only roles a bundle may leave out."""
+    if not (isinstance(omitted, dict) and all(isinstance(k, str) and is_object_id(k) for k in omitted)):
+        raise bad
+    for oid, role in omitted.items():
+        if role not in OMITTABLE_ROLES:
+            shown = role[:40] if isinstance(role, str) else type(role).__name__
+            raise StoreError(f"{path} leaves out input {oid} as {shown!r}, but a bundle may only leave out "
+                             f"{', '.join(sorted(OMITTABLE_ROLES))} inputs; nothing was imported. Export it again "
+                             "with everything it needs.")
+    return dict(omitted)
 
 
 def _no_constant(name: str) -> None:
@@ -446,8 +499,13 @@ def _hash_stream(chunks: Iterator[bytes]) -> tuple[str, int]:
     return digest.hexdigest(), size
 
 
-def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], exported: set[str]) -> None:
-    """Parse an exported manifest strictly and check that everything it names is there, with the right size."""
+def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], exported: set[str],
+                    omitted: dict[str, str]) -> set[str]:
+    """Parse an exported manifest strictly and check that everything it names is there, with the right size.
+
+    An input may instead be declared left out (``omitted``), under its own role, which must be ``trainer_state``.
+    Returns the declared-omitted ids this manifest names.
+    """
     if oid in plan.staged:
         data = plan.staged[oid].read_bytes()
     elif oid in plan.contents:
@@ -471,10 +529,18 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
         if size != entry.size:
             raise StoreError(f"manifest {oid} declares file '{name}' as {entry.size} bytes, but its object has "
                              f"{size}; nothing was imported. It was not made by morfic.")
+    named: set[str] = set()
     for role, input_id in manifest.inputs.items():
-        if input_id not in exported and not store.index.has(input_id):
+        if input_id in omitted:
+            if omitted[input_id] != role:
+                raise StoreError(f"manifest {oid} in the export names the left-out input {input_id} as '{role}', "
+                                 f"but only its {omitted[input_id]} may be left out; nothing was imported. Export it "
+                                 "again with everything it needs.")
+            named.add(input_id)
+        elif input_id not in exported and not store.index.has(input_id):
             raise StoreError(f"the export is incomplete: manifest {oid} input '{role}' {input_id} is not a "
                              "manifest in the export or in this store; nothing was imported. Re-export it.")
+    return named
 
 
 def _commit(store: Store, plan: _Plan, report: ImportReport, append: bool = False) -> None:
@@ -495,6 +561,14 @@ def _commit(store: Store, plan: _Plan, report: ImportReport, append: bool = Fals
             for oid in plan.manifests:
                 store.index.add(oid)
             report.manifests = len(plan.manifests)
+            for oid in plan.manifests:
+                if store.omitted.has(oid):  # a full bundle after a weights-only one: the gap is filled
+                    store.omitted.remove(oid)
+                    report.filled.append(oid)
+            for oid in plan.omitted:
+                if not store.objects.has(oid):
+                    store.omitted.add(oid)
+                    report.omitted.append(oid)
         except OSError as exc:
             raise store_os_error(exc, "importing objects", store.root) from exc
         written: list[str] = []
