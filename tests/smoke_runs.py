@@ -18,3 +18,8 @@ def train_smoke_runs(root: Path, variants: tuple[str, ...] = ("film",), seed: in
         run.train()
         run.env.close()
     return store
+
+
+#: The first shipped policy (`film`, cpu preset, trained by morfic 0.1.0 before the method fixes of issue 16; ref
+#: runs/film-cpu): the fixture of every test about checkpoints an older morfic wrote (tests/data/README.md).
+LEGACY_BUNDLE = Path(__file__).resolve().parent / "data" / "film-cpu-legacy.tar"

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 from rsl_rl.runners import OnPolicyRunner
-from smoke_runs import train_smoke_runs
+from smoke_runs import LEGACY_BUNDLE, train_smoke_runs
 
 from morfic_cli.envs.locomotion import LocomotionEnv
 from morfic_cli.rl.config import train_cfg_from_dict
@@ -19,7 +19,7 @@ from morfic_cli.store import Store
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-BUNDLE = Path(__file__).resolve().parents[2] / "artifacts" / "bundles" / "film-cpu.tar"
+BUNDLE = LEGACY_BUNDLE
 
 
 @pytest.fixture(scope="module")

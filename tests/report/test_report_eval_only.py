@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
+from smoke_runs import LEGACY_BUNDLE
 
 from morfic_cli.report.tables import protocol_text
 
-BUNDLE = Path(__file__).resolve().parents[2] / "artifacts" / "bundles" / "film-cpu.tar"
+BUNDLE = LEGACY_BUNDLE
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

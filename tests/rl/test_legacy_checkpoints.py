@@ -7,10 +7,10 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 import torch
+from smoke_runs import LEGACY_BUNDLE
 
 from morfic_cli import __version__
 from morfic_cli.envs import observations as O
@@ -20,7 +20,7 @@ from morfic_cli.rl.runner import load_trained
 from morfic_cli.store import Store
 from morfic_cli.store.transfer import import_tar
 
-BUNDLE = Path(__file__).resolve().parents[2] / "artifacts" / "bundles" / "film-cpu.tar"
+BUNDLE = LEGACY_BUNDLE
 
 
 @pytest.fixture

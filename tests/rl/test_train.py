@@ -9,10 +9,10 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 import torch
+from smoke_runs import LEGACY_BUNDLE
 
 from morfic_cli.recording.curves import read_curve_csv
 from morfic_cli.rl.config import smoke_preset
@@ -128,7 +128,7 @@ def test_an_existing_run_name_is_not_overwritten(run_cli):
 
 def test_a_policy_bundle_without_trainer_state_cannot_be_resumed(run_cli, tmp_path):
     """The shipped bundle predates trainer states in bundles: weights only, so it evaluates but cannot resume."""
-    bundle = Path(__file__).resolve().parents[2] / "artifacts" / "bundles" / "film-cpu.tar"
+    bundle = LEGACY_BUNDLE
     other = tmp_path / "other"
     assert run_cli("store", "import", str(bundle), "--store", str(other))[0] == 0
     code, _, err = run_cli("train", "--resume", "runs/film-cpu", "--store", str(other))
