@@ -106,10 +106,14 @@ def bundle_path(bundles: str | Path, spec: str) -> Path:
     return Path(bundles) / f"{run_of(spec)}.tar"
 
 
+def shipped_bundle(bundles: str | Path, variant: str, seed: int = 0) -> Path:
+    """The bundle of the shipped run of ``variant``: ``<bundles>/<variant>-cpu-s<seed>.tar``."""
+    return bundle_path(bundles, RUNS_PREFIX + run_name(variant, seed, SHIPPED_TRAIN_PRESET))
+
+
 def shipped_variants(bundles: str | Path, seed: int = 0) -> tuple[str, ...]:
     """The stock variants (in :data:`VARIANTS` order) whose seed-``seed`` bundle is in ``bundles``."""
-    return tuple(v for v in VARIANTS
-                 if bundle_path(bundles, RUNS_PREFIX + run_name(v, seed, SHIPPED_TRAIN_PRESET)).is_file())
+    return tuple(v for v in VARIANTS if shipped_bundle(bundles, v, seed).is_file())
 
 
 def reproduce_cfg(preset: str, *, seeds: int = 1, variants: tuple[str, ...] | None = None,
@@ -154,8 +158,7 @@ def _shipped_cfg(seeds: int, variants: tuple[str, ...] | None, device: str, bund
         raise MorficError(f"no bundle folder {bundles}: run from a source checkout of morfic (it ships the trained "
                           f"runs under artifacts/bundles/), or pass --bundles DIR.")
     if variants:
-        missing = [str(bundle_path(bundles, RUNS_PREFIX + run_name(v, 0, SHIPPED_TRAIN_PRESET))) for v in variants
-                   if not bundle_path(bundles, RUNS_PREFIX + run_name(v, 0, SHIPPED_TRAIN_PRESET)).is_file()]
+        missing = [str(shipped_bundle(bundles, v)) for v in variants if not shipped_bundle(bundles, v).is_file()]
         if missing:
             raise MorficError(f"no shipped bundle {', '.join(missing)}; the shipped variants are "
                               f"{', '.join(shipped_variants(bundles)) or 'none'} (or train one: morfic reproduce "
