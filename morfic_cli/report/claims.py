@@ -213,7 +213,8 @@ def claim_b(evals: Sequence[dict[str, Any]]) -> Claim:
         base = [b for b in BASELINES if b in vx]
         if "film" not in vx or not base:
             outcomes.append(None)
-            per_robot.append(f"{robot}: {'film' if 'film' not in vx else 'no baseline'} not evaluated")
+            per_robot.append(f"{robot}: {'film' if 'film' not in vx else 'no baseline (ppo, actor-only, concat)'} "
+                             f"evaluated" if "film" in vx else f"{robot}: film not evaluated")
             continue
         used += [vx["film"], *(vx[b] for b in base)]
         wins = [better(vx["film"], vx[b]) for b in base]
