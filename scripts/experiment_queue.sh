@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# The paper's experiment, run by run (docs/results.md, "Status of the runs"): train each run with the cpu preset,
+# evaluate and diagnose it with the paper's protocol (`morfic reproduce --preset cpu`, which skips what the store
+# holds), ship a seed-0 run as a weights-only bundle and copy its result tables under docs/results/.
+#
+# Usage: scripts/experiment_queue.sh [--stop-at HH:MM] VARIANT:SEED ...
+#   e.g.  MORFIC_STORE=/work/stores/exp nohup scripts/experiment_queue.sh --stop-at 23:05 concat:0 actor-only:0 \
+#           > queue.log 2>&1 &
+#
+# --stop-at (UTC) is for a machine that goes away: at that time a training still running gets Ctrl-C (it finishes
+# its iteration and checkpoints), its full bundle (with the trainer state, so `morfic train --resume` continues it
+# bit-identically elsewhere) goes to artifacts/partial/<run>.tar, and the queue stops. Commit what it wrote.
+# Runs are done strictly one after another: two CPU-heavy jobs on 2 cores slow each other.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+: "${MORFIC_STORE:?set MORFIC_STORE to the experiment store (kept between runs)}"
+STOP_AT=""
+if [ "${1:-}" = "--stop-at" ]; then STOP_AT=$2; shift 2; fi
+[ $# -gt 0 ] || { echo "Error: name at least one run as VARIANT:SEED, e.g. concat:0" >&2; exit 1; }
+RESULTS=docs/results
+mkdir -p "$RESULTS" artifacts/bundles artifacts/partial
+
+finished() {  # 0 when runs/$1 is a finished run in the store
+  morfic store show "runs/$1" -f json 2>/dev/null | python3 -c \
+    "import json,sys; sys.exit(0 if json.load(sys.stdin)['meta'].get('finished') else 1)"
+}
+
+seconds_left() {  # seconds until STOP_AT today (UTC), or a large number
+  [ -n "$STOP_AT" ] || { echo 999999; return; }
+  echo $(( $(date -u -d "$STOP_AT" +%s) - $(date -u +%s) ))
+}
+
+for item in "$@"; do
+  variant=${item%:*}; seed=${item#*:}; name="$variant-cpu-s$seed"
+  if [ "$(seconds_left)" -le 0 ]; then echo "== $(date -u +%T) stop time reached before $name"; exit 0; fi
+  if ! finished "$name"; then
+    if morfic store show "runs/$name" >/dev/null 2>&1; then
+      args=(--resume "runs/$name")
+    else
+      args=(--variant "$variant" --preset cpu --seed "$seed" --name "$name")
+    fi
+    echo "== $(date -u +%T) train $name (${args[*]})"
+    morfic train "${args[@]}" -q & pid=$!
+    while kill -0 "$pid" 2>/dev/null; do
+      if [ "$(seconds_left)" -le 0 ]; then
+        echo "== $(date -u +%T) stop time: Ctrl-C to $name, it checkpoints"
+        kill -INT "$pid"; wait "$pid" || true
+        morfic store export "runs/$name" --latest --out artifacts/partial --force
+        echo "== partial run exported: artifacts/partial/$name.tar (resume: morfic store import it, then" \
+             "morfic train --resume runs/$name)"
+        exit 0
+      fi
+      sleep 20
+    done
+    wait "$pid"
+  fi
+  echo "== $(date -u +%T) evaluate and diagnose $name"
+  morfic eval "runs/$name" --robots go2 --command-vx 1.0 --envs 16 --steps 250 -f json -q > "$RESULTS/$name-walk.json"
+  morfic reproduce --preset cpu --variants "$variant" --seeds $((seed + 1)) -f json -q > /dev/null
+  python scripts/experiment_tables.py "$name" --out "$RESULTS"
+  if [ "$seed" = 0 ]; then
+    morfic store export "runs/$name" --latest --without-trainer-state --out artifacts/bundles --force
+    rm -f "artifacts/partial/$name.tar"
+  fi
+  echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,calibration.csv}" \
+       "$([ "$seed" = 0 ] && echo "and artifacts/bundles/$name.tar")"
+done
