@@ -5,13 +5,17 @@ fixed_rollout.csv rows, each with ``variant``, ``seed`` and ``artifact``). Each 
 metric between variants; with several seeds a difference counts only when it exceeds the seeds' spread (the
 larger of the two sides' standard deviations), with one seed every difference counts and the reason says so.
 
+Differences smaller than a metric's :data:`RESOLUTION` are ties.
+
 Verdicts: ``holds`` (on every robot the claim names), ``holds partly`` (on some), ``does not hold`` (on none) and
 ``cannot tell`` (a variant the claim needs has no result in the store, or every difference is within the seeds'
 spread). The claims (paper Sec. "Results" and the abstract):
 
 - (a) multiplicative critics (film, film-scaled, adaln, hyper) keep a higher EV than the additive ones
   (concat, ppo, actor-only) on the out-of-distribution robots;
-- (b) MorFiC-F transfers better than PPO, actor-only and concat (1.98 m/s on AlienGo against below 0.65);
+- (b) MorFiC-F transfers better than PPO, actor-only and concat (1.98 m/s on AlienGo against below 0.65), compared
+  as v_x x S, the speed kept over the episode (the paper's AlienGo cells: film survives, the additive ones mostly
+  do not);
 - (c) in the fixed-rollout analysis the film critic has the lowest Flip and the highest Cos on AlienGo and
   Mini Cheetah;
 - (d) all multiplicative variants transfer similarly (the ablation);
@@ -44,6 +48,10 @@ BASELINES: tuple[str, ...] = ("ppo", "actor-only", "concat")
 SIMILAR_VX: float = 0.3
 #: Claim (e): the rank correlation between d and v_x below which "degrades with distance" holds.
 DEGRADES_RHO: float = -0.5
+
+#: Smallest difference that counts as one side beating the other, per metric (m/s for speeds): below it two
+#: runs are a tie, whatever the seeds (a 0.01 m/s lead is not a better transfer).
+RESOLUTION: dict[str, float] = {"vx_s": 0.05, "ev": 0.05, "flip": 0.02, "cos_grad": 0.02}
 
 HOLDS, PARTLY, NOT, CANNOT = "holds", "holds partly", "does not hold", "cannot tell"
 
@@ -125,9 +133,12 @@ def _differs(value: Any, wanted: Any) -> bool:
     return value != wanted
 
 
-def better(a: Stat, b: Stat, higher: bool = True) -> bool | None:
-    """Whether ``a`` beats ``b`` beyond the seeds' spread (True / False), or None when within it."""
-    margin = max(a.std, b.std) if min(a.n, b.n) > 1 else 0.0
+def better(a: Stat, b: Stat, higher: bool = True, resolution: float = 0.0) -> bool | None:
+    """Whether ``a`` beats ``b`` (True / False); None within the seeds' spread (several seeds) or ``resolution``.
+
+    The seeds' spread is the larger of the two standard deviations.
+    """
+    margin = max(a.std if min(a.n, b.n) > 1 else 0.0, b.std if min(a.n, b.n) > 1 else 0.0, resolution)
     diff = (a.mean - b.mean) if higher else (b.mean - a.mean)
     if abs(diff) <= margin:
         return None
@@ -156,7 +167,8 @@ def _seed_note(stats: Iterable[Stat]) -> str:
     if not ns:
         return ""
     if ns == [1]:
-        return " One seed per variant: every difference counts, none is tested against seed noise."
+        return (" One seed per variant: every difference above the metric's resolution counts; none is tested "
+                "against seed noise.")
     return f" Seeds per variant: {'/'.join(map(str, ns))}; a difference within the seeds' spread does not count."
 
 
@@ -174,7 +186,7 @@ def claim_a(calibration: Sequence[dict[str, Any]]) -> Claim:
             per_robot.append(f"{robot}: no {'multiplicative' if not mult else 'additive'} critic diagnosed")
             continue
         m, a = _pool(mult), _pool(add)
-        outcomes.append(better(m, a))
+        outcomes.append(better(m, a, resolution=RESOLUTION["ev"]))
         per_robot.append(f"{robot}: multiplicative {m.text()} vs additive {a.text()} (" + ", ".join(
             f"{v} {ev[v].text()}" for v in (*MULTIPLICATIVE, *ADDITIVE) if v in ev) + ")")
     v = verdict(outcomes)
@@ -203,32 +215,53 @@ def _reason(v: str, outcomes: Sequence[bool | None], robots: Sequence[str], what
     return "; ".join(parts).capitalize() + "." if parts else f"{v}."
 
 
+def speed_kept(rows: Sequence[dict[str, Any]], robot: str) -> dict[str, Stat]:
+    """Variant -> seed statistic of v_x x S (descriptor mode, 2.0 m/s): the speed a transfer keeps.
+
+    A run that is fast until it falls scores its speed times the fraction of envs that survive.
+    """
+    out = {}
+    per: dict[str, dict[Any, float]] = {}
+    for r in rows:
+        if (r.get("robot") != robot or r.get("mode") != "descriptor" or _differs(r.get("command_vx"), 2.0)
+                or r.get("vx_mean") in (None, "") or r.get("survival") in (None, "")):
+            continue
+        per.setdefault(str(r["variant"]), {})[r.get("seed", 0)] = float(r["vx_mean"]) * float(r["survival"])
+    for variant, seeds in per.items():
+        stat = seed_stat(seeds.values())
+        if stat is not None:
+            out[variant] = stat
+    return out
+
+
 def claim_b(evals: Sequence[dict[str, Any]]) -> Claim:
-    """(b) MorFiC-F's v_x at 2.0 m/s (descriptor mode) against each of PPO, actor-only and concat, per OOD robot."""
-    text = "MorFiC-F transfers better than PPO, actor-only and concat (v_x at 2.0 m/s, descriptor mode)."
+    """(b) MorFiC-F's v_x x S at 2.0 m/s (descriptor mode) against each of PPO, actor-only and concat, per OOD robot."""
+    text = ("MorFiC-F transfers better than PPO, actor-only and concat (v_x x S at 2.0 m/s, descriptor mode: the "
+            "speed kept over the episode).")
     per_robot, outcomes, used = [], [], []
     for robot in OOD_ROBOTS:
+        kept = speed_kept(evals, robot)
         vx = by_variant(evals, "vx_mean", robot, mode="descriptor", command_vx=2.0)
         s = by_variant(evals, "survival", robot, mode="descriptor", command_vx=2.0)
-        base = [b for b in BASELINES if b in vx]
-        if "film" not in vx or not base:
+        base = [b for b in BASELINES if b in kept]
+        if "film" not in kept or not base:
             outcomes.append(None)
-            per_robot.append(f"{robot}: {'film' if 'film' not in vx else 'no baseline (ppo, actor-only, concat)'} "
-                             f"evaluated" if "film" in vx else f"{robot}: film not evaluated")
+            per_robot.append(f"{robot}: film not evaluated" if "film" not in kept
+                             else f"{robot}: no baseline (ppo, actor-only, concat) evaluated")
             continue
-        used += [vx["film"], *(vx[b] for b in base)]
-        wins = [better(vx["film"], vx[b]) for b in base]
+        used += [kept["film"], *(kept[b] for b in base)]
+        wins = [better(kept["film"], kept[b], resolution=RESOLUTION["vx_s"]) for b in base]
         outcomes.append(None if None in wins else all(wins))
         per_robot.append(f"{robot}: " + ", ".join(
-            f"{v} {vx[v].text()} m/s S {s[v].mean:.2f}" for v in ("film", *base) if v in s))
+            f"{v} {kept[v].text()} (v_x {vx[v].mean:.2f}, S {s[v].mean:.2f})" for v in ("film", *base)))
     paper_cells = []
     for v in ("film", *BASELINES):
         cell = paper.transfer_values(v, "aliengo", 2.0)
         if cell["vx"] is not None:
-            paper_cells.append(f"{v} {cell['vx']:.2f}")
+            paper_cells.append(f"{v} {cell['vx']:.2f} m/s, S {cell['survival']:.2f}")
     v = verdict(outcomes)
-    reason = _reason(v, outcomes, OOD_ROBOTS, "film is faster than every baseline") + _seed_note(used)
-    return Claim("b", text, "AlienGo v_x: " + ", ".join(paper_cells) + " m/s (Table \"zero-shot transfer\").",
+    reason = _reason(v, outcomes, OOD_ROBOTS, "film keeps more speed than every baseline") + _seed_note(used)
+    return Claim("b", text, "AlienGo: " + "; ".join(paper_cells) + " (Table \"zero-shot transfer\").",
                  "; ".join(per_robot), v, reason, _ids(evals, ("film", *BASELINES), OOD_ROBOTS))
 
 
@@ -246,8 +279,9 @@ def claim_c(fixed: Sequence[dict[str, Any]]) -> Claim:
             outcomes.append(None)
             per_robot.append(f"{robot}: {'no film critic' if 'film' not in flip else 'no other critic'} scored")
             continue
-        low = [better(flip["film"], flip[v], higher=False) for v in others]
-        high = [better(cos["film"], cos[v]) for v in others if v in cos and "film" in cos]
+        low = [better(flip["film"], flip[v], higher=False, resolution=RESOLUTION["flip"]) for v in others]
+        high = [better(cos["film"], cos[v], resolution=RESOLUTION["cos_grad"]) for v in others
+                if v in cos and "film" in cos]
         both = low + high
         outcomes.append(None if None in both else all(both))
         per_robot.append(f"{robot}: " + ", ".join(f"{v} Flip {flip[v].text(3)} Cos {cos[v].text(3)}"

@@ -30,8 +30,10 @@ def test_seed_stat_and_better_use_the_seeds_spread():
     assert C.better(s, C.Stat(1.0, 0.0, 3)) is True
     # vs 1.5: difference 0.5 < 0.816 -> within noise
     assert C.better(s, C.Stat(1.5, 0.0, 3)) is None
-    # one seed: any difference counts
+    # one seed: any difference above the resolution counts; below it, a tie
     assert C.better(C.Stat(1.01, 0, 1), C.Stat(1.0, 0, 1)) is True
+    assert C.better(C.Stat(1.01, 0, 1), C.Stat(1.0, 0, 1), resolution=0.05) is None
+    assert C.better(C.Stat(1.10, 0, 1), C.Stat(1.0, 0, 1), resolution=0.05) is True
     assert C.better(C.Stat(0.2, 0, 1), C.Stat(0.3, 0, 1), higher=False) is True
 
 
@@ -58,21 +60,25 @@ def test_claim_a_compares_group_means_of_ev():
     assert c.artifacts == ["c-concat-0", "c-film-0", "c-hyper-0", "c-ppo-0"]
 
 
-def test_claim_b_film_must_beat_every_baseline_on_a_robot():
-    rows = [_eval("film", "aliengo", 1.9), _eval("ppo", "aliengo", 0.5), _eval("concat", "aliengo", 1.0),
-            _eval("film", "mini_cheetah", 1.0), _eval("ppo", "mini_cheetah", 1.2),
-            _eval("film", "anymal_c", 0.3), _eval("ppo", "anymal_c", 0.1),
+def test_claim_b_film_must_keep_more_speed_than_every_baseline():
+    # v_x x S on aliengo: film 1.9 x 0.5 = 0.95 vs ppo 0.5 x 1 = 0.5 and concat 1.0 x 0.8 = 0.8 -> yes
+    rows = [_eval("film", "aliengo", 1.9, s=0.5), _eval("ppo", "aliengo", 0.5), _eval("concat", "aliengo", 1.0, s=0.8),
+            # mini_cheetah: film fast but falls (2.0 x 0 = 0) vs ppo slower and survives (1.2 x 1) -> no
+            _eval("film", "mini_cheetah", 2.0, s=0.0), _eval("ppo", "mini_cheetah", 1.2),
+            # anymal_c: 0.30 vs 0.28 -> within the resolution: a tie -> undecided
+            _eval("film", "anymal_c", 0.30), _eval("ppo", "anymal_c", 0.28),
             _eval("ppo", "aliengo", 9.0, mode="full")]  # another mode never counts
     c = C.claim_b(rows)
-    assert c.verdict == C.PARTLY  # aliengo and anymal_c yes, mini_cheetah no
-    assert "film 1.90 m/s S 1.00, ppo 0.50 m/s" in c.ours
-    assert "film 1.98" in c.paper and "ppo 0.27" in c.paper
+    assert c.verdict == C.PARTLY
+    assert "film 0.95 (v_x 1.90, S 0.50), ppo 0.50 (v_x 0.50, S 1.00), concat 0.80" in c.ours
+    assert "not on mini_cheetah" in c.reason and "undecided on anymal_c" in c.reason
+    assert "film 1.98 m/s, S 1.00" in c.paper and "ppo 0.27 m/s, S 0.00" in c.paper
 
 
 def test_claim_b_with_seeds_inside_noise_cannot_tell():
     rows = [_eval("film", r, vx, seed=k) for r in C.OOD_ROBOTS for k, vx in enumerate((1.0, 2.0))]
     rows += [_eval("ppo", r, vx, seed=k) for r in C.OOD_ROBOTS for k, vx in enumerate((1.2, 1.4))]
-    # film 1.5 +- 0.5 vs ppo 1.3 +- 0.1: difference 0.2 < 0.5 on every robot
+    # v_x x S (S = 1): film 1.5 +- 0.5 vs ppo 1.3 +- 0.1: difference 0.2 < 0.5 on every robot
     c = C.claim_b(rows)
     assert c.verdict == C.CANNOT and "1.50 ± 0.50 (n=2)" in c.ours
 
@@ -83,6 +89,7 @@ def test_claim_c_lowest_flip_and_highest_cos():
 
     rows = [fx("film", "aliengo", 0.2, 0.9), fx("ppo", "aliengo", 0.3, 0.5),
             fx("film", "mini_cheetah", 0.2, 0.4), fx("ppo", "mini_cheetah", 0.3, 0.5),
+            fx("film", "anymal_c", 0.0, 1.0),  # not a robot of claim (c)
             {"variant": "mc", "robot": "aliengo", "flip": 0.0, "cos_grad": 1.0, "artifact": "f"}]  # MC: reference
     c = C.claim_c(rows)
     assert c.verdict == C.PARTLY and "not on mini_cheetah" in c.reason
