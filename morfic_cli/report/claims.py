@@ -145,6 +145,13 @@ def better(a: Stat, b: Stat, higher: bool = True, resolution: float = 0.0) -> bo
     return diff > 0
 
 
+def all_of(outcomes: Sequence[bool | None]) -> bool | None:
+    """False when any comparison is lost, else None when any is undecided, else True."""
+    if any(o is False for o in outcomes):
+        return False
+    return None if any(o is None for o in outcomes) else True
+
+
 def verdict(outcomes: Sequence[bool | None]) -> str:
     """Verdict: holds (all True), does not hold (none True), holds partly (some), cannot tell (no decided outcome)."""
     decided = [o for o in outcomes if o is not None]
@@ -251,7 +258,7 @@ def claim_b(evals: Sequence[dict[str, Any]]) -> Claim:
             continue
         used += [kept["film"], *(kept[b] for b in base)]
         wins = [better(kept["film"], kept[b], resolution=RESOLUTION["vx_s"]) for b in base]
-        outcomes.append(None if None in wins else all(wins))
+        outcomes.append(all_of(wins))
         per_robot.append(f"{robot}: " + ", ".join(
             f"{v} {kept[v].text()} (v_x {vx[v].mean:.2f}, S {s[v].mean:.2f})" for v in ("film", *base)))
     paper_cells = []
@@ -282,8 +289,7 @@ def claim_c(fixed: Sequence[dict[str, Any]]) -> Claim:
         low = [better(flip["film"], flip[v], higher=False, resolution=RESOLUTION["flip"]) for v in others]
         high = [better(cos["film"], cos[v], resolution=RESOLUTION["cos_grad"]) for v in others
                 if v in cos and "film" in cos]
-        both = low + high
-        outcomes.append(None if None in both else all(both))
+        outcomes.append(all_of(low + high))
         per_robot.append(f"{robot}: " + ", ".join(f"{v} Flip {flip[v].text(3)} Cos {cos[v].text(3)}"
                                                   for v in ("film", *others) if v in cos))
     paper_cells = []

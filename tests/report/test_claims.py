@@ -37,6 +37,12 @@ def test_seed_stat_and_better_use_the_seeds_spread():
     assert C.better(C.Stat(0.2, 0, 1), C.Stat(0.3, 0, 1), higher=False) is True
 
 
+def test_all_of_loses_on_any_lost_comparison():
+    assert C.all_of([True, None, False]) is False
+    assert C.all_of([True, None]) is None
+    assert C.all_of([True, True]) is True
+
+
 def test_verdict_rules():
     assert C.verdict([True, True, True]) == C.HOLDS
     assert C.verdict([True, False, None]) == C.PARTLY
