@@ -80,6 +80,12 @@ def test_shipped_imports_evaluates_reports_and_a_rerun_does_nothing(bundles, tmp
     assert store.has_ref("reports/shipped") and (tmp_path / "out" / "report.md").is_file()
     md = (tmp_path / "out" / "report.md").read_text()
     assert "shipped preset" in md and "2 envs x 20 steps" in md  # the report names its reduced protocol
+    # the claims open the report: film alone can be compared with nothing, so (a)-(d) cannot tell
+    claims = md[md.index("## The paper's claims"):md.index("## Zero-shot transfer")]
+    assert [claims.count(f"**({k})") for k in "abcde"] == [1] * 5
+    assert claims.count("Verdict: **cannot tell**") >= 4
+    tex = (tmp_path / "out" / "report.tex").read_text()
+    assert tex.count("\\item \\textbf{(") == 5 and "\\begin{itemize}" in tex
 
     before = _state(store)
     again = Pipeline(store, cfg, out=tmp_path / "out").run()
