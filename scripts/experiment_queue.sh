@@ -21,8 +21,9 @@ RESULTS=docs/results
 mkdir -p "$RESULTS" artifacts/bundles artifacts/partial
 
 finished() {  # 0 when runs/$1 is a finished run in the store
-  morfic store show "runs/$1" -f json 2>/dev/null | python3 -c \
-    "import json,sys; sys.exit(0 if json.load(sys.stdin)['meta'].get('finished') else 1)"
+  local doc
+  doc=$(morfic store show "runs/$1" -f json 2>/dev/null) || return 1
+  python3 -c "import json,sys; sys.exit(0 if json.loads(sys.argv[1])['meta'].get('finished') else 1)" "$doc"
 }
 
 seconds_left() {  # seconds until STOP_AT today (UTC), or a large number
