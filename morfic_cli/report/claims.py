@@ -222,23 +222,13 @@ def _reason(v: str, outcomes: Sequence[bool | None], robots: Sequence[str], what
     return "; ".join(parts).capitalize() + "." if parts else f"{v}."
 
 
-def speed_kept(rows: Sequence[dict[str, Any]], robot: str) -> dict[str, Stat]:
-    """Variant -> seed statistic of v_x x S (descriptor mode, 2.0 m/s): the speed a transfer keeps.
+def with_speed_kept(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The eval rows with ``vx_s`` = v_x x S added: the speed a transfer keeps.
 
     A run that is fast until it falls scores its speed times the fraction of envs that survive.
     """
-    out = {}
-    per: dict[str, dict[Any, float]] = {}
-    for r in rows:
-        if (r.get("robot") != robot or r.get("mode") != "descriptor" or _differs(r.get("command_vx"), 2.0)
-                or r.get("vx_mean") in (None, "") or r.get("survival") in (None, "")):
-            continue
-        per.setdefault(str(r["variant"]), {})[r.get("seed", 0)] = float(r["vx_mean"]) * float(r["survival"])
-    for variant, seeds in per.items():
-        stat = seed_stat(seeds.values())
-        if stat is not None:
-            out[variant] = stat
-    return out
+    return [{**r, "vx_s": float(r["vx_mean"]) * float(r["survival"])} for r in rows
+            if r.get("vx_mean") not in (None, "") and r.get("survival") not in (None, "")]
 
 
 def claim_b(evals: Sequence[dict[str, Any]]) -> Claim:
@@ -246,8 +236,9 @@ def claim_b(evals: Sequence[dict[str, Any]]) -> Claim:
     text = ("MorFiC-F transfers better than PPO, actor-only and concat (v_x x S at 2.0 m/s, descriptor mode: the "
             "speed kept over the episode).")
     per_robot, outcomes, used = [], [], []
+    kept_rows = with_speed_kept(evals)
     for robot in OOD_ROBOTS:
-        kept = speed_kept(evals, robot)
+        kept = by_variant(kept_rows, "vx_s", robot, mode="descriptor", command_vx=2.0)
         vx = by_variant(evals, "vx_mean", robot, mode="descriptor", command_vx=2.0)
         s = by_variant(evals, "survival", robot, mode="descriptor", command_vx=2.0)
         base = [b for b in BASELINES if b in kept]
@@ -401,6 +392,12 @@ def _paper_rho() -> float | None:
         if cell["vx"] is not None and cell["survival"] is not None and robot in dist:
             pts.append((dist[robot], cell["vx"] * cell["survival"]))
     return spearman([p[0] for p in pts], [p[1] for p in pts])
+
+
+def claim_parts(claim: Claim) -> list[tuple[str, str]]:
+    """What a report prints under a claim, as (label, plain text): the paper's numbers, ours, why, the ids."""
+    return [("Paper", claim.paper), ("Ours", claim.ours or "-"), ("Why", claim.reason),
+            ("From", ", ".join(f"`{i[:12]}`" for i in claim.artifacts) or "-")]
 
 
 def check_claims(evals: Sequence[dict[str, Any]], calibration: Sequence[dict[str, Any]],

@@ -201,12 +201,10 @@ def compile_pdf(tex: str, files: Mapping[str, bytes] | None = None, *, timeout_s
 
 def claims_latex(claims: Sequence[Claim]) -> str:
     """The paper's claims as an itemize list (see :func:`~morfic_cli.report.markdown.claims_markdown`)."""
+    from morfic_cli.report.claims import claim_parts
+
     if not claims:
         return ""
-    items = []
-    for c in claims:
-        ids = ", ".join(f"`{i[:12]}`" for i in c.artifacts) or "-"
-        items.append(rf"\item \textbf{{({c.key}) {escape(c.claim)}}} Verdict: \textbf{{{escape(c.verdict)}}}."
-                     rf" Paper: {escape(c.paper)} Ours: {escape(c.ours) or '-'}. Why: {escape(c.reason)}"
-                     rf" From: {escape(ids)}.")
+    items = [rf"\item \textbf{{({c.key}) {escape(c.claim)}}} Verdict: \textbf{{{escape(c.verdict)}}}. "
+             + " ".join(f"{label}: {escape(text)}." for label, text in claim_parts(c)) for c in claims]
     return "\\begin{itemize}\n" + "\n".join(items) + "\n\\end{itemize}"

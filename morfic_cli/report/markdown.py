@@ -60,11 +60,12 @@ def document_markdown(title: str, sections: Sequence[tuple[str, str]], *, intro:
 
 
 def claims_markdown(claims: Sequence[Claim]) -> str:
-    """The paper's claims as a list: each claim with its verdict, the paper's numbers, ours, why, and the ids."""
+    """The paper's claims as a list: each claim with its verdict, then its parts (:func:`claim_parts`)."""
+    from morfic_cli.report.claims import claim_parts
+
     out = []
     for c in claims:
-        ids = ", ".join(f"`{i[:12]}`" for i in c.artifacts) or "-"
-        out.append(f"- **({c.key}) {_escape(c.claim)}** Verdict: **{c.verdict}**.\n"
-                   f"  - Paper: {_escape(c.paper)}\n  - Ours: {_escape(c.ours) or '-'}\n"
-                   f"  - Why: {_escape(c.reason)}\n  - From: {ids}")
+        parts = "".join(f"\n  - {label}: {text if label == 'From' else _escape(text)}"
+                        for label, text in claim_parts(c))
+        out.append(f"- **({c.key}) {_escape(c.claim)}** Verdict: **{c.verdict}**.{parts}")
     return "\n".join(out)
