@@ -2,7 +2,7 @@
 
 Usage (from a checkout, with a trained run in the store, e.g. the shipped bundle)::
 
-    morfic store import tests/data/film-cpu-legacy.tar --store /tmp/s
+    morfic store import artifacts/bundles/film-cpu-legacy.tar --store /tmp/s
     git show 21fb091:morfic_cli/recording/rollout_log.py > /tmp/rollout_log_v1.py   # the JSON writer (format 1)
     python examples/bench_rollout_log.py --store /tmp/s --run runs/film-cpu --before /tmp/rollout_log_v1.py
 

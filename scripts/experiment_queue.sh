@@ -9,7 +9,7 @@
 #
 # --stop-at (UTC) is for a machine that goes away: at that time a training still running gets Ctrl-C (it finishes
 # its iteration and checkpoints), its full bundle (with the trainer state, so `morfic train --resume` continues it
-# bit-identically elsewhere) goes to artifacts/partial/<run>.tar, and the queue stops. Commit what it wrote.
+# bit-identically elsewhere) goes to artifacts/bundles/partial/<run>.tar, and the queue stops. Commit what it wrote.
 # Runs are done strictly one after another: two CPU-heavy jobs on 2 cores slow each other.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,7 +18,7 @@ STOP_AT=""
 if [ "${1:-}" = "--stop-at" ]; then STOP_AT=$2; shift 2; fi
 [ $# -gt 0 ] || { echo "Error: name at least one run as VARIANT:SEED, e.g. concat:0" >&2; exit 1; }
 RESULTS=docs/results
-mkdir -p "$RESULTS" artifacts/bundles artifacts/partial
+mkdir -p "$RESULTS" artifacts/bundles artifacts/bundles/partial
 
 finished() {  # 0 when runs/$1 is a finished run in the store
   local doc
@@ -46,8 +46,8 @@ for item in "$@"; do
       if [ "$(seconds_left)" -le 0 ]; then
         echo "== $(date -u +%T) stop time: Ctrl-C to $name, it checkpoints"
         kill -INT "$pid"; wait "$pid" || true
-        morfic store export "runs/$name" --latest --out artifacts/partial --force
-        echo "== partial run exported: artifacts/partial/$name.tar (resume: morfic store import it, then" \
+        morfic store export "runs/$name" --latest --out artifacts/bundles/partial --force
+        echo "== partial run exported: artifacts/bundles/partial/$name.tar (resume: morfic store import it, then" \
              "morfic train --resume runs/$name)"
         exit 0
       fi
@@ -61,7 +61,7 @@ for item in "$@"; do
   python scripts/experiment_tables.py "$name" --out "$RESULTS"
   if [ "$seed" = 0 ]; then
     morfic store export "runs/$name" --latest --without-trainer-state --out artifacts/bundles --force
-    rm -f "artifacts/partial/$name.tar"
+    rm -f "artifacts/bundles/partial/$name.tar"
   fi
   echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,calibration.csv}" \
        "$([ "$seed" = 0 ] && echo "and artifacts/bundles/$name.tar")"

@@ -21,5 +21,5 @@ def train_smoke_runs(root: Path, variants: tuple[str, ...] = ("film",), seed: in
 
 
 #: The first shipped policy (`film`, cpu preset, trained by morfic 0.1.0 before the method fixes of issue 16; ref
-#: runs/film-cpu): the fixture of every test about checkpoints an older morfic wrote (tests/data/README.md).
-LEGACY_BUNDLE = Path(__file__).resolve().parent / "data" / "film-cpu-legacy.tar"
+#: runs/film-cpu): the fixture of every test about checkpoints an older morfic wrote (artifacts/README.md).
+LEGACY_BUNDLE = Path(__file__).resolve().parents[1] / "artifacts" / "bundles" / "film-cpu-legacy.tar"
