@@ -12,7 +12,9 @@
 #      (each with PARTS.sha256);
 #   4. print the device calls (.gpu/PLAN.txt).
 #
-# Usage: bash scripts/gpu_wheels.sh [all|download|check|split]   (default all; re-running reuses the downloads)
+# Usage: bash scripts/gpu_wheels.sh [all|download|check|split|slim|full]   (default all; re-running reuses the downloads)
+#        slim: leave artifacts/bundles/ (tens of MiB of shipped runs the check does not read) out of the working
+#              tree with git sparse-checkout, so that the parts get the room; full: bring it back after the calls
 #        PART_MIB=40 bash scripts/gpu_wheels.sh   (smaller parts than the limit allows; PART_SIZE=700 in bytes)
 # .gpu/ (MORFIC_GPU_DIR) is git-ignored: nothing here is committed. Needs python3 with pip >= 23.2 and packaging.
 set -euo pipefail
@@ -76,15 +78,23 @@ echo "torch @ file://$TORCH_STUB" >> "$G/requirements.txt"
 "$PY" scripts/gpu_wheels.py verify "$G/resolve-offline.json" "$G/wheels"
 }
 
+tree_bytes() {  # tracked and untracked-not-ignored files present here (a sparse checkout's left-out ones don't travel)
+{ git ls-files -z -c -o --exclude-standard | xargs -0 stat -c %s 2>/dev/null || true; } | awk '{s += $1} END {print s + 0}'
+}
+
 split_parts() {
 echo "== 3. split into parts that fit a device call"
 # what travels with every call: tracked and untracked-not-ignored files (and shared/ if the checkout has one)
-TREE_BYTES=$(git ls-files -z -c -o --exclude-standard | xargs -0 stat -c %s 2>/dev/null | awk '{s += $1} END {print s + 0}')
+TREE_BYTES=$(tree_bytes)
 [ -d shared ] && TREE_BYTES=$((TREE_BYTES + $(du -sb shared | cut -f1)))
 LIMIT_MIB=$(( (64 * 1048576 - TREE_BYTES) / 1048576 - 2 ))  # 2 MiB margin for the part folders' small files
 PART_MIB=${PART_MIB:-$LIMIT_MIB}
 [ "$PART_MIB" -gt "$LIMIT_MIB" ] && PART_MIB=$LIMIT_MIB
-[ "$PART_MIB" -ge 8 ] || { echo "Error: the working tree ($((TREE_BYTES / 1048576)) MiB) leaves no room for parts" >&2; exit 1; }
+if [ "$PART_MIB" -lt 8 ]; then
+  echo "Error: the working tree ($((TREE_BYTES / 1048576)) MiB) leaves no room for parts;" \
+    "run 'bash scripts/gpu_wheels.sh slim' to leave artifacts/bundles/ out of it, then split again" >&2
+  exit 1
+fi
 PART_SIZE=${PART_SIZE:-${PART_MIB}M}
 (cd "$G/wheels" && sha256sum *.whl > SHA256SUMS)
 rm -rf "$G"/p[0-9]* "$G/split"
@@ -107,10 +117,23 @@ echo "== 4. the device calls (each within ~30 s of the last: the machine keeps t
 "$PY" scripts/gpu_wheels.py plan "$TREE_BYTES" "${folders[@]}" | tee "$G/PLAN.txt"
 }
 
+BUNDLES=artifacts/bundles
+slim() {
+echo "== leave $BUNDLES/ out of the working tree (git sparse-checkout; 'full' brings it back)"
+git sparse-checkout set --no-cone '/*' "!/$BUNDLES/"
+echo "  $BUNDLES/ is out; a device call now carries a $(tree_bytes | awk '{printf "%.1f", $1 / 1048576}') MiB tree"
+}
+full() {
+echo "== bring $BUNDLES/ back into the working tree"
+git sparse-checkout disable
+}
+
 case "$WHAT" in
   all) download; check; split_parts ;;
   download) download ;;
   check) check ;;
   split) split_parts ;;
-  *) echo "usage: bash scripts/gpu_wheels.sh [all|download|check|split]" >&2; exit 2 ;;
+  slim) slim ;;
+  full) full ;;
+  *) echo "usage: bash scripts/gpu_wheels.sh [all|download|check|split|slim|full]" >&2; exit 2 ;;
 esac

@@ -152,6 +152,28 @@ def test_plan_sizes_every_call_against_the_limit():
     assert lines[1].endswith("(53.0 MiB + tree 12.0 MiB = 65.0 MiB of 64 MiB)  <-- OVER THE LIMIT")
 
 
+def _checkout(tmp_path: Path, bundle_bytes: int = 0) -> Path:
+    """A git checkout holding gpu_wheels.{sh,py} (and, if asked, a tracked bundle of that many bytes), so that
+    the split measures this tree, not the size this repository happens to have."""
+    repo = tmp_path / "repo"
+    (repo / "scripts").mkdir(parents=True)
+    for name in ("gpu_wheels.sh", "gpu_wheels.py"):
+        (repo / "scripts" / name).write_bytes((SCRIPTS / name).read_bytes())
+    if bundle_bytes:
+        (repo / "artifacts" / "bundles").mkdir(parents=True)
+        with open(repo / "artifacts" / "bundles" / "film-cpu-s0.tar", "wb") as f:
+            f.truncate(bundle_bytes)  # sparse: instant, and stat reports its full size
+    git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
+    for args in (["init", "-q"], ["add", "-A"], ["commit", "-qm", "tree"]):
+        subprocess.run(git + args, check=True, capture_output=True, timeout=60)
+    return repo
+
+
+def _gpu_wheels(repo: Path, what: str, env: dict) -> subprocess.CompletedProcess:
+    return subprocess.run(["bash", str(repo / "scripts" / "gpu_wheels.sh"), what], env=env, capture_output=True,
+                          text=True, timeout=120, check=False)
+
+
 def test_parts_split_here_are_joined_and_installed_there(tmp_path):
     """gpu_wheels.sh split -> parts p1..pN; gpu_check.sh install on 'the device' joins, verifies, installs."""
     g = tmp_path / "g"
@@ -159,8 +181,7 @@ def test_parts_split_here_are_joined_and_installed_there(tmp_path):
     for name in ("alpha", "beta"):  # two real (tiny) wheels, installable offline
         gw.write_stub(g / "wheels", name, "1.0", [], None)
     env = {**os.environ, "MORFIC_GPU_DIR": str(g), "PART_SIZE": "1500", "PYTHON": sys.executable}
-    split = subprocess.run(["bash", str(SCRIPTS / "gpu_wheels.sh"), "split"], env=env, capture_output=True,
-                           text=True, timeout=120, check=False)
+    split = _gpu_wheels(_checkout(tmp_path), "split", env)
     assert split.returncode == 0, split.stderr
     parts = sorted(p.name for p in g.iterdir() if p.name.startswith("p"))
     assert len(parts) >= 2 and "call 1: carry" in split.stdout
@@ -185,6 +206,30 @@ def test_parts_split_here_are_joined_and_installed_there(tmp_path):
     missing = install(tmp_path / "cold")
     assert missing.returncode == 1
     assert "part(s) missing: morfic-wheels.tar." in missing.stdout and "from call 1" in missing.stdout
+
+
+def test_a_heavy_tree_is_slimmed_for_the_parts_and_restored(tmp_path):
+    """60 MiB of tracked bundles leave no room in a 64 MiB call: split says to slim; slim leaves artifacts/bundles/
+    out (sparse checkout), the split then measures the small tree; full brings the bundle back."""
+    g = tmp_path / "g"
+    (g / "wheels").mkdir(parents=True)
+    gw.write_stub(g / "wheels", "alpha", "1.0", [], None)
+    repo = _checkout(tmp_path, bundle_bytes=60 * 1024 * 1024)
+    env = {**os.environ, "MORFIC_GPU_DIR": str(g), "PYTHON": sys.executable}
+    heavy = _gpu_wheels(repo, "split", env)
+    assert heavy.returncode == 1
+    assert heavy.stderr.startswith("Error: the working tree (60 MiB) leaves no room for parts")
+    assert "gpu_wheels.sh slim" in heavy.stderr
+    bundle = repo / "artifacts" / "bundles" / "film-cpu-s0.tar"
+    slim = _gpu_wheels(repo, "slim", env)
+    assert slim.returncode == 0, slim.stderr
+    assert not bundle.exists()
+    split = _gpu_wheels(repo, "split", env)
+    assert split.returncode == 0, split.stderr
+    assert "working tree 0.0 MiB" in split.stdout  # the two scripts only (a few KiB)
+    full = _gpu_wheels(repo, "full", env)
+    assert full.returncode == 0, full.stderr
+    assert bundle.stat().st_size == 60 * 1024 * 1024
 
 
 @pytest.mark.slow
