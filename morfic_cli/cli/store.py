@@ -205,9 +205,9 @@ def export(
         "state, RNG; most of a run's size); it evaluates and exports, but cannot be resumed.")] = False,
     results_only: Annotated[bool, typer.Option(
         "--results-only", help="A results-only bundle of the named runs (runs/NAME; other refs are an error): each "
-        "run's current checkpoint (config, curves) and every eval and diagnosis made from it (tables, figures), "
-        "without weights, trainer states or rollout logs. `morfic report` reads it; it cannot evaluate, diagnose or "
-        "resume.")] = False,
+        "run's current checkpoint (config, curves) and every eval, diagnosis and check made from it (tables, "
+        "figures), without weights, trainer states or rollout logs. `morfic report` reads it; it cannot evaluate, "
+        "diagnose or resume.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the tar if it exists.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,

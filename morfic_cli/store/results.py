@@ -4,17 +4,18 @@
 
 - each run ``runs/NAME`` goes in at its current version only, as version 1 (as ``--latest`` does), so it merges
   with the run's weights-only bundle (``--latest --without-trainer-state``), which holds the same one-entry history;
-- every other ref with a version whose manifest is a result (kind ``eval`` or ``diagnosis``) made from one of
-  those checkpoints, i.e. naming it among its inputs (``evals/NAME``, ``diagnoses/calibration``,
-  ``diagnoses/fixed-rollout/<robot>``), goes in with its history up to its last such version: the ref as it
-  was when the run's last result was added. A prefix of a history merges with any longer one (import says
-  ``unchanged`` or ``extended``), so the results bundles of several runs of one store import in any order,
-  and the refs shared between runs come out as the source store had them. Earlier versions of a shared ref
-  (other runs' diagnoses) come along, without their heavy files like everything else.
+- every other ref with a version whose manifest is a result of one of those checkpoints goes in with its history
+  up to its last such version. A result is an ``eval``, ``diagnosis`` or ``table`` manifest that names the
+  checkpoint among its inputs and is made from no other result (``evals/NAME``, ``diagnoses/calibration``,
+  ``diagnoses/fixed-rollout/<robot>``, ``checks/training-conditions/NAME``). That is the ref as it was when the
+  run's last result was added. A prefix of a history merges with any longer one (import says ``unchanged`` or
+  ``extended``), so the results bundles of several runs of one store import in any order, and the refs shared
+  between runs come out as the source store had them. Earlier versions of a shared ref (other runs' diagnoses)
+  come along, without their heavy files like everything else.
 
-Derived tables and reports (``tables/compare-baselines``, ``reports/*``) stay out: ``morfic report`` rebuilds
-them from these results, and a local rebuild would diverge from a shipped history. What the bundle leaves out
-is :data:`~morfic_cli.store.shallow.RESULTS_ONLY` (weights, trainer states, rollout logs).
+Tables made from other results, and reports (``tables/compare-baselines``, ``reports/*``), stay out: ``morfic
+report`` rebuilds them from these results, and a local rebuild would diverge from a shipped history. What the
+bundle leaves out is :data:`~morfic_cli.store.shallow.RESULTS_ONLY` (weights, trainer states, rollout logs).
 """
 
 from __future__ import annotations
@@ -28,8 +29,8 @@ from morfic_cli.store.refs import RefEntry, check_ref_name
 if TYPE_CHECKING:
     from morfic_cli.store import Store
 
-RESULT_KINDS = frozenset({"eval", "diagnosis"})
-"""Manifest kinds that are results of the checkpoints they name as inputs."""
+RESULT_KINDS = frozenset({"eval", "diagnosis", "table"})
+"""Manifest kinds that are results of the checkpoints they name as inputs (unless made from other results)."""
 
 RUN_FILE = "model.pt"
 """A run ref's current version is a ``checkpoint`` manifest with this file (its weights)."""
@@ -75,6 +76,9 @@ def results_histories(store: Store, runs: list[str]) -> dict[str, list[RefEntry]
         for i, entry in enumerate(history):
             doc = manifest(entry.id)
             hits = checkpoints & set(doc.inputs.values()) if doc.kind in RESULT_KINDS else set()
+            others = [oid for oid in set(doc.inputs.values()) - hits if store.objects.has(oid)]
+            if hits and any(manifest(oid).kind in RESULT_KINDS for oid in others):
+                hits = set()  # made from other results (a comparison table): `morfic report` rebuilds it
             if hits:
                 last = i
                 found |= hits
@@ -82,7 +86,8 @@ def results_histories(store: Store, runs: list[str]) -> dict[str, list[RefEntry]
             out[ref] = history[:last + 1]
     bare = sorted(name for name in runs if out[name][0].id not in found)
     if bare:
-        raise StoreError(f"{bare[0]} has no eval or diagnosis in store {store.root}, so a results-only bundle of it "
-                         f"would hold no results; evaluate and diagnose it first (`morfic eval {bare[0]}`, `morfic "
-                         f"diagnose {bare[0]}`, or `morfic reproduce`), or export it without --results-only.")
+        raise StoreError(f"{bare[0]} has no eval, diagnosis or check in store {store.root}, so a results-only "
+                         f"bundle of it would hold no results; evaluate and diagnose it first (`morfic eval "
+                         f"{bare[0]}`, `morfic diagnose {bare[0]}`, or `morfic reproduce`), or export it without "
+                         "--results-only.")
     return out

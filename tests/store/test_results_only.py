@@ -65,8 +65,12 @@ def src(tmp_path):
         "actor": a["ckpt"], "rollout": a["drollout"], "critic/runs/a": a["ckpt"], "critic/runs/b": b["ckpt"]},
         files={"fixed_rollout.csv": b"critic\nMC"})
     store.set_ref("diagnoses/fixed-rollout/x", fixed)
-    store.set_ref("tables/compare-baselines", store.put_manifest(
-        "table", inputs={"checkpoint/a": a["ckpt"], "checkpoint/b": b["ckpt"]}, files={"t.csv": b"1"}))
+    a["check"] = store.put_manifest("table", config={"check": "training-conditions"}, inputs={"checkpoint": a["ckpt"]},
+                                    files={"training_check.csv": b"vx\n1"})
+    store.set_ref("checks/training-conditions/a", a["check"])
+    store.set_ref("tables/compare-baselines", store.put_manifest(  # made from the results: rebuilt by a report
+        "table", inputs={"checkpoint/a": a["ckpt"], "checkpoint/b": b["ckpt"], "eval/a": a["eval"],
+                         "eval/b": b["eval"]}, files={"t.csv": b"1"}))
     store.ids = {"a": a, "b": b, "fixed": fixed}
     return store
 
@@ -93,11 +97,12 @@ def _history(store: Store, name: str) -> list[tuple[int, str, str]]:
 def test_the_refs_of_a_runs_results_and_how_much_of_each_history(src):
     a, b = src.ids["a"], src.ids["b"]
     got = results_histories(src, ["runs/a"])
-    # runs/a as --latest makes it; evals/a whole; the shared refs up to a's last result: calibration@1 only, the
-    # fixed rollout (it names a) whole; compare-baselines (a table) and b's run and evals stay out
+    # runs/a as --latest makes it; evals/a and its check whole; the shared refs up to a's last result:
+    # calibration@1 only, the fixed rollout (it names a) whole; compare-baselines (a table made from the evals)
+    # and b's run and evals stay out
     assert {name: [e.id for e in h] for name, h in got.items()} == {
         "runs/a": [a["ckpt"]], "evals/a": [a["eval"]], "diagnoses/calibration": [a["diag"]],
-        "diagnoses/fixed-rollout/x": [src.ids["fixed"]]}
+        "diagnoses/fixed-rollout/x": [src.ids["fixed"]], "checks/training-conditions/a": [a["check"]]}
     assert got["runs/a"][0].version == 1 and got["runs/a"][0].time == src.ref_history("runs/a")[-1].time
     assert got["diagnoses/calibration"] == src.ref_history("diagnoses/calibration")[:1]
     got = results_histories(src, ["runs/b"])
@@ -175,8 +180,8 @@ def test_two_runs_bundles_import_in_either_order(src, tmp_path):
         dst = Store(tmp_path / f"dst-{order[0].stem}")
         statuses.append([dst.import_tar(p).refs["diagnoses/calibration"] for p in order])
         stores.append(dst)
-        assert dst.list_refs() == ["diagnoses/calibration", "diagnoses/fixed-rollout/x", "evals/a", "evals/b",
-                                   "runs/a", "runs/b"]
+        assert dst.list_refs() == ["checks/training-conditions/a", "diagnoses/calibration",
+                                   "diagnoses/fixed-rollout/x", "evals/a", "evals/b", "runs/a", "runs/b"]
         assert _history(dst, "diagnoses/calibration") == _history(src, "diagnoses/calibration")
         assert dst.verify().ok
     # a first: calibration@1, then b's bundle extends it; b first: a's bundle holds a prefix, unchanged
@@ -211,8 +216,8 @@ def test_results_only_takes_runs(src, tmp_path, spec, needle):
 
 def test_a_run_without_results_is_an_error(src, tmp_path):
     src.set_ref("runs/c", src.put_manifest("checkpoint", files={"model.pt": b"c"}))
-    src.set_ref("tables/c", src.put_manifest("table", inputs={"checkpoint": "runs/c"}))  # a table is no result
-    with pytest.raises(StoreError, match="runs/c has no eval or diagnosis in store"):
+    src.set_ref("tables/c", src.put_manifest("table", inputs={"checkpoint": "runs/c", "eval": "evals/a"}))  # derived
+    with pytest.raises(StoreError, match="runs/c has no eval, diagnosis or check in store"):
         src.export_tar(["runs/a", "runs/c"], tmp_path / "x.tar", results_only=True)
     assert not (tmp_path / "x.tar").exists()
 
