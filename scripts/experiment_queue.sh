@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The paper's experiment, run by run (docs/results.md, "Status of the runs"): train each run with the cpu preset,
 # evaluate and diagnose it with the paper's protocol (`morfic reproduce --preset cpu`, which skips what the store
-# holds), ship a seed-0 run as a weights-only bundle and copy its result tables under docs/results/.
+# holds), copy its result tables under docs/results/ and ship it: a seed-0 run as a weights-only bundle
+# (artifacts/bundles/<run>.tar), any other seed as a results-only bundle (artifacts/bundles/results/<run>.tar: its
+# evals and diagnoses without weights or logs, ~0.5 MiB; `morfic store import` it, then `morfic report runs/<run>`).
 #
 # Usage: scripts/experiment_queue.sh [--stop-at HH:MM] VARIANT:SEED ...
 #   e.g.  MORFIC_STORE=/work/stores/exp nohup scripts/experiment_queue.sh --stop-at 23:05 concat:0 actor-only:0 \
@@ -18,7 +20,8 @@ STOP_AT=""
 if [ "${1:-}" = "--stop-at" ]; then STOP_AT=$2; shift 2; fi
 [ $# -gt 0 ] || { echo "Error: name at least one run as VARIANT:SEED, e.g. concat:0" >&2; exit 1; }
 RESULTS=docs/results
-mkdir -p "$RESULTS" artifacts/bundles artifacts/bundles/partial
+BUNDLES=artifacts/bundles
+mkdir -p "$RESULTS" "$BUNDLES" "$BUNDLES/partial" "$BUNDLES/results"
 
 finished() {  # 0 when runs/$1 is a finished run in the store
   local doc
@@ -60,9 +63,12 @@ for item in "$@"; do
   morfic reproduce --preset cpu --variants "$variant" --seeds $((seed + 1)) -f json -q > /dev/null
   python scripts/experiment_tables.py "$name" --out "$RESULTS"
   if [ "$seed" = 0 ]; then
-    morfic store export "runs/$name" --latest --without-trainer-state --out artifacts/bundles --force
-    rm -f "artifacts/bundles/partial/$name.tar"
+    shipped="$BUNDLES/$name.tar"
+    morfic store export "runs/$name" --latest --without-trainer-state --out "$BUNDLES" --force
+  else
+    shipped="$BUNDLES/results/$name.tar"
+    morfic store export "runs/$name" --results-only --out "$BUNDLES/results" --force
   fi
-  echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,calibration.csv}" \
-       "$([ "$seed" = 0 ] && echo "and artifacts/bundles/$name.tar")"
+  rm -f "$BUNDLES/partial/$name.tar"
+  echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,calibration.csv} and $shipped"
 done

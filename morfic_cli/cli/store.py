@@ -37,8 +37,11 @@ def human_size(size: Any) -> str:
     return f"{value:.1f} GiB"
 
 
-def _left_out(omitted: Any) -> str:
-    """The note on the trainer states a weights-only export left out (``omitted``: their ids)."""
+def _left_out(omitted: Any, files: Any = ()) -> str:
+    """The note on what a weights-only or results-only export left out (``omitted``, ``files``: their ids)."""
+    if files:
+        return (f"{len(omitted)} trainer state(s) and {len(files)} weight and rollout-log file(s) left out (results "
+                "only: `morfic report` reads it; it cannot evaluate, diagnose or resume)")
     return f"{len(omitted)} trainer state(s) left out (weights only: evaluates and exports, cannot be resumed)"
 
 
@@ -155,6 +158,9 @@ def verify(store: StoreOpt = DEFAULT_STORE) -> None:
     leftovers = f"; {report.temp_files} leftover temp file(s), `morfic store gc --yes` removes them" \
         if report.temp_files else ""
     omitted = f"; {report.omitted} trainer state(s) left out by a weights-only import" if report.omitted else ""
+    if report.omitted_files:
+        omitted = (f"; {report.omitted} trainer state(s) and {report.omitted_files} weight and rollout-log file(s) "
+                   "left out by a results-only import")
     info(f"store {escape(str(store))} OK: {report.objects} objects ({human_size(report.bytes)}), "
          f"{report.manifests} manifests, {report.refs} refs checked{leftovers}{omitted}")
 
@@ -197,6 +203,11 @@ def export(
     without_trainer_state: Annotated[bool, typer.Option(
         "--without-trainer-state", help="A weights-only bundle: leave out the runs' trainer states (optimiser, env "
         "state, RNG; most of a run's size); it evaluates and exports, but cannot be resumed.")] = False,
+    results_only: Annotated[bool, typer.Option(
+        "--results-only", help="A results-only bundle of the named runs (runs/NAME; other refs are an error): each "
+        "run's current checkpoint (config, curves) and every eval, diagnosis and check made from it (tables, "
+        "figures), without weights, trainer states or rollout logs. `morfic report` reads it; it cannot evaluate, "
+        "diagnose or resume.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the tar if it exists.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
@@ -206,22 +217,24 @@ def export(
     The tar is named after the refs unless --name says otherwise: runs/film-cpu-s0 -> film-cpu-s0.tar;
     runs/film-s0 runs/film-s1 -> film-s0+film-s1.tar; five refs -> film-s0+4-more.tar. An existing
     tar is kept unless --force. With --latest only the current version of each ref goes in; it arrives as version
-    1 of that ref.
+    1 of that ref. With --results-only the refs are runs: each goes in as with --latest, together with the refs
+    of their evals and diagnoses (evals/NAME, diagnoses/...) up to the run's last result (docs/concepts.md).
 
     Example: morfic store export runs/film-s0 runs/film-s1 --out bundles/ --name film
     """
     check_args(store=store, out_dir=out, specs=refs)
     path = export_path(out, refs, name, force=force)
-    report = Store(store).export_tar(refs, path, latest=latest, without_trainer_state=without_trainer_state)
+    report = Store(store).export_tar(refs, path, latest=latest, without_trainer_state=without_trainer_state,
+                                     results_only=results_only)
     info(f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
          f"to {escape(str(report.path))}")
-    if report.omitted:
-        info(_left_out(report.omitted))
+    if report.omitted or report.omitted_files:
+        info(_left_out(report.omitted, report.omitted_files))
     if fmt == OutputFormat.table:  # the path alone, whole (a table would fold a long one), for `$(...)`
         sys.stdout.write(f"{report.path}\n")
         return
     emit_object({"path": str(report.path), "refs": report.refs, "objects": report.objects, "bytes": report.bytes,
-                 "omitted": sorted(report.omitted)}, fmt)
+                 "omitted": sorted(report.omitted), "omitted_files": sorted(report.omitted_files)}, fmt)
 
 
 @app.command("import")
@@ -238,7 +251,7 @@ def import_(
     rows = [{"ref": name, "status": status} for name, status in report.refs.items()]
     _emit(rows, fmt, [Column("ref"), Column("status")], title=f"refs imported from {path.name}")
     repaired = f", {report.objects_repaired} corrupt here and repaired" if report.objects_repaired else ""
-    left_out = f"; {_left_out(report.omitted)}" if report.omitted else ""
-    filled = f"; {len(report.filled)} trainer state(s) filled in" if report.filled else ""
+    left_out = f"; {_left_out(report.omitted, report.omitted_files)}" if report.omitted or report.omitted_files else ""
+    filled = f"; {len(report.filled)} left-out object(s) filled in" if report.filled else ""
     info(f"imported {report.objects_added} new object(s) ({report.objects_present} already present{repaired}), "
          f"{len(rows)} ref(s) into {escape(str(store))}{left_out}{filled}")

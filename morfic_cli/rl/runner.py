@@ -142,6 +142,7 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training checkpoint; "
                           "pass a run ref such as runs/film-s0 (see `morfic store ls --kind checkpoint`).")
+    check_weights(store, spec, manifest)
     cfg = train_cfg_from_dict(manifest.config)
     actor, critic = build_models(cfg)
     state = _load_weights(store, manifest.id, "cpu")
@@ -409,6 +410,23 @@ class TrainingRun:
         self._fresh = False
 
 
+def check_weights(store: Store, spec: str, manifest: Any) -> None:
+    """Raise when the checkpoint's weights were left out (a run imported from a results-only bundle).
+
+    Raises:
+        MorficError: ``model.pt`` of ``manifest`` is recorded as left out (``shallow/``); names the bundle to import.
+    """
+    entry = manifest.files.get("model.pt")
+    if entry is not None and store.is_omitted(entry.id):
+        name = run_of(spec, manifest.meta)
+        raise MorficError(f"{spec} was imported from a results-only bundle: its weights (model.pt) and trainer state "
+                          "were left out, so it cannot be evaluated, played, exported, diagnosed or resumed (its "
+                          "tables, curves and config are here, for `morfic report`). Import a bundle with its weights "
+                          f"first: its weights-only bundle (made by `morfic store export {RUNS_PREFIX}{name} --latest "
+                          "--without-trainer-state` in the store that trained it; shipped ones are under "
+                          "artifacts/bundles/), or its full bundle to resume it.")
+
+
 def _load_weights(store: Store, ckpt_id: str, device: str) -> dict[str, Any]:
     """``model.pt`` of a checkpoint: ``{"actor": state dict, "critic": state dict}``, loaded as tensors only."""
     state = trainer_state.load_tensors(store.read_file(ckpt_id, "model.pt"), f"model.pt of checkpoint {ckpt_id[:12]}",
@@ -547,6 +565,7 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-s0.")
     name = run_of(spec, manifest.meta)
+    check_weights(store, spec, manifest)
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
     if state_id is not None and store.is_omitted(state_id):
         raise MorficError(f"{spec} was imported without its trainer state (a weights-only bundle); it evaluates and "

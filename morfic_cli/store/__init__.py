@@ -3,9 +3,11 @@
 :class:`Store` is the one entry point; the modules beside it do the file work:
 ``objects`` (immutable blobs), ``manifest`` (manifest schema and index), ``refs`` (named, versioned
 pointers), ``lock`` (flock-based locks), ``gc`` (reachability, verify, gc), ``transfer``
-(export/import tar files) and ``shallow`` (inputs a weights-only bundle leaves out).
+(export/import tar files), ``shallow`` (what a weights-only or results-only bundle leaves out) and ``results``
+(which refs hold a run's results).
 ``docs/concepts.md`` describes the layout and guarantees. The store knows nothing about RL beyond the
-name of the one input role a weights-only bundle may leave out, and never imports torch or mujoco.
+names of what a bundle may leave out (``shallow``) and which manifest kinds are results (``results``), and never
+imports torch or mujoco.
 
 Example::
 
@@ -47,7 +49,7 @@ from morfic_cli.store.manifest import (
 from morfic_cli.store.objects import ObjectDB, store_os_error
 from morfic_cli.store.publish import Published, publish
 from morfic_cli.store.refs import RefDB, RefEntry, check_ref_name, pick_version, split_spec
-from morfic_cli.store.shallow import OMITTABLE_ROLES, OmittedIndex
+from morfic_cli.store.shallow import OMITTABLE_FILES, OMITTABLE_ROLES, OmittedIndex
 from morfic_cli.store.transfer import ExportReport, ImportReport, export_tar, import_tar
 
 __all__ = [
@@ -158,13 +160,18 @@ class Store:
         return self.objects.get_bytes(oid)
 
     def is_omitted(self, oid: str) -> bool:
-        """Whether ``oid`` was left out of a weights-only import (``shallow/<id>``) and is still not stored."""
+        """Whether ``oid`` was left out of a weights- or results-only import (``shallow/<id>``) and is not stored."""
         return self.omitted.has(oid) and not self.objects.has(oid)
 
     def omitted_inputs(self, manifest: Manifest) -> dict[str, str]:
         """Role -> id of the inputs of ``manifest`` that a weights-only import left out (empty for a full store)."""
         return {role: oid for role, oid in manifest.inputs.items()
                 if role in OMITTABLE_ROLES and self.is_omitted(oid)}
+
+    def omitted_files(self, manifest: Manifest) -> dict[str, str]:
+        """File name -> id of the files of ``manifest`` that a results-only import left out (weights, logs)."""
+        return {name: entry.id for name, entry in manifest.files.items()
+                if name in OMITTABLE_FILES and self.is_omitted(entry.id)}
 
     def object_path(self, oid: str) -> Path:
         """Path of object ``oid`` (read-only; never write to it)."""
@@ -240,15 +247,25 @@ class Store:
 
     def read_file(self, manifest_spec: str, name: str) -> bytes:
         """The bytes of file ``name`` of a manifest (checked against their hash)."""
-        return self.objects.get_bytes(self.read_manifest(manifest_spec).file(name).id)
+        return self.objects.get_bytes(self._file_entry(manifest_spec, name).id)
 
     def file_path(self, manifest_spec: str, name: str) -> Path:
         """Read-only path of file ``name`` of a manifest, for readers that want a path (not rehashed)."""
-        entry = self.read_manifest(manifest_spec).file(name)
+        entry = self._file_entry(manifest_spec, name)
         if not self.objects.has(entry.id):
             raise ArtifactNotFoundError(f"file '{name}' ({entry.id}) of manifest {manifest_spec} is missing "
                                         "from the store; run `morfic store verify`.")
         return self.objects.path(entry.id)
+
+    def _file_entry(self, manifest_spec: str, name: str) -> FileEntry:
+        """File ``name`` of a manifest; one a results-only bundle left out is an error that says so."""
+        entry = self.read_manifest(manifest_spec).file(name)
+        if name in OMITTABLE_FILES and self.is_omitted(entry.id):
+            raise ArtifactNotFoundError(f"file '{name}' ({entry.id[:12]}) of {manifest_spec} is not in store "
+                                        f"{self.root}: a results-only bundle left it out (results without weights or "
+                                        "rollout logs); import a bundle that holds it (the run's weights-only or "
+                                        "full bundle) to get it.")
+        return entry
 
     # -- refs ---------------------------------------------------------------------------------
 
@@ -326,7 +343,8 @@ class Store:
                 return hexid
             if self.is_omitted(hexid):
                 raise ArtifactNotFoundError(f"artifact {hexid} is not in store {self.root}: a weights-only bundle "
-                                            "left it out (a trainer state); import the full bundle to get it.")
+                                            "left it out (a trainer state), or a results-only one (a trainer state, "
+                                            "weights or a rollout log); import the full bundle to get it.")
             raise self._not_found(text)
         if len(hexid) < MIN_PREFIX or len(hexid) > 64:
             raise ArtifactNotFoundError(f"id prefix '{text}' is too short: give at least {MIN_PREFIX} hex "
@@ -413,8 +431,9 @@ class Store:
             manifest = load_manifest_if_any(self, oid, strict=False)
         if manifest is None:
             return {"id": oid, "kind": None, "size": self.objects.size(oid), "refs": refs}
-        omitted = self.omitted_inputs(manifest)
-        return {"id": oid, "refs": refs, **manifest.to_dict(), **({"omitted": omitted} if omitted else {})}
+        omitted, files = self.omitted_inputs(manifest), self.omitted_files(manifest)
+        return {"id": oid, "refs": refs, **manifest.to_dict(), **({"omitted": omitted} if omitted else {}),
+                **({"omitted_files": files} if files else {})}
 
     # -- maintenance --------------------------------------------------------------------------
 
@@ -437,12 +456,14 @@ class Store:
             return collect_garbage(self, dry_run=dry_run)
 
     def export_tar(self, refs: list[str], out: Path, *, latest: bool = False,
-                   without_trainer_state: bool = False) -> ExportReport:
+                   without_trainer_state: bool = False, results_only: bool = False) -> ExportReport:
         """Write the closure of ``refs`` (every version, or only the current one with ``latest``) to the tar ``out``.
 
-        ``without_trainer_state``: a weights-only bundle (see :func:`morfic_cli.store.transfer.export_tar`).
+        ``without_trainer_state``: a weights-only bundle; ``results_only``: ``refs`` are runs, and the bundle holds
+        their results without weights or logs (see :func:`morfic_cli.store.transfer.export_tar`).
         """
-        return export_tar(self, refs, Path(out), latest=latest, without_trainer_state=without_trainer_state)
+        return export_tar(self, refs, Path(out), latest=latest, without_trainer_state=without_trainer_state,
+                          results_only=results_only)
 
     def import_tar(self, path: Path, *, append: bool = False) -> ImportReport:
         """Import a tar made by :meth:`export_tar`; idempotent (see :class:`ImportReport`; ``append``: there)."""

@@ -1,8 +1,8 @@
 """Store maintenance: reachability, ``verify`` and ``gc``.
 
 Reachability (like git): the roots are *every version of every ref*; from a manifest, its files and
-its inputs are reachable, recursively; an input a weights-only import left out on purpose
-(:mod:`morfic_cli.store.shallow`) is known-absent, not damage. ``gc`` deletes every object outside
+its inputs are reachable, recursively; an input or file a weights-only or results-only import left out on
+purpose (:mod:`morfic_cli.store.shallow`) is known-absent, not damage. ``gc`` deletes every object outside
 that closure, the index markers of deleted manifests, and leftover temp files, under the exclusive
 store lock so no writer can be between "object written" and "ref updated" while it runs.
 """
@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 from morfic_cli.errors import StoreError
 from morfic_cli.store.manifest import MANIFEST_MAGIC, Manifest, parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, unlink_quiet
-from morfic_cli.store.shallow import OMITTABLE_ROLES
+from morfic_cli.store.shallow import NOTHING, OMITTABLE_FILES, OMITTABLE_ROLES, LeaveOut
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -34,7 +34,9 @@ class VerifyReport:
         manifests: Index entries checked.
         refs: Refs checked.
         temp_files: Leftover temp files (harmless; ``gc`` removes them).
-        omitted: Manifest inputs known to be absent (trainer states left out of a weights-only import).
+        omitted: Manifest inputs known to be absent (trainer states left out of a weights-only or results-only
+            import).
+        omitted_files: Manifest files known to be absent (weights and rollout logs left out of a results-only import).
         problems: One line per problem; empty for a healthy store.
     """
 
@@ -44,6 +46,7 @@ class VerifyReport:
     refs: int = 0
     temp_files: int = 0
     omitted: int = 0
+    omitted_files: int = 0
     problems: list[str] = field(default_factory=list)
 
     @property
@@ -76,7 +79,8 @@ class GcReport:
         reachable: Objects reachable from some version of some ref (kept).
         removed: The unreachable objects, by id.
         temp_files: Leftover temp files under ``tmp/``.
-        omitted: Reachable inputs known to be absent (trainer states left out of a weights-only import).
+        omitted: Reachable inputs and files known to be absent (left out of a weights-only or results-only
+            import: trainer states, weights, rollout logs).
     """
 
     dry_run: bool
@@ -116,52 +120,65 @@ class Walk:
     """What :func:`walk` reached.
 
     Attributes:
-        ids: Every id reachable, stored or not, except the known-absent inputs.
-        absent: Known-absent inputs (id -> role): left out of a weights-only import (``shallow/``) or, by
-            ``omit_roles``, left out of this walk (and reached by nothing else).
+        ids: Every id reachable, stored or not, except the known-absent inputs and files.
+        absent: Known-absent inputs (id -> role): left out of an import (``shallow/``) or, by the walk's
+            ``leave_out``, left out of this walk (and reached by nothing else).
+        absent_files: Known-absent files (id -> file name), the same way.
     """
 
     ids: set[str] = field(default_factory=set)
     absent: dict[str, str] = field(default_factory=dict)
+    absent_files: dict[str, str] = field(default_factory=dict)
+
+    def left_out(self) -> set[str]:
+        """Every known-absent id, input or file."""
+        return set(self.absent) | set(self.absent_files)
 
 
-def walk(store: Store, roots: Iterable[str], *, strict: bool = True,
-         omit_roles: frozenset[str] = frozenset()) -> Walk:
-    """Every id reachable from ``roots`` (manifest -> files and inputs, recursively), and the known-absent inputs.
+def walk(store: Store, roots: Iterable[str], *, strict: bool = True, leave_out: LeaveOut = NOTHING) -> Walk:
+    """Every id reachable from ``roots`` (manifest -> files and inputs, recursively), and the known-absent ones.
 
     Roots and inputs must be manifests. Ids that are not stored are included (they are referenced) but not
-    followed. An input under a role of :data:`~morfic_cli.store.shallow.OMITTABLE_ROLES` that is missing but
-    marked omitted (``shallow/<id>``) is known-absent, not damage; inputs under ``omit_roles`` are not followed
-    (a weights-only export) unless something else reaches them.
+    followed. An input under a role of :data:`~morfic_cli.store.shallow.OMITTABLE_ROLES`, or a file under a name
+    of :data:`~morfic_cli.store.shallow.OMITTABLE_FILES`, that is missing but marked omitted (``shallow/<id>``) is
+    known-absent, not damage; inputs under ``leave_out.roles`` and files named in ``leave_out.files`` are not
+    followed (a weights-only or results-only export) unless something else reaches them.
 
     Args:
         store: The store.
         roots: Manifest ids (every version of the refs).
         strict: Raise when a root or input is missing (and not known-absent) or is not a readable manifest:
             what it names is then unknown, so gc and export must not guess.
-        omit_roles: Input roles to leave out (a subset of ``OMITTABLE_ROLES``).
+        leave_out: What to leave out of this walk.
 
     Raises:
         StoreError: ``strict`` and some reachable manifest cannot be read; the message lists them.
     """
-    assert omit_roles <= OMITTABLE_ROLES, omit_roles
     seen: set[str] = set()
     manifests: set[str] = set()
     damaged: dict[str, str] = {}
     absent: dict[str, str] = {}
+    absent_files: dict[str, str] = {}
     skipped: dict[str, str] = {}
-    stack: list[tuple[str, str | None]] = [(oid, "") for oid in roots]  # role: "" root, None a file
+    skipped_files: dict[str, str] = {}
+    # (id, role, file name): role "" a root, None a file (then its name)
+    stack: list[tuple[str, str | None, str]] = [(oid, "", "") for oid in roots]
     while stack:
         while stack:
-            oid, role = stack.pop()
+            oid, role, name = stack.pop()
             must_be_manifest = role is not None
             if oid in seen and not (must_be_manifest and oid not in manifests and oid not in damaged):
                 continue
+            if not store.objects.has(oid) and store.omitted.has(oid):
+                if must_be_manifest and role in OMITTABLE_ROLES:
+                    absent[oid] = role
+                    continue
+                if not must_be_manifest and name in OMITTABLE_FILES:
+                    absent_files.setdefault(oid, name)
+                    continue
             seen.add(oid)
             if not store.objects.has(oid):
-                if must_be_manifest and role in OMITTABLE_ROLES and store.omitted.has(oid):
-                    absent[oid] = role
-                elif must_be_manifest:
+                if must_be_manifest:
                     damaged[oid] = "missing"
                 continue
             expected = must_be_manifest or store.index.has(oid)
@@ -174,22 +191,29 @@ def walk(store: Store, roots: Iterable[str], *, strict: bool = True,
                     damaged[oid] = "corrupt" if "corrupt" in str(exc) else "not a readable manifest"
                 continue
             manifests.add(oid)
-            stack.extend((f.id, None) for f in manifest.files.values())
+            for file_name, entry in manifest.files.items():
+                if file_name in leave_out.files:
+                    skipped_files.setdefault(entry.id, file_name)
+                else:
+                    stack.append((entry.id, None, file_name))
             for input_role, input_id in manifest.inputs.items():
-                if input_role in omit_roles:
+                if input_role in leave_out.roles:
                     skipped.setdefault(input_id, input_role)
                 else:
-                    stack.append((input_id, input_role))
+                    stack.append((input_id, input_role, ""))
         # an omitted input that something else reaches (seen, say, as a plain file) is walked after all
-        stack = [(oid, skipped.pop(oid)) for oid in sorted(skipped) if oid in seen and oid not in manifests]
+        stack = [(oid, skipped.pop(oid), "") for oid in sorted(skipped) if oid in seen and oid not in manifests]
     absent.update((oid, role) for oid, role in skipped.items() if oid not in seen)
+    absent_files.update((oid, name) for oid, name in skipped_files.items() if oid not in seen and oid not in absent)
+    for oid in seen & set(absent_files):  # reached as something kept after all
+        del absent_files[oid]
     if strict and damaged:
         listed = ", ".join(f"{oid} ({why})" for oid, why in sorted(damaged.items())[:10])
         more = f" and {len(damaged) - 10} more" if len(damaged) > 10 else ""
         raise StoreError(f"{len(damaged)} manifest(s) reachable from refs cannot be read: {listed}{more}; what "
                          "they name is unknown, so refusing to delete or export anything. Run `morfic store "
                          "verify`, restore them (`morfic store import` of an export that holds them), then retry.")
-    return Walk(ids=seen - set(absent), absent=absent)
+    return Walk(ids=seen - set(absent), absent=absent, absent_files=absent_files)
 
 
 def closure(store: Store, roots: Iterable[str], *, strict: bool = True) -> set[str]:
@@ -225,9 +249,9 @@ def collect_garbage(store: Store, *, dry_run: bool = True) -> GcReport:
             report.removed.append(GcItem(id=oid, kind=kind, size=store.objects.size(oid)))
     leftovers = temp_files(store)
     report.temp_files = len(leftovers)
-    report.omitted = len(reached.absent)
+    report.omitted = len(reached.left_out())
     if not dry_run:
-        _delete(store, [item.id for item in report.removed], leftovers, set(reached.absent))
+        _delete(store, [item.id for item in report.removed], leftovers, reached.left_out())
     return report
 
 
@@ -300,7 +324,9 @@ def _verify_index(store: Store, report: VerifyReport) -> None:
 
 def _verify_manifest_links(store: Store, manifest: Manifest, report: VerifyReport) -> None:
     for name, entry in manifest.files.items():
-        if not store.objects.has(entry.id):
+        if name in OMITTABLE_FILES and store.is_omitted(entry.id):
+            report.omitted_files += 1
+        elif not store.objects.has(entry.id):
             report.problems.append(f"manifest {manifest.id}: file '{name}' object {entry.id} is missing")
         elif store.objects.size(entry.id) != entry.size:
             report.problems.append(f"manifest {manifest.id}: file '{name}' size {entry.size} does not "

@@ -3,7 +3,8 @@
 The tar mirrors the store layout and holds the closure of the named refs::
 
     morfic-export.json           {"format": 1, "morfic_version": ..., "refs": [...], "objects": N}
-                                 (+ "omitted": {id: "trainer_state"} in a weights-only export)
+                                 (+ "omitted": {id: "trainer_state"} in a weights-only export,
+                                  + "omitted_files": {id: "model.pt"} in a results-only one)
     objects/ab/cdef...           every object reachable from any version of those refs
     manifests/<id>               index markers of the manifests among them
     refs/<name>                  the full history of each named ref
@@ -14,9 +15,11 @@ becomes visible (see :func:`import_tar`), adds only what is missing or corrupt h
 ref history (see :func:`morfic_cli.store.refs.merge_status`); it is idempotent and all or nothing.
 
 A weights-only export (``without_trainer_state``) leaves out the ``trainer_state`` inputs of the checkpoints
-and lists them under ``omitted``; its manifests are the store's, byte for byte. Importing one records the
-omitted ids the store lacks under ``shallow/`` (:mod:`morfic_cli.store.shallow`); exporting from such a store
-stays weights-only by itself.
+and lists them under ``omitted``; a results-only export (``results_only``, refs chosen by
+:mod:`morfic_cli.store.results`) also leaves out the weight and rollout-log files and lists them under
+``omitted_files``. Their manifests are the store's, byte for byte. Importing one records the omitted ids the
+store lacks under ``shallow/`` (:mod:`morfic_cli.store.shallow`); exporting from such a store leaves them out
+(and lists them) by itself.
 """
 
 from __future__ import annotations
@@ -50,7 +53,8 @@ from morfic_cli.store.refs import (
     merge_status,
     next_entry,
 )
-from morfic_cli.store.shallow import OMITTABLE_ROLES
+from morfic_cli.store.results import results_histories
+from morfic_cli.store.shallow import NOTHING, OMITTABLE_FILES, OMITTABLE_ROLES, RESULTS_ONLY, WEIGHTS_ONLY
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -72,6 +76,8 @@ class ExportReport:
         objects: Objects in the tar.
         bytes: Their total size.
         omitted: Inputs left out (id -> role ``trainer_state``), listed in the header; empty for a full export.
+        omitted_files: Files left out (id -> file name: ``model.pt``, ``rollout.mcap``, ``obs.npz``), listed in
+            the header; empty but for a results-only export.
     """
 
     path: Path
@@ -79,6 +85,7 @@ class ExportReport:
     objects: int = 0
     bytes: int = 0
     omitted: dict[str, str] = field(default_factory=dict)
+    omitted_files: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -92,7 +99,8 @@ class ImportReport:
         manifests: Manifests indexed.
         refs: Ref name -> ``created``, ``extended`` or ``unchanged``.
         omitted: Inputs the (weights-only) export left out and this store lacks, now recorded under ``shallow/``.
-        filled: Inputs this store had recorded as left out and that this import brought.
+        omitted_files: Files the (results-only) export left out and this store lacks, recorded the same way.
+        filled: Inputs and files this store had recorded as left out and that this import brought.
     """
 
     objects_added: int = 0
@@ -101,6 +109,7 @@ class ImportReport:
     manifests: int = 0
     refs: dict[str, str] = field(default_factory=dict)
     omitted: list[str] = field(default_factory=list)
+    omitted_files: list[str] = field(default_factory=list)
     filled: list[str] = field(default_factory=list)
 
 
@@ -163,7 +172,7 @@ def export_path(out_dir: Path, refs: list[str], name: str | None = None, *, forc
 
 
 def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False,
-               without_trainer_state: bool = False) -> ExportReport:
+               without_trainer_state: bool = False, results_only: bool = False) -> ExportReport:
     """Write the closure of ``refs`` (objects and ref histories) to the tar file ``out``.
 
     With ``latest``, only each ref's current version goes in, as a one-version history (version 1 in the
@@ -175,9 +184,15 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
     resumed. Inputs this store itself lacks because it imported such a bundle are left out (and listed) in
     any case.
 
+    With ``results_only``, ``refs`` are runs and the tar holds their results
+    (:func:`morfic_cli.store.results.results_histories` picks the refs and history prefixes; ``latest`` changes
+    nothing) without the trainer states, weights and rollout logs (listed under ``omitted`` and
+    ``omitted_files``): a bundle that ``morfic report`` reads, but that cannot evaluate, diagnose or resume.
+
     Raises:
         ArtifactNotFoundError: A name that is not a ref.
-        StoreError: A reachable object is missing (run ``verify``) or ``out`` cannot be written.
+        StoreError: A reachable object is missing (run ``verify``), ``out`` cannot be written, or (results only)
+            a ref that is not a run or a run without results.
     """
     names = sorted(set(refs))
     out = Path(out)
@@ -193,19 +208,24 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
     for name in names:
         if not store.refs.exists(check_ref_name(name)):
             raise ArtifactNotFoundError(f"no ref '{name}' in store {store.root}; try `morfic store ls`.")
-    report = ExportReport(path=out, refs=names)
     with store.reading():
-        histories = {name: store.refs.history(name) for name in names}
-        if latest:
-            histories = {name: [RefEntry(1, h[-1].id, h[-1].time)] for name, h in histories.items()}
-        reached = walk(store, [entry.id for h in histories.values() for entry in h],
-                       omit_roles=OMITTABLE_ROLES if without_trainer_state else frozenset())
+        if results_only:
+            histories = results_histories(store, names)
+            names = sorted(histories)
+        else:
+            histories = {name: store.refs.history(name) for name in names}
+            if latest:
+                histories = {name: [RefEntry(1, h[-1].id, h[-1].time)] for name, h in histories.items()}
+        report = ExportReport(path=out, refs=names)
+        leave_out = RESULTS_ONLY if results_only else WEIGHTS_ONLY if without_trainer_state else NOTHING
+        reached = walk(store, [entry.id for h in histories.values() for entry in h], leave_out=leave_out)
         ids = sorted(reached.ids)
         missing = [oid for oid in ids if not store.objects.has(oid)]
         if missing:
             raise StoreError(f"cannot export: {len(missing)} reachable object(s) are missing (first: "
                              f"{missing[0]}); run `morfic store verify`.")
         report.omitted = dict(sorted(reached.absent.items()))
+        report.omitted_files = dict(sorted(reached.absent_files.items()))
         _write_tar(store, out, names, histories, ids, report)
     return report
 
@@ -221,6 +241,8 @@ def _write_tar(store: Store, out: Path, names: list[str], histories: dict[str, l
             header = {"format": EXPORT_FORMAT, "morfic_version": __version__, "objects": len(ids), "refs": names}
             if report.omitted:  # a full export's header (and bytes) stay what they always were
                 header["omitted"] = report.omitted
+            if report.omitted_files:
+                header["omitted_files"] = report.omitted_files
             _add_bytes(tar, HEADER, json.dumps(header, sort_keys=True, indent=1).encode())
             for oid in ids:
                 path = store.objects.path(oid)
@@ -247,7 +269,7 @@ def _write_tar(store: Store, out: Path, names: list[str], histories: dict[str, l
 MAX_SMALL_MEMBER = 16 << 20
 
 _HEADER_KEYS = frozenset({"format", "morfic_version", "objects", "refs"})
-_OPTIONAL_HEADER_KEYS = frozenset({"omitted"})
+_OPTIONAL_HEADER_KEYS = frozenset({"omitted", "omitted_files"})
 
 
 @dataclass
@@ -322,6 +344,10 @@ class _Plan:
     histories: dict[str, list[RefEntry]] = field(default_factory=dict)
     omitted: list[str] = field(default_factory=list)
     """Ids the export declares left out (``trainer_state`` inputs of its manifests)."""
+    omitted_files: list[str] = field(default_factory=list)
+    """Ids of the files the export declares left out (weights and rollout logs of its manifests)."""
+    objects: list[str] = field(default_factory=list)
+    """Every object id the tar holds."""
 
 
 def import_tar(store: Store, path: Path, *, append: bool = False) -> ImportReport:
@@ -399,19 +425,23 @@ def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
                          f"{len(sizes)}; nothing was imported. Re-export it.")
     exported = set(members.manifests)
     omitted: dict[str, str] = header["omitted"]
-    both = sorted(set(omitted) & (exported | set(sizes)))
+    omitted_files: dict[str, str] = header["omitted_files"]
+    both = sorted((set(omitted) | set(omitted_files)) & (exported | set(sizes)))
     if both:
         raise StoreError(f"{path} is inconsistent: its header lists {both[0]} as left out, yet it holds it; "
                          "nothing was imported. Re-export it.")
     named: set[str] = set()
     for oid in sorted(exported):
-        named |= _check_manifest(store, oid, plan, sizes, exported, omitted)
-    unnamed = sorted(set(omitted) - named)
+        named |= _check_manifest(store, oid, plan, sizes, exported, omitted, omitted_files)
+    unnamed = sorted((set(omitted) | set(omitted_files)) - named)
     if unnamed:
-        raise StoreError(f"{path} is inconsistent: its header lists {unnamed[0]} as a left-out trainer state, but "
-                         "no manifest in it names that input; nothing was imported. Re-export it.")
+        what = ("trainer state", "input") if unnamed[0] in omitted else (omitted_files[unnamed[0]], "file")
+        raise StoreError(f"{path} is inconsistent: its header lists {unnamed[0]} as a left-out {what[0]}, but "
+                         f"no manifest in it names that {what[1]}; nothing was imported. Re-export it.")
     plan.manifests = sorted(exported)
     plan.omitted = sorted(omitted)
+    plan.omitted_files = sorted(omitted_files)
+    plan.objects = sorted(sizes)
     for name, member in sorted(members.refs.items()):
         history = decode_history(name, _read_small(tar, member, f"ref '{name}'", path))
         if not history:
@@ -469,19 +499,23 @@ def _read_header(tar: tarfile.TarFile, members: _Members, path: Path) -> dict:
     if not isinstance(header["morfic_version"], str) or len(header["morfic_version"]) > 100:
         raise bad
     header["refs"] = sorted(refs)
-    header["omitted"] = _read_omitted(header.get("omitted", {}), bad, path)
+    header["omitted"] = _read_omitted(header.get("omitted", {}), bad, path, OMITTABLE_ROLES, "input")
+    header["omitted_files"] = _read_omitted(header.get("omitted_files", {}), bad, path, OMITTABLE_FILES, "file")
     return header
 
 
-def _read_omitted(omitted: object, bad: StoreError, path: Path) -> dict[str, str]:
-    """The header's ``omitted`` map (id -> role), checked: full ids, and only roles a bundle may leave out."""
+def _read_omitted(omitted: object, bad: StoreError, path: Path, allowed: frozenset[str], what: str) -> dict[str, str]:
+    """The header's ``omitted`` (id -> role) or ``omitted_files`` (id -> file name) map, checked.
+
+    Full ids, and only the roles or file names (``allowed``) a bundle may leave out.
+    """
     if not (isinstance(omitted, dict) and all(isinstance(k, str) and is_object_id(k) for k in omitted)):
         raise bad
-    for oid, role in omitted.items():
-        if role not in OMITTABLE_ROLES:
-            shown = role[:40] if isinstance(role, str) else type(role).__name__
-            raise StoreError(f"{path} leaves out input {oid} as {shown!r}, but a bundle may only leave out "
-                             f"{', '.join(sorted(OMITTABLE_ROLES))} inputs; nothing was imported. Export it again "
+    for oid, label in omitted.items():
+        if label not in allowed:
+            shown = label[:40] if isinstance(label, str) else type(label).__name__
+            raise StoreError(f"{path} leaves out {what} {oid} as {shown!r}, but a bundle may only leave out "
+                             f"{', '.join(sorted(allowed))} {what}s; nothing was imported. Export it again "
                              "with everything it needs.")
     return dict(omitted)
 
@@ -500,10 +534,11 @@ def _hash_stream(chunks: Iterator[bytes]) -> tuple[str, int]:
 
 
 def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], exported: set[str],
-                    omitted: dict[str, str]) -> set[str]:
+                    omitted: dict[str, str], omitted_files: dict[str, str]) -> set[str]:
     """Parse an exported manifest strictly and check that everything it names is there, with the right size.
 
-    An input may instead be declared left out (``omitted``), under its own role, which must be ``trainer_state``.
+    An input may instead be declared left out (``omitted``), under its own role, which must be ``trainer_state``;
+    a file (``omitted_files``) under a name of ``OMITTABLE_FILES``.
     Returns the declared-omitted ids this manifest names.
     """
     if oid in plan.staged:
@@ -519,17 +554,25 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
         raise StoreError(f"the export lists manifest {oid} but does not contain it; nothing was imported. "
                          "Re-export it.")
     manifest = parse_manifest(oid, data)
+    named: set[str] = set()
     for name, entry in manifest.files.items():
         size = sizes.get(entry.id)
         if size is None and store.objects.intact(entry.id):
             size = store.objects.size(entry.id)
+        if entry.id in omitted_files:
+            if name not in OMITTABLE_FILES:
+                raise StoreError(f"manifest {oid} in the export names the left-out file {entry.id} as '{name}', "
+                                 f"but only {', '.join(sorted(OMITTABLE_FILES))} files may be left out; nothing was "
+                                 "imported. Export it again with everything it needs.")
+            named.add(entry.id)
+            if size is None:
+                continue
         if size is None:
             raise StoreError(f"the export is incomplete: manifest {oid} names {entry.id} (file '{name}'), which "
                              "is neither in the export nor intact in this store; nothing was imported. Re-export it.")
         if size != entry.size:
             raise StoreError(f"manifest {oid} declares file '{name}' as {entry.size} bytes, but its object has "
                              f"{size}; nothing was imported. It was not made by morfic.")
-    named: set[str] = set()
     for role, input_id in manifest.inputs.items():
         if input_id in omitted:
             if omitted[input_id] != role:
@@ -561,14 +604,15 @@ def _commit(store: Store, plan: _Plan, report: ImportReport, append: bool = Fals
             for oid in plan.manifests:
                 store.index.add(oid)
             report.manifests = len(plan.manifests)
-            for oid in plan.manifests:
-                if store.omitted.has(oid):  # a full bundle after a weights-only one: the gap is filled
+            for oid in plan.objects:
+                if store.omitted.has(oid):  # a fuller bundle after a weights- or results-only one: the gap is filled
                     store.omitted.remove(oid)
                     report.filled.append(oid)
-            for oid in plan.omitted:
-                if not store.objects.has(oid):
-                    store.omitted.add(oid)
-                    report.omitted.append(oid)
+            for oids, recorded in ((plan.omitted, report.omitted), (plan.omitted_files, report.omitted_files)):
+                for oid in oids:
+                    if not store.objects.has(oid):
+                        store.omitted.add(oid)
+                        recorded.append(oid)
         except OSError as exc:
             raise store_os_error(exc, "importing objects", store.root) from exc
         written: list[str] = []

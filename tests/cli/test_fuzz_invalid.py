@@ -135,6 +135,8 @@ ROWS: list[tuple[str, ...]] = [
     ("store", "export", "runs/film-s0", "--out", "{T}", "--name", "good"),
     ("store", "export", "runs/film-s0", "--out", "{T}", "--name", "../x"),
     ("store", "export", "runs/film-s0", "--out", "{T}", "--name", ""),
+    ("store", "export", "runs/film-s0", "--out", "{T}/bundles", "--results-only"),  # a run without results
+    ("store", "export", "runs/nothing", "--out", "{T}/bundles", "--results-only"),
     ("store", "import", "{T}/missing.tar"),
     ("store", "import", "{DIR}"),
     ("store", "import", "{FILE}"),

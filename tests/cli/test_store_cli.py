@@ -115,7 +115,8 @@ def test_export_import_round_trip(filled, tmp_path):
         objects = [m for m in t.getmembers() if m.name.startswith("objects/")]
     # 3 manifests (checkpoint, both run versions) and 3 files (model.pt, c.csv twice)
     assert json.loads(result.stdout) == {"path": str(tar), "refs": ["runs/film-s0"], "objects": 6,
-                                         "bytes": sum(m.size for m in objects), "omitted": []} and len(objects) == 6
+                                         "bytes": sum(m.size for m in objects), "omitted": [],
+                                         "omitted_files": []} and len(objects) == 6
     dst = tmp_path / "dst"
     rows = json.loads(_invoke("import", str(tar), "--store", str(dst), "-f", "json").stdout)
     assert rows == [{"ref": "runs/film-s0", "status": "created"}]

@@ -1,0 +1,164 @@
+"""A smoke experiment shipped results-only (`store export runs/NAME --results-only`): reports, won't run.
+
+The source store is made the way scripts/experiment_queue.sh makes the experiment's: `reproduce --seeds 1`, then
+`reproduce --seeds 2` (a reduced protocol: 2 robots, one command), so ``diagnoses/calibration`` and
+``diagnoses/fixed-rollout/aliengo`` are shared by both seeds' runs.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tarfile
+
+import pytest
+from crafted_bundles import listing
+
+from morfic_cli.store import Store
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+RUN = "runs/film-smoke-s1"
+HEAVY = ("model.pt", "rollout.mcap", "obs.npz")
+
+
+def _reproduce(store: Store, seeds: int) -> None:
+    from morfic_cli.pipeline import Pipeline, ReproduceCfg
+
+    cfg = ReproduceCfg(preset="smoke", variants=("film",), seeds=seeds, robots=("go2", "aliengo"), command_vx=(2.0,),
+                       modes=("descriptor",), eval_envs=2, eval_steps=5, diagnose_envs=2, diagnose_steps=80,
+                       trunc_eps=0.5, fixed_rollout_robots=("aliengo",), torch_threads=1)
+    assert not Pipeline(store, cfg).run().interrupted
+
+
+@pytest.fixture(scope="module")
+def bundles(tmp_path_factory):
+    """The source store; the run's results-only, weights-only and full (--latest) bundles."""
+    base = tmp_path_factory.mktemp("results-only")
+    src = Store(base / "src")
+    _reproduce(src, 1)
+    _reproduce(src, 2)
+    results = src.export_tar([RUN], base / "results.tar", results_only=True)
+    weights = src.export_tar([RUN], base / "weights.tar", latest=True, without_trainer_state=True)
+    full = src.export_tar([RUN], base / "full.tar", latest=True)
+    return src, results, weights, full
+
+
+def _imported(tmp_path, *reports, name: str = "dst") -> Store:
+    store = Store(tmp_path / name)
+    for report in reports:
+        store.import_tar(report.path)
+    return store
+
+
+def _tar_objects(path) -> set[str]:
+    with tarfile.open(path) as tar:
+        return {n[8:10] + n[11:] for n in tar.getnames() if n.startswith("objects/")}
+
+
+def test_the_bundle_holds_the_results_and_none_of_the_weights_or_logs(bundles):
+    src, results, weights, full = bundles
+    assert results.refs == ["diagnoses/calibration", "diagnoses/fixed-rollout/aliengo", "evals/film-smoke-s1", RUN]
+    # every weight, trainer state and rollout log in the source store, found by kind and file name
+    heavy, states = set(), set()
+    for oid in src.index.ids():
+        manifest = src.read_manifest(oid)
+        heavy |= {e.id for n, e in manifest.files.items() if n in HEAVY}
+        if manifest.config.get("role") == "trainer-state":
+            states |= {oid, *(e.id for e in manifest.files.values())}
+    in_tar = _tar_objects(results.path)
+    assert in_tar and not in_tar & (heavy | states)
+    assert set(results.omitted_files) <= heavy and set(results.omitted) <= states
+    assert {results.omitted_files[e.id] for e in src.read_manifest(RUN).files.values() if e.id in
+            results.omitted_files} == {"model.pt"}
+    # the results are in: the eval table, both calibration tables, the fixed-rollout table, the run's curve
+    for ref, file in (("evals/film-smoke-s1", "eval.csv"), ("diagnoses/calibration", "calibration.csv"),
+                      ("diagnoses/calibration@1", "calibration.csv"), ("diagnoses/fixed-rollout/aliengo",
+                                                                        "fixed_rollout.csv"), (RUN, "curve.csv")):
+        assert src.read_manifest(ref).files[file].id in in_tar, ref
+    # sizes: the whole results bundle is smaller than the run's weights file alone
+    model = src.read_manifest(RUN).files["model.pt"]
+    assert results.path.stat().st_size < model.size < weights.path.stat().st_size < full.path.stat().st_size
+    assert results.bytes == sum(src.objects.size(oid) for oid in in_tar)
+
+
+def test_import_gives_the_same_refs_and_ids(bundles, tmp_path):
+    src, results, _, _ = bundles
+    dst = _imported(tmp_path, results)
+    assert dst.list_refs() == results.refs
+    for name in results.refs[:-1]:
+        assert [(e.version, e.id, e.time) for e in dst.ref_history(name)] == [
+            (e.version, e.id, e.time) for e in src.ref_history(name)], name
+    last = src.ref_history(RUN)[-1]
+    assert [(e.version, e.id, e.time) for e in dst.ref_history(RUN)] == [(1, last.id, last.time)]
+    assert dst.get_bytes(last.id) == src.get_bytes(last.id)
+    assert sorted(dst.objects.iter_ids()) == sorted(_tar_objects(results.path))
+    check = dst.verify()
+    assert check.ok and check.omitted_files == len(results.omitted_files) and check.omitted == len(results.omitted)
+    assert dst.gc(dry_run=False).removed == []
+
+
+def _report_md(run_cli, store: Store, out) -> str:
+    code, _, err = run_cli("report", RUN, "--markdown", "--figures", "--out", str(out), "--store", str(store.root),
+                           "-q")
+    assert code == 0, err
+    return (out / "report.md").read_text()
+
+
+def test_report_over_the_imported_results_is_the_sources(run_cli, bundles, tmp_path):
+    from morfic_cli.report.compare import compare_tables
+    from morfic_cli.report.gather import gather, resolve_runs
+
+    src, results, _, _ = bundles
+    dst = _imported(tmp_path, results)
+    theirs, ours = (gather(s, resolve_runs(s, [RUN])) for s in (src, dst))
+    assert len(ours.evals) == 2 and len(ours.calibration) == 2 and len(ours.fixed) == 2  # go2, aliengo; MC + s1
+    for field in ("evals", "calibration", "fixed", "curves"):
+        assert getattr(ours, field) == getattr(theirs, field), field
+    assert compare_tables(ours, with_paper=True) == compare_tables(theirs, with_paper=True)
+    # the report itself: the same text up to its provenance (whose support-table id is per store), the same figures
+    copy = Store(tmp_path / "copy")
+    shutil.copytree(src.root, copy.root)
+    mine, source = _report_md(run_cli, dst, tmp_path / "mine"), _report_md(run_cli, copy, tmp_path / "source")
+    assert "| Go2 |" in mine and "| AlienGo |" in mine and "Frozen actor(s): film-smoke-s0." in mine
+    assert mine.split("## Provenance")[0] == source.split("## Provenance")[0]
+    figures = sorted(p.name for p in (tmp_path / "mine" / "figures").iterdir())
+    assert "speed-film-smoke-s1-aliengo.png" in figures and "curves.png" in figures
+    assert figures == sorted(p.name for p in (tmp_path / "source" / "figures").iterdir())
+
+
+COMMANDS = {
+    "eval": ("eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "4", "-q"),
+    "diagnose": ("diagnose", RUN, "--robots", "go2", "--envs", "2", "--steps", "30", "--trunc-eps", "0.8", "-q"),
+    "fixed-rollout": ("diagnose", "--fixed-rollout", "aliengo", "--actor", RUN, "--critics", RUN, "--envs", "2",
+                      "--steps", "30", "--trunc-eps", "0.8", "-q"),
+    "resume": ("train", "--resume", RUN, "-q"),
+    "play": ("play", RUN, "--robot", "go2", "--steps", "1", "-q"),
+    "export-rsl-rl": ("export", RUN, "--to", "rsl-rl", "--out", "OUT"),
+    "export-onnx": ("export", RUN, "--robot", "go2", "--out", "OUT"),
+}
+
+
+@pytest.mark.parametrize("what", sorted(COMMANDS))
+def test_what_needs_the_weights_is_an_error_and_changes_nothing(run_cli, bundles, tmp_path, what):
+    _, results, _, _ = bundles
+    dst = _imported(tmp_path, results)
+    before = listing(dst.root)
+    args = [str(tmp_path / "out") if a == "OUT" else a for a in COMMANDS[what]]
+    code, out, err = run_cli(*args, "--store", str(dst.root))
+    assert code == 1 and out == ""
+    assert err.startswith(f"Error: {RUN} was imported from a results-only bundle: its weights (model.pt) and trainer "
+                          "state were left out"), err
+    assert "Import a bundle with its weights first: its weights-only bundle (made by `morfic store export " \
+           f"{RUN} --latest --without-trainer-state`" in " ".join(err.split())
+    assert listing(dst.root) == before and not (tmp_path / "out").exists()
+
+
+def test_the_weights_only_bundle_on_top_makes_it_evaluate(run_cli, bundles, tmp_path):
+    _, results, weights, _ = bundles
+    dst = _imported(tmp_path, results, weights)
+    assert dst.ref_history(RUN)[-1].version == 1 and dst.verify().ok
+    code, _, err = run_cli("eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "4", "-q", "--store",
+                           str(dst.root))
+    assert code == 0, err
+    code, _, err = run_cli("train", "--resume", RUN, "-q", "--store", str(dst.root))
+    assert code == 1 and "was imported without its trainer state (a weights-only bundle)" in err
