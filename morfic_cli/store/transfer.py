@@ -230,6 +230,13 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
     return report
 
 
+def _umask() -> int:
+    """The process's umask (read by setting it and putting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def _write_tar(store: Store, out: Path, names: list[str], histories: dict[str, list[RefEntry]],
                ids: list[str], report: ExportReport) -> None:
     """Write the tar to a temp file next to ``out`` and rename it into place."""
@@ -256,6 +263,7 @@ def _write_tar(store: Store, out: Path, names: list[str], histories: dict[str, l
                     _add_bytes(tar, f"manifests/{oid}", b"", 0o444)
             for name in names:
                 _add_bytes(tar, f"refs/{name}", encode_history(histories[name]))
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; a bundle is a file to share, as `cp` would make it
         os.replace(tmp, out)
         tmp = None
     except OSError as exc:

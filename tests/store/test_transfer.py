@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import os
+import stat
 import tarfile
 
 import pytest
@@ -81,6 +83,19 @@ def test_export_is_deterministic(src, tmp_path):
     src.export_tar(["runs/b", "runs/a"], tmp_path / "1.tar")
     src.export_tar(["runs/a", "runs/b"], tmp_path / "2.tar")
     assert (tmp_path / "1.tar").read_bytes() == (tmp_path / "2.tar").read_bytes()
+
+
+def test_export_is_readable_as_the_umask_allows(src, tmp_path):
+    """A bundle is made to be shared: 0644 under umask 022 and 0640 under 027, not mkstemp's 0600."""
+    old = os.umask(0o022)
+    try:
+        src.export_tar(["runs/a"], tmp_path / "a.tar")
+        os.umask(0o027)
+        src.export_tar(["runs/a"], tmp_path / "b.tar")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "a.tar").stat().st_mode) == 0o644
+    assert stat.S_IMODE((tmp_path / "b.tar").stat().st_mode) == 0o640
 
 
 def test_import_extends_a_prefix_history(src, tmp_path):
