@@ -221,15 +221,15 @@ def run_rollouts(
     env = LocomotionEnv(cfg, mode=mode, robot=per_env, seed=seed)
     try:
         term_names = None
-        rec: dict[str, list[np.ndarray]] = {k: [] for k in (*RECORDED, "reward_terms")}
-        obs_rec: dict[str, list[np.ndarray]] = {g: [] for g in keep_obs}
+        rec: dict[str, np.ndarray] = {}  # key -> (T, N, ...), filled step by step
+        obs_rec: dict[str, np.ndarray] = {}
         obs = env.get_observations()
         nominal = env.params.nominal_height.float()
         gen = torch.Generator().manual_seed(seed) if sample_actions else None
         with torch.no_grad():
             for t in range(steps):
-                for group, kept in obs_rec.items():
-                    kept.append(obs[group].detach().cpu().numpy().astype(np.float32))
+                for group in keep_obs:
+                    _record(obs_rec, group, t, steps, obs[group].detach().cpu().numpy())
                 action = actor(obs)
                 if gen is not None:  # a ~ N(mean, std), rsl-rl's Gaussian with our generator
                     actor.distribution.update(action)
@@ -242,7 +242,7 @@ def run_rollouts(
                 step = step_record(env, action, value, reward, done, extras, nominal, term_names)
                 for key, value_t in step.items():
                     arr = value_t.detach().cpu().numpy()
-                    rec[key].append(arr if arr.dtype == np.bool_ else arr.astype(np.float32))
+                    _record(rec, key, t, steps, arr)
                 if on_step is not None:
                     on_step(t)
         descriptors = env.params.descriptor.double().cpu().numpy()
@@ -254,13 +254,19 @@ def run_rollouts(
         qpos_adr = None if info is None else np.asarray(info.qpos_adr)
     finally:
         env.close()
-    arrays = {k: np.stack(v) for k, v in rec.items()}
-    kept_obs = {g: np.stack(v) for g, v in obs_rec.items()}
+    arrays, kept_obs = rec, obs_rec
     out = {}
     for k, robot in enumerate(robots):
         envs = slice(k * num_envs, (k + 1) * num_envs)
-        pick = (lambda a: a) if len(robots) == 1 else (lambda a, envs=envs: np.ascontiguousarray(a[:, envs]))
+        pick = (lambda a: a) if len(robots) == 1 else (lambda a, envs=envs: a[:, envs])  # views, no copies
         out[robot] = Rollout(robot, mode, float(command_vx), seed, dt, term_names or [], descriptors[envs.start],
                              {key: pick(a) for key, a in arrays.items()}, models[k], qpos_adr,
                              {g: pick(a) for g, a in kept_obs.items()})
     return out
+
+
+def _record(buffers: dict[str, np.ndarray], key: str, t: int, steps: int, value: np.ndarray) -> None:
+    """Write step ``t``'s ``value`` (N, ...) into ``buffers[key]`` (T, N, ...): bool stays bool, else float32."""
+    if key not in buffers:
+        buffers[key] = np.empty((steps, *value.shape), dtype=np.bool_ if value.dtype == np.bool_ else np.float32)
+    buffers[key][t] = value
