@@ -8,7 +8,7 @@ pushes or sensor noise; command (vx, 0, 0); no time-out inside the rollout) with
 - the observation groups the models saw are kept per step (:data:`OBS_GROUPS`), so that any critic (its own
   history, privileged and morphology inputs, exactly as in training) and the actor can be scored on these samples.
 
-Store layout: one ``rollout`` manifest per (checkpoint, robot, mode, command, envs, steps, seed), config
+Store layout: one ``rollout`` manifest per (checkpoint, robot, mode, command, envs, steps, seed, batch), config
 :func:`rollout_config`, input ``checkpoint``, files ``rollout.mcap`` (the log of docs/mcap.md, with the sampled
 actions, rewards, the collecting critic's values, done and time-out flags) and ``obs.npz`` (the observation groups,
 see :func:`encode_obs`). Asking again for the same inputs finds that manifest (:func:`find_rollout`) and reads it
