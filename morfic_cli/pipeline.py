@@ -51,8 +51,8 @@ class ReproduceCfg:
         trunc_eps: eps of I_eps.
         batch_robots: Step the descriptor-mode rollouts of all ``robots`` as one env (each robot its slice of
             ``len(robots) x envs`` envs; :func:`~morfic_cli.evaluation.rollout.run_rollouts`) in the evaluation, the
-            diagnosis and the fixed-rollout analysis: same per-robot protocol, other random start states, about 2.5x
-            cheaper. The ``shipped`` quick protocol does; the paper's (``cpu``, ``paper``, ``--full-protocol``) not.
+            diagnosis and the fixed-rollout analysis: same per-robot protocol, other random start states, about half
+            the CPU time. The ``shipped`` quick protocol does; ``cpu``, ``paper`` and ``--full-protocol`` do not.
         fixed_rollout_robots: Targets of the fixed-rollout analysis.
         actor_variant: Variant whose seed-0 actor is frozen for the fixed-rollout analysis.
         device: Training device.
@@ -98,7 +98,7 @@ SHIPPED_TRAIN_PRESET = "cpu"
 #: 2.0 m/s) and its episode and diagnostic lengths, with 16 envs instead of 64 (at 16 envs a policy step costs
 #: little more than its fixed Python overhead, so fewer steps, not fewer envs, would be the real saving), the seven
 #: robots' 16 envs stepped as one batch of 112 (``batch_robots``: one policy call and one env step per step for all
-#: robots, about 2.5x cheaper than seven rollouts of 16; docs/benchmarks.md).
+#: robots, about half the CPU time of seven rollouts of 16; docs/benchmarks.md).
 SHIPPED_PROTOCOL: dict[str, Any] = {"modes": ("descriptor",), "command_vx": (2.0,), "eval_envs": 16,
                                     "eval_steps": 500, "diagnose_envs": 16, "diagnose_steps": 800,
                                     "batch_robots": True}

@@ -66,7 +66,7 @@ class DiagnoseCfg:
     batch: tuple[str, ...] = ()
     """Robots whose descriptor-mode rollouts are stepped together, as one env of ``len(batch) * num_envs`` envs,
     each robot its slice (:func:`~morfic_cli.evaluation.rollout.run_rollouts`); empty: each robot alone. Same
-    per-robot protocol, other random start states and action noise, about 2.5x cheaper for seven robots. The rollout
+    per-robot protocol, other random start states and action noise, about half the CPU time for 7 robots. The rollout
     manifests record it (``config["batch"]``), so a batched and an unbatched rollout are distinct artifacts."""
 
 

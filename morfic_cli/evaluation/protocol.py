@@ -52,7 +52,7 @@ class EvalCfg:
     batch_robots: bool = False
     """Step the descriptor-mode rollouts of all ``robots`` (per command) as one env of ``len(robots) * num_envs``
     envs, each robot its slice (:func:`~morfic_cli.evaluation.rollout.run_rollouts`): the same per-robot protocol
-    and metrics, other random start states, about 2.5x cheaper for seven robots. Full mode runs each robot alone."""
+    and metrics, other random start states, half the CPU time for seven robots. Full mode runs each robot alone."""
 
 
 def eval_config(spec: str, cfg: EvalCfg) -> dict[str, Any]:

@@ -187,7 +187,7 @@ def run_rollouts(
     differs from a rollout of the robot alone is the env's random draws (reset poses, gait phases, sampled actions
     come from one generator over the joint batch) and so the sampled start states, not their distribution. One
     robot is exactly :func:`run_rollout`. At 16 envs a policy step costs little more than its fixed Python and
-    model-call overhead, so seven robots in one batch cost about 2.5x one robot instead of 7x (docs/benchmarks.md).
+    model-call overhead, so seven robots in one batch cost about 3x one robot instead of 7x (docs/benchmarks.md).
 
     Args:
         actor: Trained actor, as in :func:`run_rollout`.
