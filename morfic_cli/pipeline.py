@@ -49,6 +49,10 @@ class ReproduceCfg:
         diagnose_envs: Envs per diagnostic rollout.
         diagnose_steps: Policy steps per diagnostic rollout (must exceed H_eps).
         trunc_eps: eps of I_eps.
+        batch_robots: Step the descriptor-mode rollouts of all ``robots`` as one env (each robot its slice of
+            ``len(robots) x envs`` envs; :func:`~morfic_cli.evaluation.rollout.run_rollouts`) in the evaluation, the
+            diagnosis and the fixed-rollout analysis: same per-robot protocol, other random start states, about half
+            the CPU time. The ``shipped`` quick protocol does; ``cpu``, ``paper`` and ``--full-protocol`` do not.
         fixed_rollout_robots: Targets of the fixed-rollout analysis.
         actor_variant: Variant whose seed-0 actor is frozen for the fixed-rollout analysis.
         device: Training device.
@@ -71,6 +75,7 @@ class ReproduceCfg:
     diagnose_envs: int = 64
     diagnose_steps: int = 800
     trunc_eps: float = 0.05
+    batch_robots: bool = False
     fixed_rollout_robots: tuple[str, ...] = ("aliengo", "mini_cheetah")
     actor_variant: str = "film"
     device: str = "cpu"
@@ -91,9 +96,12 @@ SHIPPED_TRAIN_PRESET = "cpu"
 #: The ``shipped`` preset's quick protocol, sized so that seven variants are evaluated, diagnosed and reported in
 #: about 10 minutes on 2 cores (docs/reproducing.md): the paper's main zero-shot table only (descriptor mode,
 #: 2.0 m/s) and its episode and diagnostic lengths, with 16 envs instead of 64 (at 16 envs a policy step costs
-#: little more than its fixed Python overhead, so fewer steps, not fewer envs, would be the real saving).
+#: little more than its fixed Python overhead, so fewer steps, not fewer envs, would be the real saving), the seven
+#: robots' 16 envs stepped as one batch of 112 (``batch_robots``: one policy call and one env step per step for all
+#: robots, about half the CPU time of seven rollouts of 16; docs/benchmarks.md).
 SHIPPED_PROTOCOL: dict[str, Any] = {"modes": ("descriptor",), "command_vx": (2.0,), "eval_envs": 16,
-                                    "eval_steps": 500, "diagnose_envs": 16, "diagnose_steps": 800}
+                                    "eval_steps": 500, "diagnose_envs": 16, "diagnose_steps": 800,
+                                    "batch_robots": True}
 
 
 def default_bundles() -> Path:
@@ -434,13 +442,15 @@ class Pipeline:
 
         c = self.cfg
         return EvalCfg(robots=c.robots, modes=c.modes, command_vx=c.command_vx, num_envs=c.eval_envs,
-                       steps=c.eval_steps, seed=0)
+                       steps=c.eval_steps, seed=0, batch_robots=c.batch_robots)
 
     def stored_eval(self, spec: str) -> StepResult | None:
         """The skipped result when the store holds this evaluation of ``spec``'s checkpoint, else None."""
         if not self.store.has_ref(spec):
             return None
-        config = _json({"spec": spec, **dataclasses.asdict(self.eval_cfg())})
+        from morfic_cli.evaluation.protocol import eval_config
+
+        config = _json(eval_config(spec, self.eval_cfg()))
         found = find_manifest(self.store, "eval", config, inputs_subset={"checkpoint": self.store.resolve(spec)},
                               files=("eval.csv",))
         return StepResult("eval", spec, "skipped", found) if found else None
@@ -461,18 +471,25 @@ class Pipeline:
         return StepResult("eval", spec, "done", res.id, f"{res.ref}@{res.version}")
 
     def diagnose_cfg(self, robots: tuple[str, ...]):
-        """The diagnosis config (the paper's: descriptor mode, 2.0 m/s)."""
+        """The diagnosis config (the paper's: descriptor mode, 2.0 m/s).
+
+        With ``batch_robots`` every robot's rollout is its slice of one env of all ``cfg.robots``, in the
+        fixed-rollout analysis too (so it reuses the diagnosis's rollouts of its actor).
+        """
         from morfic_cli.diagnostics.samples import DiagnoseCfg
 
         c = self.cfg
         return DiagnoseCfg(robots=robots, mode="descriptor", command_vx=2.0, num_envs=c.diagnose_envs,
-                           steps=c.diagnose_steps, seed=0, trunc_eps=c.trunc_eps)
+                           steps=c.diagnose_steps, seed=0, trunc_eps=c.trunc_eps,
+                           batch=c.robots if c.batch_robots else ())
 
     def stored_diagnosis(self, spec: str) -> StepResult | None:
         """The skipped result when the store holds this diagnosis of ``spec``'s checkpoint, else None."""
         if not self.store.has_ref(spec):
             return None
-        config = _json({"specs": [spec], **dataclasses.asdict(self.diagnose_cfg(self.cfg.robots))})
+        from morfic_cli.diagnostics.samples import diagnose_config
+
+        config = _json({"specs": [spec], **diagnose_config(self.diagnose_cfg(self.cfg.robots))})
         found = find_manifest(self.store, "diagnosis", config,
                               inputs_subset={f"checkpoint/{spec}": self.store.resolve(spec)},
                               files=("calibration.csv",))
@@ -503,8 +520,9 @@ class Pipeline:
         actor, critics = self.fixed_rollout_models()
         if not all(self.store.has_ref(spec) for spec in critics):
             return None
-        config = {"robot": robot, "actor": actor, "critics": critics,
-                  **dataclasses.asdict(self.diagnose_cfg((robot,)))}
+        from morfic_cli.diagnostics.samples import diagnose_config
+
+        config = {"robot": robot, "actor": actor, "critics": critics, **diagnose_config(self.diagnose_cfg((robot,)))}
         config.pop("robots")
         subset = {"actor": self.store.resolve(actor), **{f"critic/{c}": self.store.resolve(c) for c in critics}}
         found = find_manifest(self.store, "diagnosis", _json(config), inputs_subset=subset,

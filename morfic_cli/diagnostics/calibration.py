@@ -12,7 +12,6 @@ inputs ``checkpoint/<spec>`` and ``rollout/<spec>/<robot>``.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -23,7 +22,14 @@ import torch
 
 from morfic_cli.diagnostics.metrics import cos_grad, critic_advantage, critic_metrics, mc_advantage
 from morfic_cli.diagnostics.returns import mc_returns, min_horizon
-from morfic_cli.diagnostics.samples import DiagnoseCfg, Samples, collect_samples
+from morfic_cli.diagnostics.samples import (
+    DiagnoseCfg,
+    Samples,
+    batched,
+    collect_batch,
+    collect_samples,
+    diagnose_config,
+)
 from morfic_cli.diagnostics.scoring import actor_gradients, critic_values
 from morfic_cli.errors import MorficError
 from morfic_cli.runs import run_of
@@ -233,10 +239,19 @@ def diagnose_runs(
     for spec, model, label in zip(specs, models, labels, strict=True):
         inputs[f"checkpoint/{spec}"] = model.checkpoint_id
         gamma = model.cfg.ppo.gamma
+        joint: dict[str, Samples] | None = None  # the batched robots' samples (cfg.batch), collected at once
         for robot in cfg.robots:
-            if on_rollout_start is not None:
-                on_rollout_start(label, robot)
-            samples = collect_samples(store, model, robot, cfg, on_step=on_step)
+            if batched(robot, cfg):
+                if joint is None:
+                    if on_rollout_start is not None:
+                        on_rollout_start(label, "+".join(cfg.batch))
+                    each = None if on_step is None else (lambda t: [on_step(t) for _ in cfg.batch])
+                    joint = collect_batch(store, model, cfg, on_step=each)
+                samples = joint.pop(robot)
+            else:
+                if on_rollout_start is not None:
+                    on_rollout_start(label, robot)
+                samples = collect_samples(store, model, robot, cfg, on_step=on_step)
             inputs[f"rollout/{spec}/{robot}"] = samples.rollout_id
             ref = reference(samples, gamma, cfg)
             (scores,) = score_critics(model.actor, [model.critic], samples, ref, cfg, model.cfg.ppo.clip_param)
@@ -262,7 +277,7 @@ def diagnose_runs(
             )
     rows = [{**{k: row[k] for k in CALIBRATION_COLUMNS}, "reused": row["reused"]} for row in rows]
     png, pdf = ev_figure(rows)
-    config = {"specs": list(specs), **dataclasses.asdict(cfg)}
+    config = {"specs": list(specs), **diagnose_config(cfg)}
     pub = store.publish("diagnosis", CALIBRATION_REF, config=config, inputs=inputs, meta={"runs": labels},
                         files={"calibration.csv": rows_to_csv(rows, CALIBRATION_COLUMNS), "ev.png": png, "ev.pdf": pdf})
     return DiagnosisResult(rows, pub.id, CALIBRATION_REF, pub.version)

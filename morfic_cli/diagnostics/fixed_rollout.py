@@ -14,7 +14,6 @@ Store: one ``diagnosis`` manifest per call (ref ``diagnoses/fixed-rollout/<robot
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -23,7 +22,7 @@ import torch
 
 from morfic_cli.config import eval_env_cfg
 from morfic_cli.diagnostics.calibration import DiagnosisResult, check_horizon, reference, run_label, score_critics
-from morfic_cli.diagnostics.samples import DiagnoseCfg, collect_samples
+from morfic_cli.diagnostics.samples import DiagnoseCfg, collect_samples, diagnose_config
 from morfic_cli.errors import MorficError
 from morfic_cli.store import Store
 
@@ -246,7 +245,7 @@ def fixed_rollout(
         "rollout": samples.rollout_id,
         **{f"critic/{s}": c.checkpoint_id for s, c in zip(critic_specs, critics, strict=True)},
     }
-    config = {"robot": robot, "actor": actor_spec, "critics": critic_specs, **dataclasses.asdict(cfg)}
+    config = {"robot": robot, "actor": actor_spec, "critics": critic_specs, **diagnose_config(cfg)}
     config.pop("robots")
     ref_name = FIXED_ROLLOUT_PREFIX + robot
     pub = store.publish("diagnosis", ref_name, config=config, inputs=inputs,

@@ -8,7 +8,7 @@ pushes or sensor noise; command (vx, 0, 0); no time-out inside the rollout) with
 - the observation groups the models saw are kept per step (:data:`OBS_GROUPS`), so that any critic (its own
   history, privileged and morphology inputs, exactly as in training) and the actor can be scored on these samples.
 
-Store layout: one ``rollout`` manifest per (checkpoint, robot, mode, command, envs, steps, seed), config
+Store layout: one ``rollout`` manifest per (checkpoint, robot, mode, command, envs, steps, seed, batch), config
 :func:`rollout_config`, input ``checkpoint``, files ``rollout.mcap`` (the log of docs/mcap.md, with the sampled
 actions, rewards, the collecting critic's values, done and time-out flags) and ``obs.npz`` (the observation groups,
 see :func:`encode_obs`). Asking again for the same inputs finds that manifest (:func:`find_rollout`) and reads it
@@ -17,6 +17,7 @@ back instead of stepping the simulator.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import tempfile
@@ -31,6 +32,7 @@ from morfic_cli import __version__
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
+    from morfic_cli.evaluation.rollout import Rollout
     from morfic_cli.rl.runner import TrainedModels
 
 OBS_GROUPS: tuple[str, ...] = ("history", "critic", "privileged", "morphology")
@@ -61,6 +63,28 @@ class DiagnoseCfg:
     """eps of I_eps: a truncated return may miss at most this fraction of the return scale."""
     sigma_eps: float = 1e-8
     """eps of sigma_G + eps in NVB and NVE."""
+    batch: tuple[str, ...] = ()
+    """Robots whose descriptor-mode rollouts are stepped together, as one env of ``len(batch) * num_envs`` envs,
+    each robot its slice (:func:`~morfic_cli.evaluation.rollout.run_rollouts`); empty: each robot alone. Same
+    per-robot protocol, other random start states and action noise, about half the CPU time for 7 robots. The rollout
+    manifests record it (``config["batch"]``), so a batched and an unbatched rollout are distinct artifacts."""
+
+
+def diagnose_config(cfg: DiagnoseCfg) -> dict[str, Any]:
+    """``cfg`` as a manifest config.
+
+    ``batch`` is in it only when set, so an unbatched diagnosis keeps the config (and so the content address) it
+    always had.
+    """
+    config = dataclasses.asdict(cfg)
+    if not cfg.batch:
+        config.pop("batch")
+    return config
+
+
+def batched(robot: str, cfg: DiagnoseCfg) -> bool:
+    """Whether ``robot``'s rollout under ``cfg`` is its slice of a joint one (:attr:`DiagnoseCfg.batch`)."""
+    return cfg.mode == "descriptor" and len(cfg.batch) > 1 and robot in cfg.batch
 
 
 @dataclass
@@ -104,6 +128,7 @@ def rollout_config(robot: str, cfg: DiagnoseCfg) -> dict[str, Any]:
         "seed": cfg.seed,
         "actions": "sample",
         "obs_groups": list(OBS_GROUPS),
+        **({"batch": list(cfg.batch)} if batched(robot, cfg) else {}),
     }
 
 
@@ -182,14 +207,16 @@ def collect_samples(
 ) -> Samples:
     """The diagnostic rollout of ``trained``'s actor on ``robot``: reused from the store if there, else collected.
 
+    A robot of ``cfg.batch`` not in the store is collected with the whole batch (:func:`collect_batch`; every
+    robot's slice is stored).
+
     Args:
         store: Artifact store (a new rollout manifest is written there).
         trained: The checkpoint whose actor acts (:func:`~morfic_cli.rl.runner.load_trained`).
         robot: Target robot.
-        cfg: Rollout settings (mode, command, envs, steps, seed).
+        cfg: Rollout settings (mode, command, envs, steps, seed, batch).
         on_step: Progress callback per policy step (called ``steps`` times at once for a reused rollout).
     """
-    from morfic_cli.evaluation.protocol import write_rollout_log
     from morfic_cli.evaluation.rollout import run_rollout
 
     config = rollout_config(robot, cfg)
@@ -198,6 +225,8 @@ def collect_samples(
         for t in range(cfg.steps if on_step is not None else 0):
             on_step(t)  # the progress of a reused rollout is complete at once
         return load_samples(store, existing)
+    if batched(robot, cfg):
+        return collect_batch(store, trained, cfg, on_step=on_step)[robot]
     rollout = run_rollout(
         trained.actor,
         trained.critic,
@@ -212,10 +241,68 @@ def collect_samples(
         keep_obs=OBS_GROUPS,
         sample_actions=True,
     )
+    return _store_samples(store, trained, rollout, config, cfg)
+
+
+def collect_batch(
+    store: Store,
+    trained: TrainedModels,
+    cfg: DiagnoseCfg,
+    *,
+    on_step: Callable[[int], None] | None = None,
+) -> dict[str, Samples]:
+    """The diagnostic rollouts of every robot of ``cfg.batch`` (descriptor mode), stepped as one env.
+
+    When the store holds every robot's slice they are read back; otherwise the joint rollout runs once and each
+    robot missing from the store gets its rollout manifest (the stored ones are read back).
+
+    Args:
+        store: Artifact store (the new rollout manifests are written there).
+        trained: The checkpoint whose actor acts.
+        cfg: Rollout settings; ``cfg.batch`` names the robots.
+        on_step: Progress per joint policy step (``cfg.steps`` calls).
+
+    Returns:
+        Robot -> its samples, in the order of ``cfg.batch``.
+    """
+    from morfic_cli.evaluation.rollout import run_rollouts
+
+    configs = {robot: rollout_config(robot, cfg) for robot in cfg.batch}
+    found = {robot: find_rollout(store, trained.checkpoint_id, c) for robot, c in configs.items()}
+    if all(found.values()):
+        for t in range(cfg.steps if on_step is not None else 0):
+            on_step(t)
+        return {robot: load_samples(store, rid) for robot, rid in found.items()}
+    rollouts = run_rollouts(
+        trained.actor,
+        trained.critic,
+        trained.cfg.env,
+        robots=cfg.batch,
+        mode=cfg.mode,
+        command_vx=cfg.command_vx,
+        num_envs=cfg.num_envs,
+        steps=cfg.steps,
+        seed=cfg.seed,
+        on_step=on_step,
+        keep_obs=OBS_GROUPS,
+        sample_actions=True,
+    )
+    return {
+        robot: load_samples(store, found[robot]) if found[robot] else
+        _store_samples(store, trained, rollouts.pop(robot), configs[robot], cfg)
+        for robot in cfg.batch
+    }
+
+
+def _store_samples(store: Store, trained: TrainedModels, rollout: Rollout, config: dict[str, Any],
+                   cfg: DiagnoseCfg) -> Samples:
+    """Store a collected diagnostic rollout (MCAP log + observation groups) as a ``rollout`` manifest."""
+    from morfic_cli.evaluation.protocol import write_rollout_log
+
     meta = {
         "run": trained.meta.get("run"),
         "checkpoint": trained.checkpoint_id,
-        "robot": robot,
+        "robot": rollout.robot,
         "descriptor": [float(x) for x in rollout.descriptor],
         "mode": cfg.mode,
         "command": [float(cfg.command_vx), 0.0, 0.0],
@@ -236,5 +323,6 @@ def collect_samples(
         )
     a = rollout.arrays
     return Samples(
-        robot, cfg.mode, rollout.obs, a["action"], a["reward"], a["value"], a["done"], a["time_out"], rid, False
+        rollout.robot, cfg.mode, rollout.obs, a["action"], a["reward"], a["value"], a["done"], a["time_out"], rid,
+        False
     )

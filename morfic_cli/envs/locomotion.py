@@ -10,6 +10,7 @@ mode every env is the target's own generated model. See docs/concepts.md ("The e
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Literal
 
 import torch
@@ -58,7 +59,7 @@ class LocomotionEnv(VecEnv):
         cfg: EnvCfg,
         *,
         mode: Mode = "train",
-        robot: str = TEMPLATE,
+        robot: str | Sequence[str] = TEMPLATE,
         seed: int = 0,
     ) -> None:
         """Create the env.
@@ -67,14 +68,20 @@ class LocomotionEnv(VecEnv):
             cfg: Env config (``cfg.num_envs`` envs).
             mode: "train" (sample descriptors from the support), "descriptor" (Go2 template with
                 ``robot``'s descriptor) or "full" (``robot``'s own model).
-            robot: Target robot for "descriptor" / "full" modes (ignored in "train").
+            robot: Target robot for "descriptor" / "full" modes (ignored in "train"). In "descriptor" mode also
+                one target per env (a sequence of ``cfg.num_envs`` names): env i is the Go2 template with
+                ``robot[i]``'s descriptor, so several targets share one batch (``self.target`` is ``robot[0]``'s).
             seed: Seed of every random draw the env makes.
         """
         if mode not in MODES:
             raise ValueError(f"unknown env mode '{mode}'; valid modes are: {', '.join(MODES)}.")
+        per_env = None if isinstance(robot, str) else tuple(robot)
+        if per_env is not None and (mode != "descriptor" or len(per_env) != cfg.num_envs):
+            raise ValueError(f"one robot per env needs descriptor mode and {cfg.num_envs} names, got mode '{mode}' "
+                             f"and {len(per_env)} names.")
         self.cfg = cfg
         self.mode = mode
-        self.target: RobotSpec = load_robot(robot)
+        self.target: RobotSpec = load_robot(robot if per_env is None else per_env[0])
         self.spec: RobotSpec = self.target if mode == "full" else load_robot(TEMPLATE)
         self.num_envs = cfg.num_envs
         self.num_actions = NUM_JOINTS
@@ -86,9 +93,14 @@ class LocomotionEnv(VecEnv):
         self._support_lo = torch.as_tensor(TRAIN_MIN, dtype=torch.float32)
         self._support_hi = torch.as_tensor(TRAIN_MAX, dtype=torch.float32)
         self._alloc_buffers()
-        if mode == "descriptor":
+        if mode == "descriptor" and per_env is None:
             desc = torch.as_tensor(as_descriptor(self.target.descriptor), dtype=torch.float64)
             self.backend.set_morphology(self._all_ids, desc.expand(self.num_envs, -1).clone())
+        elif mode == "descriptor":
+            specs = {name: load_robot(name) for name in dict.fromkeys(per_env)}
+            desc = torch.stack([torch.as_tensor(as_descriptor(specs[name].descriptor), dtype=torch.float64)
+                                for name in per_env])
+            self.backend.set_morphology(self._all_ids, desc)
         self.params: SimParams = self.backend.params()
         self._reset_envs(self._all_ids)
         self._refresh_observations(self.backend.frame(), reset_ids=self._all_ids)

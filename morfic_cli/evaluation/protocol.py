@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from morfic_cli import __version__
 from morfic_cli.evaluation.metrics import paper_cell
-from morfic_cli.evaluation.rollout import Rollout, run_rollout
+from morfic_cli.evaluation.rollout import Rollout, run_rollout, run_rollouts
 from morfic_cli.runs import run_of
 from morfic_cli.store import Store
 
@@ -49,6 +49,27 @@ class EvalCfg:
     seed: int = 0
     scene_envs: int = 4
     """How many envs (the first ones) carry a 3D scene (geoms and body frames) in each MCAP log."""
+    batch_robots: bool = False
+    """Step the descriptor-mode rollouts of all ``robots`` (per command) as one env of ``len(robots) * num_envs``
+    envs, each robot its slice (:func:`~morfic_cli.evaluation.rollout.run_rollouts`): the same per-robot protocol
+    and metrics, other random start states, half the CPU time for seven robots. Full mode runs each robot alone."""
+
+
+def eval_config(spec: str, cfg: EvalCfg) -> dict[str, Any]:
+    """The config of the ``eval`` manifest of ``spec`` under ``cfg``.
+
+    ``batch_robots`` is in it only when set, so an unbatched evaluation keeps the config (and so the content
+    address) it always had.
+    """
+    config = {"spec": spec, **dataclasses.asdict(cfg)}
+    if not cfg.batch_robots:
+        config.pop("batch_robots")
+    return config
+
+
+def batched(cfg: EvalCfg, mode: str) -> bool:
+    """Whether ``cfg``'s rollouts in ``mode`` share one env (:attr:`EvalCfg.batch_robots`)."""
+    return cfg.batch_robots and mode == "descriptor" and len(cfg.robots) > 1
 
 
 @dataclass
@@ -125,15 +146,30 @@ def evaluate(
     distances = {r.robot: r.d for r in distance_table(list_robots())}  # span over the whole library, as `distance`
     run_name = run_of(spec, trained.meta)
     rows, rollouts, inputs = [], {}, {"checkpoint": trained.checkpoint_id}
+    keep = max(keep_models, cfg.scene_envs)
+    joint: dict[tuple[str, float], dict[str, Rollout]] = {}  # (mode, vx) -> the batched rollouts, robot -> rollout
+
+    def rollout_of(robot: str, mode: str, vx: float) -> Rollout:
+        if not batched(cfg, mode):
+            if on_rollout_start is not None:
+                on_rollout_start(robot, mode, vx)
+            return run_rollout(trained.actor, trained.critic, trained.cfg.env, robot=robot, mode=mode, command_vx=vx,
+                               num_envs=cfg.num_envs, steps=cfg.steps, seed=cfg.seed, on_step=on_step,
+                               keep_models=keep)
+        if (mode, vx) not in joint:
+            if on_rollout_start is not None:
+                on_rollout_start("+".join(cfg.robots), mode, vx)
+            each = None if on_step is None else (lambda t: [on_step(t) for _ in cfg.robots])
+            joint[(mode, vx)] = run_rollouts(trained.actor, trained.critic, trained.cfg.env, robots=cfg.robots,
+                                             mode=mode, command_vx=vx, num_envs=cfg.num_envs, steps=cfg.steps,
+                                             seed=cfg.seed, on_step=each, keep_models=keep)
+        return joint[(mode, vx)].pop(robot)
+
     with tempfile.TemporaryDirectory(prefix="morfic-eval-") as tmp:
         for robot in cfg.robots:
             for mode in cfg.modes:
                 for vx in cfg.command_vx:
-                    if on_rollout_start is not None:
-                        on_rollout_start(robot, mode, vx)
-                    rollout = run_rollout(trained.actor, trained.critic, trained.cfg.env, robot=robot, mode=mode,
-                                          command_vx=vx, num_envs=cfg.num_envs, steps=cfg.steps, seed=cfg.seed,
-                                          on_step=on_step, keep_models=max(keep_models, cfg.scene_envs))
+                    rollout = rollout_of(robot, mode, vx)
                     role = rollout_role(robot, mode, vx)
                     rollouts[role] = rollout
                     rows.append(metrics_row(rollout, distances.get(robot)))
@@ -145,14 +181,15 @@ def evaluate(
                     write_rollout_log(path, rollout, meta, cfg.scene_envs)
                     png, pdf = rollout_figure(rollout.arrays["base_lin_vel"][..., 0], rollout.terminated,
                                               rollout.dt, vx, f"{robot}, {mode} mode, command {vx:g} m/s")
+                    config = {"robot": robot, "mode": mode, "command_vx": vx, "num_envs": cfg.num_envs,
+                              "steps": cfg.steps, "seed": cfg.seed}
+                    if batched(cfg, mode):
+                        config["batch"] = list(cfg.robots)  # stepped as its slice of one env of these robots
                     inputs[role] = store.publish(
-                        "rollout", config={"robot": robot, "mode": mode, "command_vx": vx, "num_envs": cfg.num_envs,
-                                           "steps": cfg.steps, "seed": cfg.seed},
-                        inputs={"checkpoint": trained.checkpoint_id},
+                        "rollout", config=config, inputs={"checkpoint": trained.checkpoint_id},
                         files={"rollout.mcap": path, FIGURE_PNG: png, FIGURE_PDF: pdf},
                         meta={k: v for k, v in meta.items() if k != "term_names"}).id
-        config = {"spec": spec, **dataclasses.asdict(cfg)}
-        pub = store.publish("eval", EVALS_PREFIX + run_name, config=config, inputs=inputs,
+        pub = store.publish("eval", EVALS_PREFIX + run_name, config=eval_config(spec, cfg), inputs=inputs,
                             files={"eval.csv": rows_to_csv(rows, EVAL_COLUMNS)},
                             meta={"run": run_name, "iteration": trained.meta.get("iteration")})
     return EvalResult(rows, pub.id, pub.ref, pub.version, rollouts)

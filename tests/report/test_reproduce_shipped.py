@@ -77,6 +77,18 @@ def test_shipped_imports_evaluates_reports_and_a_rerun_does_nothing(bundles, tmp
     evals = store.read_manifest("evals/film-cpu-s0")
     assert evals.config["modes"] == ["descriptor"] and evals.config["command_vx"] == [2.0]
     assert evals.inputs["checkpoint"] == shipped.resolve("runs/film-cpu-s0")
+    # the quick protocol steps the robots as one batch, and every artifact says so
+    assert evals.config["batch_robots"] is True
+    for robot in ("go2", "aliengo"):
+        rollout = store.read_manifest(evals.inputs[f"rollout/{robot}/descriptor/vx2"])
+        assert rollout.config["batch"] == ["go2", "aliengo"] and rollout.config["num_envs"] == 2
+    diagnosis = store.read_manifest("diagnoses/calibration")
+    assert diagnosis.config["batch"] == ["go2", "aliengo"]
+    diag_rollout = store.read_manifest(diagnosis.inputs["rollout/runs/film-cpu-s0/aliengo"])
+    assert diag_rollout.config["batch"] == ["go2", "aliengo"] and diag_rollout.config["actions"] == "sample"
+    # the fixed-rollout analysis (film actor) reuses the diagnosis's rollout of film on aliengo
+    fixed = store.read_manifest("diagnoses/fixed-rollout/aliengo")
+    assert fixed.inputs["rollout"] == diag_rollout.id
     assert store.has_ref("reports/shipped") and (tmp_path / "out" / "report.md").is_file()
     md = (tmp_path / "out" / "report.md").read_text()
     assert "shipped preset" in md and "2 envs x 20 steps" in md  # the report names its reduced protocol
