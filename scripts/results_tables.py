@@ -33,7 +33,7 @@ def load(results: Path, kind: str) -> pd.DataFrame:
         return pd.DataFrame()
     out = pd.concat(frames, ignore_index=True)
     out["variant"] = out["run"].str.replace(r"-cpu-s\d$", "", regex=True)
-    out["_order"] = [(variant_order(v), r) for v, r in zip(out["variant"], out["run"])]
+    out["_order"] = [(variant_order(v), r) for v, r in zip(out["variant"], out["run"], strict=True)]
     return out.sort_values("_order", kind="stable").drop(columns="_order")
 
 
@@ -120,6 +120,7 @@ def write_between_markers(path: Path, block: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Print the tables, or write them into ``--write``'s marked block; 0."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--results", type=Path, default=Path("docs/results"))
     p.add_argument("--write", type=Path, default=None, help="markdown file whose marked block to replace")
