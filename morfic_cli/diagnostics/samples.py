@@ -217,31 +217,31 @@ def collect_samples(
         cfg: Rollout settings (mode, command, envs, steps, seed, batch).
         on_step: Progress callback per policy step (called ``steps`` times at once for a reused rollout).
     """
-    from morfic_cli.evaluation.rollout import run_rollout
-
     config = rollout_config(robot, cfg)
     existing = find_rollout(store, trained.checkpoint_id, config)
     if existing is not None:
-        for t in range(cfg.steps if on_step is not None else 0):
-            on_step(t)  # the progress of a reused rollout is complete at once
+        _reused(cfg, on_step)
         return load_samples(store, existing)
     if batched(robot, cfg):
         return collect_batch(store, trained, cfg, on_step=on_step)[robot]
-    rollout = run_rollout(
-        trained.actor,
-        trained.critic,
-        trained.cfg.env,
-        robot=robot,
-        mode=cfg.mode,
-        command_vx=cfg.command_vx,
-        num_envs=cfg.num_envs,
-        steps=cfg.steps,
-        seed=cfg.seed,
-        on_step=on_step,
-        keep_obs=OBS_GROUPS,
-        sample_actions=True,
-    )
+    rollout = _diagnostic_rollouts(trained, cfg, (robot,), on_step)[robot]
     return _store_samples(store, trained, rollout, config, cfg)
+
+
+def _reused(cfg: DiagnoseCfg, on_step: Callable[[int], None] | None) -> None:
+    """Report a reused rollout's progress as complete at once (``cfg.steps`` calls)."""
+    for t in range(cfg.steps if on_step is not None else 0):
+        on_step(t)
+
+
+def _diagnostic_rollouts(trained: TrainedModels, cfg: DiagnoseCfg, robots: tuple[str, ...],
+                         on_step: Callable[[int], None] | None) -> dict:
+    """Robot -> its rollout: the actor's sampled actions, the critic's inputs recorded, ``robots`` as one env."""
+    from morfic_cli.evaluation.rollout import run_rollouts
+
+    return run_rollouts(trained.actor, trained.critic, trained.cfg.env, robots=robots, mode=cfg.mode,
+                        command_vx=cfg.command_vx, num_envs=cfg.num_envs, steps=cfg.steps, seed=cfg.seed,
+                        on_step=on_step, keep_obs=OBS_GROUPS, sample_actions=True)
 
 
 def collect_batch(
@@ -265,28 +265,12 @@ def collect_batch(
     Returns:
         Robot -> its samples, in the order of ``cfg.batch``.
     """
-    from morfic_cli.evaluation.rollout import run_rollouts
-
     configs = {robot: rollout_config(robot, cfg) for robot in cfg.batch}
     found = {robot: find_rollout(store, trained.checkpoint_id, c) for robot, c in configs.items()}
     if all(found.values()):
-        for t in range(cfg.steps if on_step is not None else 0):
-            on_step(t)
+        _reused(cfg, on_step)
         return {robot: load_samples(store, rid) for robot, rid in found.items()}
-    rollouts = run_rollouts(
-        trained.actor,
-        trained.critic,
-        trained.cfg.env,
-        robots=cfg.batch,
-        mode=cfg.mode,
-        command_vx=cfg.command_vx,
-        num_envs=cfg.num_envs,
-        steps=cfg.steps,
-        seed=cfg.seed,
-        on_step=on_step,
-        keep_obs=OBS_GROUPS,
-        sample_actions=True,
-    )
+    rollouts = _diagnostic_rollouts(trained, cfg, tuple(cfg.batch), on_step)
     return {
         robot: load_samples(store, found[robot]) if found[robot] else
         _store_samples(store, trained, rollouts.pop(robot), configs[robot], cfg)
