@@ -26,7 +26,7 @@ from typing import Any, Protocol
 from morfic_cli.errors import MorficError
 from morfic_cli.report.build import ReportCfg, ReportResult, build_report
 from morfic_cli.report.paper import ROBOTS
-from morfic_cli.rl.variants import VARIANTS, resolve_variant
+from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, VARIANTS, resolve_variant
 from morfic_cli.runs import RUNS_PREFIX, run_name, run_of
 from morfic_cli.store import Store
 from morfic_cli.store.publish import find_manifest
@@ -77,7 +77,7 @@ class ReproduceCfg:
     trunc_eps: float = 0.05
     batch_robots: bool = False
     fixed_rollout_robots: tuple[str, ...] = ("aliengo", "mini_cheetah")
-    actor_variant: str = "film"
+    actor_variant: str = FIXED_ROLLOUT_ACTOR
     device: str = "cpu"
     torch_threads: int | None = None
     bundles: str | None = None
@@ -204,12 +204,16 @@ class _Silent:
         pass
 
 
+#: A step's status when it cannot run (the fixed-rollout analysis without its actor); ``detail`` says why.
+NOT_RUN = "not run"
+
+
 @dataclass
 class StepResult:
     """What one step did.
 
-    ``status`` is done, resumed (a run continued), skipped (the store had the result) or interrupted (training
-    stopped at a checkpoint after Ctrl-C).
+    ``status`` is done, resumed (a run continued), skipped (the store had the result), interrupted (training
+    stopped at a checkpoint after Ctrl-C) or not run (:data:`NOT_RUN`: it cannot run, ``detail`` says why).
     """
 
     kind: str
@@ -233,7 +237,7 @@ class ReproduceResult:
     @property
     def work_done(self) -> int:
         """Steps that did work (not skipped)."""
-        return sum(s.status != "skipped" for s in self.steps)
+        return sum(s.status not in ("skipped", NOT_RUN) for s in self.steps)
 
 
 def _json(doc: Any) -> Any:
@@ -510,15 +514,28 @@ class Pipeline:
         return StepResult("diagnose", spec, "done", res.id, f"{res.ref}@{res.version}")
 
     def fixed_rollout_models(self) -> tuple[str, list[str]]:
-        """(actor spec, critic specs) of the fixed-rollout analysis."""
+        """(actor spec, critic specs) of the fixed-rollout analysis: the seed-0 run of ``actor_variant``, always.
+
+        Every critic is scored on that one actor's rollouts (paper Table "causal advantage"), also when
+        ``actor_variant`` is not among the variants reproduced (then its run must be in the store already:
+        :meth:`fixed_rollout_unavailable`); never another variant's actor in its place.
+        """
         runs = self.run_specs()
-        actor = next((spec for v, s, spec in runs if v == self.cfg.actor_variant and s == 0), runs[0][2])
+        actor = RUNS_PREFIX + run_name(self.cfg.actor_variant, 0, self.cfg.preset)
         return actor, [spec for _, _, spec in runs]
+
+    def fixed_rollout_unavailable(self) -> str | None:
+        """Why the fixed-rollout analysis cannot run (its actor neither reproduced here nor in the store), or None."""
+        actor, _ = self.fixed_rollout_models()
+        if any(spec == actor for _, _, spec in self.run_specs()) or self.store.has_ref(actor):
+            return None
+        return (f"its frozen actor {actor} is neither reproduced here nor in the store; add "
+                f"{self.cfg.actor_variant} to --variants or import its run's bundle")
 
     def stored_fixed_rollout(self, robot: str) -> StepResult | None:
         """The skipped result when the store holds this fixed-rollout analysis on ``robot``, else None."""
         actor, critics = self.fixed_rollout_models()
-        if not all(self.store.has_ref(spec) for spec in critics):
+        if not all(self.store.has_ref(spec) for spec in (actor, *critics)):
             return None
         from morfic_cli.diagnostics.samples import diagnose_config
 
@@ -538,6 +555,9 @@ class Pipeline:
         found = self.stored_fixed_rollout(robot)
         if found is not None:
             return found
+        why = self.fixed_rollout_unavailable()
+        if why is not None:
+            return StepResult("fixed-rollout", robot, NOT_RUN, detail=why)
         self._start("fixed-rollout", robot, cfg.steps, "steps")
         models = load_models(self.store, actor, critics, cfg)
         res = fixed_rollout(self.store, robot, models, cfg, on_step=lambda _t: self.progress.step_advance(advance=1))

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The paper's experiment, run by run (docs/results.md, "Status of the runs"): train each run with the cpu preset,
-# evaluate and diagnose it with the paper's protocol (`morfic reproduce --preset cpu`, which skips what the store
-# holds), copy its result tables under docs/results/ and ship it: a seed-0 run as a weights-only bundle
+# evaluate and diagnose it with the paper's protocol (scripts/experiment_tables.py --run-missing: `morfic reproduce
+# --preset cpu`'s steps for this run, skipped where the store holds them, its critic scored on the frozen film actor's
+# rollouts), copy its result tables under docs/results/, regenerate docs/results.md's tables, claims and figures
+# (scripts/results_tables.py) and ship it: a seed-0 run as a weights-only bundle
 # (artifacts/bundles/<run>.tar), any other seed as a results-only bundle (artifacts/bundles/results/<run>.tar: its
 # evals and diagnoses without weights or logs, ~0.5 MiB; `morfic store import` it, then `morfic report runs/<run>`).
 #
@@ -60,8 +62,10 @@ for item in "$@"; do
   fi
   echo "== $(date -u +%T) evaluate and diagnose $name"
   morfic eval "runs/$name" --robots go2 --command-vx 1.0 --envs 16 --steps 250 -f json -q > "$RESULTS/$name-walk.json"
-  morfic reproduce --preset cpu --variants "$variant" --seeds $((seed + 1)) -f json -q > /dev/null
-  python scripts/experiment_tables.py "$name" --out "$RESULTS"
+  # the paper's protocol for this run alone (`morfic reproduce --preset cpu`'s configs; the variant's other seeds are
+  # not re-evaluated), its critic scored on the frozen film actor's rollouts, the tables copied with their ids
+  python scripts/experiment_tables.py "$name" --run-missing --out "$RESULTS"
+  python scripts/results_tables.py --write docs/results.md --figures docs/img
   if [ "$seed" = 0 ]; then
     shipped="$BUNDLES/$name.tar"
     morfic store export "runs/$name" --latest --without-trainer-state --out "$BUNDLES" --force
@@ -70,5 +74,6 @@ for item in "$@"; do
     morfic store export "runs/$name" --results-only --out "$BUNDLES/results" --force
   fi
   rm -f "$BUNDLES/partial/$name.tar"
-  echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,calibration.csv} and $shipped"
+  echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,calibration.csv,curve.csv,artifacts.json}," \
+       "docs/results.md's tables and claims, docs/img/results-*.png and $shipped"
 done

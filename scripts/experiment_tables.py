@@ -1,45 +1,166 @@
-"""Copy one experiment run's result tables out of the store: its eval, calibration and training-conditions CSVs.
+"""Copy one experiment run's result tables out of the store into docs/results/, with the ids they come from.
 
-The eval and diagnosis are the ones `morfic reproduce --preset cpu` stored for the run (found as the pipeline finds
-them, so a table is never another run's); written as ``<out>/<run>-eval.csv`` and ``<out>/<run>-calibration.csv``.
+Writes, for run RUN (its results as `morfic reproduce --preset cpu` stored them, found as the pipeline finds them,
+so a table is never another run's):
 
-Usage: python scripts/experiment_tables.py RUN_NAME [--out docs/results] [--store STORE]
+- ``<out>/RUN-eval.csv`` and ``<out>/RUN-calibration.csv``: the eval's and the diagnosis's files, verbatim;
+- ``<out>/fixed-rollout-<robot>.csv``: RUN's critic row (and the MC reference row) of the fixed-rollout analysis
+  on each robot, the frozen film actor's one rollout, merged with the rows of the critics scored before; a row of
+  other samples is refused (every critic of that table must be scored on the same samples; the samples' content id
+  is kept in ``<out>/fixed-rollout-<robot>.json``);
+- ``<out>/RUN-curve.csv``: the training curve's main columns (:data:`CURVE_COLUMNS`);
+- ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, diagnosis and fixed-rollout analyses.
+
+With ``--run-missing`` the run is first evaluated, diagnosed and its critic scored in the fixed-rollout analysis,
+each step with the paper's protocol (``morfic reproduce --preset cpu``'s configs) and skipped when the store holds
+it: the experiment queue's evaluation of a run, without re-evaluating the variant's other seeds. With
+``--fixed-rollout-only`` only the fixed-rollout rows are written (the analysis run first when the store lacks it).
+
+Usage: python scripts/experiment_tables.py RUN_NAME [--out docs/results] [--store STORE] [--run-missing]
+       [--fixed-rollout-only]
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
+import io
+import json
 import os
 import sys
 from pathlib import Path
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Write the tables; 1 with ``Error:`` when the store has no paper-protocol eval or diagnosis of the run."""
+def merge_fixed_rows(path: Path, new_rows: list[dict[str, str]], columns: list[str],
+                     samples: str) -> list[dict[str, str]]:
+    """``path``'s rows with ``new_rows`` merged in (a critic's new row replaces its old one; MC row first).
+
+    ``samples`` is the content id of the new rows' rollout samples (its ``obs.npz``); the rows already in ``path``
+    were scored on the samples recorded in the sidecar ``<path>.json``. A rollout's manifest id (the ``rollout``
+    column) differs between stores (it hashes its creation time), its samples' content id does not: the frozen
+    actor's rollout is deterministic on CPU.
+
+    Raises:
+        SystemExit: the new rows come from other samples than the rows already in ``path``.
+    """
+    side = path.with_suffix(".json")
+    old = list(csv.DictReader(path.open())) if path.is_file() else []
+    known = json.loads(side.read_text()) if side.is_file() else {"samples": samples, "rollouts": []}
+    if old and known["samples"] != samples:
+        raise SystemExit(f"Error: {path} holds critics scored on samples {known['samples'][:12]}, the new rows on "
+                         f"{samples[:12]}: every critic must be scored on the same samples; rescore them all with "
+                         "one fixed-rollout analysis.")
+    known["rollouts"] = sorted({*known["rollouts"], *(r["rollout"] for r in new_rows)})
+    side.write_text(json.dumps(known, indent=1) + "\n")
+    merged = {r["critic"]: r for r in old}
+    merged.update({r["critic"]: r for r in new_rows})
+    rows = sorted(merged.values(), key=lambda r: r["critic"] != "MC")
+    return [{c: r.get(c, "") for c in columns} for r in rows]
+
+
+#: The training-curve columns kept in ``<run>-curve.csv`` (the store's curve.csv has ~80 columns, 1.2 MB a run).
+CURVE_COLUMNS = ["iteration", "env_steps", "wall_time_s", "mean_reward", "episode_length_s", "explained_variance",
+                 "tracking.vx_error", "curriculum.vx_max", "action_std"]
+
+
+def curve_rows(curve_csv: str) -> list[dict[str, str]]:
+    """The :data:`CURVE_COLUMNS` of a run's curve.csv, numbers to 5 significant digits."""
+    def short(v: str) -> str:
+        try:
+            return f"{float(v):.5g}"
+        except ValueError:
+            return v
+
+    return [{c: short(r.get(c, "")) for c in CURVE_COLUMNS} for r in csv.DictReader(io.StringIO(curve_csv))]
+
+
+def write_csv(path: Path, rows: list[dict[str, str]], columns: list[str]) -> None:
+    """``rows`` as CSV with ``columns``."""
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    path.write_text(buf.getvalue())
+
+
+def one_run_pipeline(store, variant: str, seed: int, spec: str):
+    """``morfic reproduce --preset cpu``'s pipeline restricted to the one run ``spec`` (its steps' configs unchanged).
+
+    Its fixed-rollout analysis scores this run's critic alone on the frozen film actor's rollouts (reused from the
+    store, so every critic of a robot's table is scored on the same samples).
+    """
     from morfic_cli.pipeline import Pipeline, reproduce_cfg
+
+    class OneRun(Pipeline):
+        def run_specs(self) -> list[tuple[str, int, str]]:
+            return [(variant, seed, spec)]
+
+    return OneRun(store, reproduce_cfg("cpu", variants=(variant,), seeds=seed + 1))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Write the tables; 1 with ``Error:`` when the store has no paper-protocol result of the run."""
+    from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS
     from morfic_cli.store import Store
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("run", help="run name, e.g. concat-cpu-s0")
     p.add_argument("--out", type=Path, default=Path("docs/results"))
     p.add_argument("--store", default=os.environ.get("MORFIC_STORE", "artifacts"))
+    p.add_argument("--run-missing", action="store_true",
+                   help="first evaluate, diagnose and score the run's critic on the film actor's rollouts (each "
+                        "with the paper's protocol, skipped when the store holds it)")
+    p.add_argument("--fixed-rollout-only", action="store_true",
+                   help="only the fixed-rollout rows; run the analysis (film actor frozen) if the store lacks it")
     args = p.parse_args(argv)
     store = Store(args.store)
     spec = f"runs/{args.run}"
     manifest = store.read_manifest(spec)
     variant = manifest.config["variant"]
-    pipe = Pipeline(store, reproduce_cfg("cpu", variants=(variant,), seeds=int(manifest.config["seed"]) + 1))
-    found = {"eval": (pipe.stored_eval(spec), "eval.csv"),
-             "calibration": (pipe.stored_diagnosis(spec), "calibration.csv")}
+    pipe = one_run_pipeline(store, variant, int(manifest.config["seed"]), spec)
     args.out.mkdir(parents=True, exist_ok=True)
-    for what, (step, file) in found.items():
-        if step is None:
-            print(f"Error: no {what} of {spec} with the paper's protocol in {store.root}; run "
-                  f"`morfic reproduce --preset cpu --variants {variant}` first.", file=sys.stderr)
+    ids_path = args.out / f"{args.run}-artifacts.json"
+    ids = json.loads(ids_path.read_text()) if ids_path.is_file() else {"run": args.run}
+    ids["checkpoint"] = manifest.id
+    if "curve.csv" in manifest.files:
+        curve = args.out / f"{args.run}-curve.csv"
+        write_csv(curve, curve_rows(store.read_file(manifest.id, "curve.csv").decode()), CURVE_COLUMNS)
+        print(f"{curve} (training curve, {len(CURVE_COLUMNS)} columns)")
+    if args.run_missing and not args.fixed_rollout_only:
+        for step in (pipe.evaluate, pipe.diagnose):
+            result = step(spec)
+            print(f"{result.kind} {spec}: {result.status} in {result.seconds:.0f} s", file=sys.stderr)
+    if not args.fixed_rollout_only:
+        found = {"eval": (pipe.stored_eval(spec), "eval.csv"),
+                 "diagnosis": (pipe.stored_diagnosis(spec), "calibration.csv")}
+        for what, (step, file) in found.items():
+            if step is None:
+                print(f"Error: no {what} of {spec} with the paper's protocol in {store.root}; rerun with "
+                      "--run-missing (or `morfic reproduce --preset cpu` for the run) first.", file=sys.stderr)
+                return 1
+            path = args.out / f"{args.run}-{file}"
+            path.write_bytes(store.read_file(step.id, file))
+            ids[what] = step.id
+            print(f"{path} (artifact {step.id[:12]})")
+    fixed_ids = ids.setdefault("fixed_rollout", {})
+    for robot in pipe.cfg.fixed_rollout_robots:
+        step = pipe.stored_fixed_rollout(robot)
+        if step is None and (args.fixed_rollout_only or args.run_missing):
+            step = pipe.fixed_rollout(robot)
+        if step is None or step.id is None:
+            why = pipe.fixed_rollout_unavailable() or "rerun with --run-missing or --fixed-rollout-only"
+            print(f"Error: no fixed-rollout analysis of {spec}'s critic on {robot} in {store.root}: {why}.",
+                  file=sys.stderr)
             return 1
-        path = args.out / f"{args.run}-{what}.csv"
-        path.write_bytes(store.read_file(step.id, file))
-        print(f"{path} (artifact {step.id[:12]})")
+        rows = list(csv.DictReader(io.StringIO(store.read_file(step.id, "fixed_rollout.csv").decode())))
+        mine = [r for r in rows if r["critic"] in ("MC", args.run)]
+        samples = store.read_manifest(mine[0]["rollout"]).files["obs.npz"].id
+        path = args.out / f"fixed-rollout-{robot}.csv"
+        columns = list(FIXED_ROLLOUT_COLUMNS)
+        write_csv(path, merge_fixed_rows(path, mine, columns, samples), columns)
+        fixed_ids[robot] = step.id
+        print(f"{path}: {args.run}'s critic (artifact {step.id[:12]})")
+    ids_path.write_text(json.dumps(ids, indent=1) + "\n")
     return 0
 
 

@@ -1,89 +1,170 @@
-"""docs/results.md's transfer and calibration tables, from the run CSVs under docs/results/, beside the paper's.
+"""docs/results.md's tables, claims and figures, from the run CSVs under docs/results/, beside the paper's.
 
-Every ``<run>-eval.csv`` and ``<run>-calibration.csv`` that scripts/experiment_tables.py copied out of the experiment
-store becomes a column (runs ordered as the paper orders the variants, then by seed); the paper's own columns are
-added for each trained variant it reports. With ``--write FILE`` the tables replace what stands between the
-markers ``<!-- results-tables:begin -->`` and ``<!-- results-tables:end -->`` in FILE; without it they go to stdout.
+Inputs (written by scripts/experiment_tables.py from the experiment store, each CSV the artifact's file verbatim):
+``<run>-eval.csv``, ``<run>-calibration.csv``, ``<run>-artifacts.json`` (the ids of the run's checkpoint, eval,
+diagnosis and fixed-rollout analyses) and ``fixed-rollout-<robot>.csv`` (every critic scored on the frozen film
+actor's one rollout of the robot).
 
-Usage: python scripts/results_tables.py [--results docs/results] [--write docs/results.md]
+Outputs:
+
+- the transfer and calibration tables: one column per variant (the paper's order), its seeds pooled: with one seed
+  the run's own cell (v̄x ± σ over the alive env-steps / S), with several the mean ± std over the seeds of each
+  number (n = seeds); then the paper's columns for each trained variant it reports;
+- the fixed-rollout table (Flip / Cos per critic, beside the paper's);
+- the paper's claims (a)-(e), computed by ``morfic_cli.report.claims.check_claims`` from the same rows (never
+  typed in), each with the artifact ids its numbers come from;
+- with ``--figures DIR``: ``results-ev.png`` (EV per variant per robot), ``results-distance.png`` (speed against
+  the normalised distance d, the paper's points beside ours) and ``results-curves.png`` (every run's training curve,
+  from ``<run>-curve.csv``).
+
+With ``--write FILE`` the tables replace what stands between ``<!-- results-tables:begin -->`` and
+``<!-- results-tables:end -->`` in FILE, and the claims what stands between ``<!-- results-claims:begin -->`` and
+``<!-- results-claims:end -->``; without it both go to stdout.
+
+Usage: python scripts/results_tables.py [--results docs/results] [--write docs/results.md] [--figures docs/img]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import re
 import sys
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 BEGIN, END = "<!-- results-tables:begin -->", "<!-- results-tables:end -->"
+CLAIMS_BEGIN, CLAIMS_END = "<!-- results-claims:begin -->", "<!-- results-claims:end -->"
 ROBOTS = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")
+FIXED_ROBOTS = ("aliengo", "mini_cheetah")
+RUN_NAME = re.compile(r"^(?P<variant>.+)-cpu-s(?P<seed>\d+)$")
+
+
+def parse_run(name: str) -> tuple[str, int] | None:
+    """``(variant, seed)`` of an experiment run name (``film-scaled-cpu-s1`` -> ``("film-scaled", 1)``), else None."""
+    m = RUN_NAME.match(name)
+    return (m["variant"], int(m["seed"])) if m else None
 
 
 def load(results: Path, kind: str) -> pd.DataFrame:
-    """Every ``<run>-<kind>.csv`` in ``results`` in one frame with a ``run`` column, runs in the paper's order."""
+    """Every ``<run>-<kind>.csv`` in ``results`` in one frame with ``run``, ``variant`` and ``seed`` columns.
+
+    Rows are in the paper's variant order, then by seed.
+    """
     from morfic_cli.rl.variants import variant_order
 
     frames = []
-    for path in sorted(results.glob(f"*-cpu-s[0-9]-{kind}.csv")):
+    for path in sorted(results.glob(f"*-cpu-s*-{kind}.csv")):
+        run = path.name[: -len(f"-{kind}.csv")]
+        parsed = parse_run(run)
+        if parsed is None:
+            continue
         frame = pd.read_csv(path)
-        frame["run"] = path.name[: -len(f"-{kind}.csv")]
+        frame["run"], frame["variant"], frame["seed"] = run, parsed[0], parsed[1]
         frames.append(frame)
     if not frames:
         return pd.DataFrame()
     out = pd.concat(frames, ignore_index=True)
-    out["variant"] = out["run"].str.replace(r"-cpu-s\d$", "", regex=True)
-    out["_order"] = [(variant_order(v), r) for v, r in zip(out["variant"], out["run"], strict=True)]
-    return out.sort_values("_order", kind="stable").drop(columns="_order")
+    out["_order"] = [(variant_order(v), s) for v, s in zip(out["variant"], out["seed"], strict=True)]
+    return out.sort_values("_order", kind="stable").drop(columns="_order").reset_index(drop=True)
 
 
-def _cell(vx: float | None, std: float | None, s: float | None, verdict: str | None = None) -> str:
-    if vx is None or pd.isna(vx):
+def load_artifacts(results: Path) -> dict[str, dict[str, Any]]:
+    """Run name -> its ``<run>-artifacts.json`` (ids of checkpoint, eval, diagnosis, fixed rollouts)."""
+    return {p.name[: -len("-artifacts.json")]: json.loads(p.read_text())
+            for p in sorted(results.glob("*-artifacts.json"))}
+
+
+def load_fixed(results: Path) -> pd.DataFrame:
+    """Every ``fixed-rollout-<robot>.csv``: one row per critic (and the MC reference), ``seed`` the critic run's."""
+    frames = [pd.read_csv(p) for p in sorted(results.glob("fixed-rollout-*.csv"))]
+    if not frames:
+        return pd.DataFrame()
+    out = pd.concat(frames, ignore_index=True)
+    out["seed"] = [parsed[1] if (parsed := parse_run(str(c))) else 0 for c in out["critic"]]
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- pooled cells
+def _pm(values: pd.Series, decimals: int) -> str:
+    """``mean ± std`` (population std) of a series of seed values."""
+    xs = [float(v) for v in values]
+    mean = sum(xs) / len(xs)
+    std = math.sqrt(sum((x - mean) ** 2 for x in xs) / len(xs))
+    return f"{mean:.{decimals}f} ± {std:.{decimals}f}"
+
+
+def transfer_cell(rows: pd.DataFrame) -> str:
+    """One variant's cell on one robot: the run's own ``v̄x ± σ / S (verdict)``, or over seeds ``v̄x / S (n=k)``."""
+    if rows.empty:
         return "-"
-    text = f"{vx:.2f} ± {std:.2f} / {s:.3f}"
-    return f"{text} ({verdict})" if verdict else text
+    if len(rows) == 1:
+        r = rows.iloc[0]
+        return f"{r['vx_mean']:.2f} ± {r['vx_std']:.2f} / {r['survival']:.3f} ({r['verdict']})"
+    return f"{_pm(rows['vx_mean'], 2)} / {_pm(rows['survival'], 3)} (n={len(rows)})"
+
+
+def _paper_cell(vx: float | None, vx_std: float | None, survival: float | None) -> str:
+    return "-" if vx is None else f"{vx:.2f} ± {vx_std:.2f} / {survival:.3f}"
+
+
+def _seeds_label(frame: pd.DataFrame, variant: str) -> str:
+    """```film` (s0)`` for one seed, ```film` (n=3)`` for several."""
+    seeds = sorted(set(frame.loc[frame["variant"] == variant, "seed"]))
+    return f"`{variant}` (s{seeds[0]})" if len(seeds) == 1 else f"`{variant}` (n={len(seeds)})"
 
 
 def transfer_table(ev: pd.DataFrame, mode: str, command_vx: float) -> list[str]:
-    """One markdown table: robots x runs (v̄x ± σ / S (verdict)), then the paper's columns in descriptor mode."""
+    """Robots x variants (ours, seeds pooled), then the paper's columns in descriptor mode."""
     from morfic_cli.report.paper import transfer_values
 
     rows = ev[(ev["mode"] == mode) & ((ev["command_vx"] - command_vx).abs() < 1e-9)]
-    runs = list(dict.fromkeys(rows["run"]))
     variants = list(dict.fromkeys(rows["variant"]))
     paper = [v for v in variants if mode == "descriptor" and any(
         transfer_values(v, r, command_vx)["vx"] is not None for r in ROBOTS)]
-    head = ["robot", "d", *[f"`{r}`" for r in runs], *[f"paper {v}" for v in paper]]
+    head = ["robot", "d", *[_seeds_label(rows, v) for v in variants], *[f"paper {v}" for v in paper]]
     lines = ["| " + " | ".join(head) + " |", "|---|---:|" + "---|" * (len(head) - 2)]
     for robot in ROBOTS:
-        at = rows[rows["robot"] == robot].set_index("run")
+        at = rows[rows["robot"] == robot]
         if at.empty:
             continue
-        cells = [_cell(at.at[r, "vx_mean"], at.at[r, "vx_std"], at.at[r, "survival"], at.at[r, "verdict"])
-                 if r in at.index else "-" for r in runs]
-        for v in paper:
-            p = transfer_values(v, robot, command_vx)
-            cells.append(_cell(p["vx"], p["vx_std"], p["survival"]))
+        cells = [transfer_cell(at[at["variant"] == v]) for v in variants]
+        cells += [_paper_cell(**transfer_values(v, robot, command_vx)) for v in paper]
         lines.append(f"| {robot} | {float(at['d'].iloc[0]):.3f} | " + " | ".join(cells) + " |")
     return lines
 
 
 def calibration_table(cal: pd.DataFrame) -> list[str]:
-    """Robots x runs: EV and |NVB|/NVE/ASA, then the paper's |NVB|/NVE/ASA for the variants it reports."""
+    """Robots x variants: EV and |NVB|/NVE/ASA (seeds pooled), then the paper's |NVB|/NVE/ASA where it has them."""
     from morfic_cli.report.paper import critic_values
 
-    runs = list(dict.fromkeys(cal["run"]))
-    paper = [v for v in dict.fromkeys(cal["variant"]) if critic_values(v, "go2")["abs_nvb"] is not None]
-    head = ["robot", *[f"`{r}` EV" for r in runs], *[f"`{r}` \\|NVB\\|/NVE/ASA" for r in runs],
+    variants = list(dict.fromkeys(cal["variant"]))
+    paper = [v for v in variants if critic_values(v, "go2")["abs_nvb"] is not None]
+    head = ["robot", *[f"{_seeds_label(cal, v)} EV" for v in variants],
+            *[f"{_seeds_label(cal, v)} \\|NVB\\|/NVE/ASA" for v in variants],
             *[f"paper {v} \\|NVB\\|/NVE/ASA" for v in paper]]
-    lines = ["| " + " | ".join(head) + " |", "|---|" + "---:|" * len(runs) + "---|" * (len(head) - 1 - len(runs))]
+    lines = ["| " + " | ".join(head) + " |",
+             "|---|" + "---:|" * len(variants) + "---|" * (len(head) - 1 - len(variants))]
     for robot in ROBOTS:
-        at = cal[cal["robot"] == robot].set_index("run")
+        at = cal[cal["robot"] == robot]
         if at.empty:
             continue
-        evs = [f"{at.at[r, 'ev']:.3f}" if r in at.index else "-" for r in runs]
-        trio = [f"{at.at[r, 'abs_nvb']:.3f}/{at.at[r, 'nve']:.3f}/{at.at[r, 'asa']:.3f}" if r in at.index else "-"
-                for r in runs]
+        evs, trio = [], []
+        for v in variants:
+            mine = at[at["variant"] == v]
+            if mine.empty:
+                evs.append("-")
+                trio.append("-")
+            elif len(mine) == 1:
+                r = mine.iloc[0]
+                evs.append(f"{r['ev']:.3f}")
+                trio.append(f"{r['abs_nvb']:.3f}/{r['nve']:.3f}/{r['asa']:.3f}")
+            else:
+                evs.append(f"{_pm(mine['ev'], 3)} (n={len(mine)})")
+                trio.append("/".join(f"{mine[m].mean():.3f}" for m in ("abs_nvb", "nve", "asa")) + f" (n={len(mine)})")
         ours = []
         for v in paper:
             p = critic_values(v, robot)
@@ -92,9 +173,37 @@ def calibration_table(cal: pd.DataFrame) -> list[str]:
     return lines
 
 
+def fixed_table(fixed: pd.DataFrame) -> list[str]:
+    """Critics x robots: Flip / Cos on the frozen film actor's rollout (seeds pooled), beside the paper's."""
+    from morfic_cli.report.paper import fixed_rollout_values
+    from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, variant_order
+
+    rows = fixed[fixed["actor_variant"] == FIXED_ROLLOUT_ACTOR]
+    variants = sorted(dict.fromkeys(rows["variant"]), key=lambda v: (v != "mc", variant_order(v)))
+    robots = [r for r in FIXED_ROBOTS if r in set(rows["robot"])]
+    head = ["critic", *[f"{r} Flip / Cos" for r in robots], *[f"paper {r}" for r in robots]]
+    lines = ["| " + " | ".join(head) + " |", "|---|" + "---|" * (len(head) - 1)]
+    for v in variants:
+        cells = []
+        for robot in robots:
+            mine = rows[(rows["variant"] == v) & (rows["robot"] == robot)]
+            if mine.empty:
+                cells.append("-")
+            elif len(mine) == 1:
+                cells.append(f"{mine['flip'].iloc[0]:.3f} / {mine['cos_grad'].iloc[0]:.3f}")
+            else:
+                cells.append(f"{_pm(mine['flip'], 3)} / {_pm(mine['cos_grad'], 3)} (n={len(mine)})")
+        for robot in robots:
+            p = fixed_rollout_values(v, robot)
+            cells.append("-" if p.get("flip") is None else f"{p['flip']:.3f} / {p['cos_grad']:.3f}")
+        name = "MC (reference)" if v == "mc" else _seeds_label(rows, v)
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def render(results: Path) -> str:
     """All tables as one markdown block (without the markers)."""
-    ev, cal = load(results, "eval"), load(results, "calibration")
+    ev, cal, fixed = load(results, "eval"), load(results, "calibration"), load_fixed(results)
     out: list[str] = []
     titles = {("descriptor", 2.0): "Descriptor mode (the paper's protocol), 2.0 m/s",
               ("descriptor", 2.5): "Descriptor mode, 2.5 m/s (the paper reports only MorFiC-F, as v_x^max)",
@@ -106,31 +215,122 @@ def render(results: Path) -> str:
     if not cal.empty:
         out += ["### Critic calibration (`morfic diagnose RUN`: descriptor mode, 2.0 m/s, 64 envs x 800 steps)", "",
                 *calibration_table(cal), ""]
+    if not fixed.empty:
+        out += ["### Fixed rollout (`morfic diagnose --fixed-rollout ROBOT`: the film actor frozen, every critic "
+                "scored on its one rollout)", "", *fixed_table(fixed), ""]
     return "\n".join(out).rstrip() + "\n"
 
 
-def write_between_markers(path: Path, block: str) -> None:
-    """Replace the text between :data:`BEGIN` and :data:`END` in ``path`` with ``block``."""
+# ----------------------------------------------------------------------------------------------- claims
+def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
+    """The eval, calibration and fixed-rollout rows as ``check_claims`` reads them, each with its ``artifact`` id."""
+    ids = load_artifacts(results)
+    ev, cal, fixed = load(results, "eval"), load(results, "calibration"), load_fixed(results)
+
+    def records(frame: pd.DataFrame, key: str) -> list[dict]:
+        if frame.empty:
+            return []
+        out = frame.to_dict("records")
+        for r in out:
+            r["artifact"] = ids.get(r["run"], {}).get(key) or f"{r['run']}-{key}.csv"
+        return out
+
+    fixed_rows = []
+    if not fixed.empty:
+        for r in fixed.to_dict("records"):
+            owner = r["critic"] if r["variant"] != "mc" else str(r["actor"])
+            r["artifact"] = (ids.get(owner, {}).get("fixed_rollout", {}).get(r["robot"])
+                             or f"fixed-rollout-{r['robot']}.csv")
+            fixed_rows.append(r)
+    return records(ev, "eval"), records(cal, "diagnosis"), fixed_rows
+
+
+def _short(artifact: str) -> str:
+    """An artifact id's 12-character prefix (as ``morfic store show`` takes it); a file name as it is."""
+    return artifact[:12] if re.fullmatch(r"[0-9a-f]{12,}", artifact) else artifact
+
+
+def render_claims(results: Path) -> str:
+    """The claims (a)-(e) as markdown: the paper's numbers, ours, the verdict and why, the artifact ids."""
+    from morfic_cli.report.claims import check_claims
+
+    lines = []
+    for claim in check_claims(*claim_rows(results)):
+        lines += [f"**({claim.key}) {claim.claim}** Verdict: **{claim.verdict}**.", "",
+                  f"- Paper: {claim.paper}", f"- Ours: {claim.ours or '-'}", f"- Why: {claim.reason}",
+                  "- From: " + (", ".join(f"`{_short(i)}`" for i in claim.artifacts) or "-"), ""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+# ----------------------------------------------------------------------------------------------- figures
+def write_figures(results: Path, out: Path) -> list[Path]:
+    """Write the figures into ``out``; return their paths.
+
+    ``results-ev.png`` (EV per variant and robot, seeds pooled), ``results-distance.png`` (v_x against d) and
+    ``results-curves.png`` (training curves).
+    """
+    from morfic_cli.diagnostics.figures import ev_figure
+    from morfic_cli.report.figures import distance_figure
+    from morfic_cli.report.paper import ROBOT_LABELS
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    cal = load(results, "calibration")
+    if not cal.empty:
+        pooled = cal.groupby(["variant", "robot"], sort=False).agg(ev=("ev", "mean"), n=("seed", "nunique"))
+        rows = [{"run": f"{v}, {n} seed{'s' if n > 1 else ''}", "variant": v,
+                 "robot": ROBOT_LABELS.get(robot, robot), "ev": float(e)}
+                for (v, robot), e, n in zip(pooled.index, pooled["ev"], pooled["n"], strict=True)]
+        png, _ = ev_figure(rows)
+        (out / "results-ev.png").write_bytes(png)
+        written.append(out / "results-ev.png")
+    curves = {p.name[: -len("-curve.csv")]: pd.read_csv(p).to_dict("records")
+              for p in sorted(results.glob("*-cpu-s*-curve.csv"))}
+    if curves:
+        from morfic_cli.report.figures import curves_figure
+
+        png, _ = curves_figure(curves, {name: parse_run(name)[0] for name in curves})
+        (out / "results-curves.png").write_bytes(png)
+        written.append(out / "results-curves.png")
+    ev = load(results, "eval")
+    if not ev.empty:
+        sel = ev[ev["mode"] == "descriptor"]
+        pooled = sel.groupby(["variant", "robot", "mode", "command_vx"], sort=False).agg(
+            vx=("vx_mean", "mean"), vx_std=("vx_std", "mean"), d=("d", "first")).reset_index()
+        rows = [{**r, "preset": "cpu"} for r in pooled.to_dict("records")]
+        png, _ = distance_figure(rows, command_vx=2.0, with_paper=True)
+        (out / "results-distance.png").write_bytes(png)
+        written.append(out / "results-distance.png")
+    return written
+
+
+def write_between_markers(path: Path, block: str, begin: str = BEGIN, end: str = END) -> None:
+    """Replace the text between ``begin`` and ``end`` in ``path`` with ``block``."""
     text = path.read_text()
-    if BEGIN not in text or END not in text:
-        raise SystemExit(f"Error: {path} has no {BEGIN} ... {END} markers; add them where the tables go.")
-    head, rest = text.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    path.write_text(f"{head}{BEGIN}\n{block}{END}{tail}")
+    if begin not in text or end not in text:
+        raise SystemExit(f"Error: {path} has no {begin} ... {end} markers; add them where the block goes.")
+    head, rest = text.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    path.write_text(f"{head}{begin}\n{block}{end}{tail}")
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Print the tables, or write them into ``--write``'s marked block; 0."""
+    """Print the tables and claims, or write them into ``--write``'s marked blocks; 0."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--results", type=Path, default=Path("docs/results"))
-    p.add_argument("--write", type=Path, default=None, help="markdown file whose marked block to replace")
+    p.add_argument("--write", type=Path, default=None, help="markdown file whose marked blocks to replace")
+    p.add_argument("--figures", type=Path, default=None, help="folder for the results-*.png figures")
     args = p.parse_args(argv)
-    block = render(args.results)
+    block, claims = render(args.results), render_claims(args.results)
     if args.write is None:
-        sys.stdout.write(block)
+        sys.stdout.write(block + "\n" + claims)
     else:
         write_between_markers(args.write, block)
-        print(f"{args.write}: tables of {len(load(args.results, 'eval')['run'].unique())} run(s) written")
+        write_between_markers(args.write, claims, CLAIMS_BEGIN, CLAIMS_END)
+        print(f"{args.write}: tables and claims of {load(args.results, 'eval')['run'].nunique()} run(s) written")
+    if args.figures is not None:
+        for path in write_figures(args.results, args.figures):
+            print(path)
     return 0
 
 

@@ -26,8 +26,11 @@ from morfic_cli.validation import check_args
 
 def _step_line(result) -> str:
     """One finished pipeline step as a console line: kind, label, status, seconds, detail, short id."""
-    line = f"{result.kind} {result.label}: {_MARKS.get(result.status, result.status)}"
-    if result.status != "skipped":
+    from morfic_cli.pipeline import NOT_RUN
+
+    marks = {**_MARKS, NOT_RUN: "[yellow]not run[/]"}
+    line = f"{result.kind} {result.label}: {marks.get(result.status, result.status)}"
+    if result.status not in ("skipped", NOT_RUN):
         line += f" in {result.seconds:.1f} s"
     if result.detail:
         line += f" ({result.detail})"

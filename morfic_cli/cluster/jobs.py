@@ -27,7 +27,8 @@ class Job:
         label: The run ref ``runs/NAME`` (train, eval, diagnose) or the robot (fixed-rollout).
         variant: Variant of a train job ("" otherwise).
         seed: Seed of a train job (0 otherwise).
-        needs: Run refs whose checkpoints the job reads (eval and diagnose: its run; fixed-rollout: every run).
+        needs: Run refs whose checkpoints the job reads (eval and diagnose: its run; fixed-rollout: the frozen
+            actor's run and every run).
     """
 
     kind: str
@@ -48,8 +49,10 @@ def plan_jobs(pipeline: Pipeline) -> list[Job]:
     jobs = [Job("train", spec, variant=v, seed=s) for v, s, spec in runs]
     jobs += [Job("eval", spec, needs=(spec,)) for _, _, spec in runs]
     jobs += [Job("diagnose", spec, needs=(spec,)) for _, _, spec in runs]
-    critics = tuple(spec for _, _, spec in runs)
-    jobs += [Job("fixed-rollout", robot, needs=critics) for robot in pipeline.cfg.fixed_rollout_robots]
+    if pipeline.fixed_rollout_unavailable() is None:  # else the local executor reports it as not run
+        actor, critics = pipeline.fixed_rollout_models()
+        needs = tuple(dict.fromkeys((actor, *critics)))
+        jobs += [Job("fixed-rollout", robot, needs=needs) for robot in pipeline.cfg.fixed_rollout_robots]
     return jobs
 
 

@@ -24,6 +24,7 @@ from morfic_cli.config import eval_env_cfg
 from morfic_cli.diagnostics.calibration import DiagnosisResult, check_horizon, reference, run_label, score_critics
 from morfic_cli.diagnostics.samples import DiagnoseCfg, collect_samples, diagnose_config
 from morfic_cli.errors import MorficError
+from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
@@ -59,7 +60,7 @@ FIXED_ROLLOUT_COLUMNS: tuple[str, ...] = (
     "rollout",
 )
 
-DEFAULT_ACTOR_VARIANT = "film"
+DEFAULT_ACTOR_VARIANT = FIXED_ROLLOUT_ACTOR
 
 
 class _MeanCritic(torch.nn.Module):

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from morfic_cli.report import paper
-from morfic_cli.rl.variants import STOCK
+from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, STOCK
 
 #: The out-of-distribution targets of claims (a), (b) and (d) (the paper's "heavier and out of distribution
 #: robots"; its transfer claim is about AlienGo, its calibration claim about Cheetah and AlienGo).
@@ -219,7 +219,8 @@ def _reason(v: str, outcomes: Sequence[bool | None], robots: Sequence[str], what
         parts.append(f"not on {', '.join(no)}")
     if open_:
         parts.append(f"undecided on {', '.join(open_)} (missing results or within seed noise)")
-    return "; ".join(parts).capitalize() + "." if parts else f"{v}."
+    text = "; ".join(parts)
+    return text[:1].upper() + text[1:] + "." if parts else f"{v}."  # not str.capitalize: it lowercases "EV"
 
 
 def with_speed_kept(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -267,7 +268,8 @@ def claim_c(fixed: Sequence[dict[str, Any]]) -> Claim:
     """(c) In the fixed-rollout analysis, film's Flip is the lowest and its Cos the highest of the critics."""
     text = ("With the film actor frozen, the film critic has the lowest Flip and the highest Cos (AlienGo, Mini "
             "Cheetah).")
-    rows = [r for r in fixed if r.get("variant") in STOCK]
+    # Only critics scored on the frozen film actor's rollouts compare (a store may hold analyses of other actors).
+    rows = [r for r in fixed if r.get("variant") in STOCK and r.get("actor_variant") == FIXED_ROLLOUT_ACTOR]
     per_robot, outcomes = [], []
     for robot in FIXED_ROBOTS:
         flip = by_variant(rows, "flip", robot)

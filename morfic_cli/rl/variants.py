@@ -43,6 +43,10 @@ ENTRY_POINT_GROUP = "morfic.variants"
 MULTIPLICATIVE_CONDITIONING = ("film", "hyper", "adaln")
 """Critic conditionings that scale the critic's features by z_m (paper Sec. "Method"); concat and none are additive."""
 
+FIXED_ROLLOUT_ACTOR = "film"
+"""The variant whose (seed-0) actor the fixed-rollout analysis freezes while every critic is scored on its rollouts
+(paper Table "causal advantage": MorFiC-F's actor)."""
+
 PAPER_TRUNK = (512, 256, 128)
 """Hidden widths of the actor and of every critic trunk but film-scaled's (paper Table "architecture")."""
 

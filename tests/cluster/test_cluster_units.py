@@ -29,6 +29,21 @@ def test_plan_jobs_is_the_pipeline_in_dependency_order(tmp_path):
     assert jobs[-1].needs == tuple(runs)  # every critic is scored on the frozen actor's rollout
 
 
+def test_the_fixed_rollout_freezes_films_actor_or_does_not_run(tmp_path):
+    """Without film among the variants, the analysis freezes film's seed-0 run from the store, never another actor."""
+    p = Pipeline(Store(tmp_path / "store"), reproduce_cfg("smoke", variants=("ppo", "concat")))
+    assert p.fixed_rollout_models() == ("runs/film-smoke-s0", ["runs/ppo-smoke-s0", "runs/concat-smoke-s0"])
+    assert "runs/film-smoke-s0 is neither reproduced here nor in the store" in p.fixed_rollout_unavailable()
+    assert [j.kind for j in plan_jobs(p)].count("fixed-rollout") == 0
+    result = p.fixed_rollout("aliengo")
+    assert (result.status, result.id) == ("not run", None) and "add film to --variants" in result.detail
+    p.store.publish("checkpoint", "runs/film-smoke-s0", config={"variant": "film"}, files={"model.pt": b"w"})
+    assert p.fixed_rollout_unavailable() is None
+    fixed = [j for j in plan_jobs(p) if j.kind == "fixed-rollout"]
+    assert [j.label for j in fixed] == ["aliengo", "mini_cheetah"]
+    assert fixed[0].needs == ("runs/film-smoke-s0", "runs/ppo-smoke-s0", "runs/concat-smoke-s0")
+
+
 def test_nothing_is_stored_in_an_empty_store(tmp_path):
     p = _pipeline(tmp_path)
     assert [stored(p, j) for j in plan_jobs(p)] == [None] * 8

@@ -63,6 +63,7 @@ def test_claim_a_compares_group_means_of_ev():
     assert c.verdict == C.PARTLY
     assert "multiplicative 0.50 vs additive 0.30" in c.ours
     assert "not on mini_cheetah" in c.reason and "undecided on anymal_c" in c.reason
+    assert c.reason.startswith("The multiplicative mean EV is higher on aliengo;")  # "EV", not "ev"
     assert c.artifacts == ["c-concat-0", "c-film-0", "c-hyper-0", "c-ppo-0"]
 
 
@@ -90,8 +91,8 @@ def test_claim_b_with_seeds_inside_noise_cannot_tell():
 
 
 def test_claim_c_lowest_flip_and_highest_cos():
-    def fx(v, robot, flip, cos):
-        return {"variant": v, "robot": robot, "flip": flip, "cos_grad": cos, "artifact": "f"}
+    def fx(v, robot, flip, cos, actor="film"):
+        return {"variant": v, "robot": robot, "flip": flip, "cos_grad": cos, "actor_variant": actor, "artifact": "f"}
 
     rows = [fx("film", "aliengo", 0.2, 0.9), fx("ppo", "aliengo", 0.3, 0.5),
             fx("film", "mini_cheetah", 0.2, 0.4), fx("ppo", "mini_cheetah", 0.3, 0.5),
@@ -99,6 +100,9 @@ def test_claim_c_lowest_flip_and_highest_cos():
             {"variant": "mc", "robot": "aliengo", "flip": 0.0, "cos_grad": 1.0, "artifact": "f"}]  # MC: reference
     c = C.claim_c(rows)
     assert c.verdict == C.PARTLY and "not on mini_cheetah" in c.reason
+    # a critic scored on another actor's rollouts (concat's own) is not compared: it would win on AlienGo here
+    c = C.claim_c([*rows, fx("concat", "aliengo", 0.1, 0.95, actor="concat")])
+    assert c.verdict == C.PARTLY and "concat" not in c.ours
 
 
 def test_claim_d_spread_against_the_tolerance():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
 
 import pytest
@@ -25,10 +26,33 @@ def _runs(tmp_path: Path) -> Path:
 
 def test_transfer_table_orders_runs_as_the_paper_and_adds_its_columns(tmp_path):
     lines = rt.transfer_table(rt.load(_runs(tmp_path), "eval"), "descriptor", 2.0)
-    assert lines[0] == "| robot | d | `ppo-cpu-s0` | `film-cpu-s0` | paper ppo | paper film |"
+    assert lines[0] == "| robot | d | `ppo` (s0) | `film` (s0) | paper ppo | paper film |"
     # ours rounded to 2/2/3 places with the verdict; the paper's AlienGo cells (zero-shot table)
     assert lines[2] == ("| aliengo | 0.324 | 1.20 ± 0.48 / 0.422 (falls) | 1.64 ± 0.64 / 0.000 (falls) | "
                         "0.27 ± 0.07 / 0.000 | 1.98 ± 0.51 / 1.000 |")
+
+
+def test_seeds_of_a_variant_pool_into_mean_and_std(tmp_path):
+    """Seeds 0-2 of film become one column: mean ± population std of v_x and of S over the seeds (n=3)."""
+    _runs(tmp_path)
+    for seed, vx, s in ((1, 1.0, 0.5), (2, 1.3, 0.25)):
+        (tmp_path / f"film-cpu-s{seed}-eval.csv").write_text(
+            EVAL_HEAD + f"aliengo,descriptor,2.0,0.324,{vx},0.5,{s},falls\n")
+    lines = rt.transfer_table(rt.load(tmp_path, "eval"), "descriptor", 2.0)
+    assert lines[0] == "| robot | d | `ppo` (s0) | `film` (n=3) | paper ppo | paper film |"
+    # v_x 1.6449, 1.0, 1.3: mean 1.3150, std sqrt(((.3299)^2 + (.315)^2 + (.015)^2) / 3) = 0.2634
+    # S 0.0, 0.5, 0.25: mean 0.25, std sqrt((.0625 + .0625 + 0) / 3) = 0.2041
+    assert "| 1.31 ± 0.26 / 0.250 ± 0.204 (n=3) |" in lines[2]
+
+
+def test_claims_are_computed_from_the_csvs_with_their_artifact_ids(tmp_path):
+    _runs(tmp_path)
+    (tmp_path / "film-cpu-s0-artifacts.json").write_text(json.dumps({"eval": "e" * 64}))
+    text = rt.render_claims(tmp_path)
+    # (b) on AlienGo: film 1.6449 x 0.0 = 0.00 against ppo 1.2 x 0.421875 = 0.51: film loses
+    assert "**(b) MorFiC-F transfers better" in text and "Verdict: **does not hold**" in text
+    assert "film 0.00 (v_x 1.64, S 0.00), ppo 0.51 (v_x 1.20, S 0.42)" in text
+    assert "`eeeeeeeeeeee`" in text and "`ppo-cpu-s0-eval.csv`" in text  # an id, else the file it came from
 
 
 def test_calibration_table_and_the_marked_block(tmp_path):
@@ -43,3 +67,32 @@ def test_calibration_table_and_the_marked_block(tmp_path):
     doc.write_text("no markers\n")
     with pytest.raises(SystemExit, match="no <!-- results-tables:begin -->"):
         rt.write_between_markers(doc, block)
+
+
+ET_SCRIPT = SCRIPT.parent / "experiment_tables.py"
+et_spec = importlib.util.spec_from_file_location("experiment_tables", ET_SCRIPT)
+et = importlib.util.module_from_spec(et_spec)
+et_spec.loader.exec_module(et)
+
+
+def _fixed(critic, flip, rollout="r1"):
+    return {"critic": critic, "variant": critic.split("-cpu")[0].lower(), "flip": flip, "rollout": rollout}
+
+
+def test_fixed_rollout_rows_merge_on_the_same_samples_only(tmp_path):
+    cols = ["critic", "variant", "flip", "rollout"]
+    path = tmp_path / "fixed-rollout-aliengo.csv"
+    et.write_csv(path, et.merge_fixed_rows(path, [_fixed("MC", "0"), _fixed("film-cpu-s0", "0.4")], cols, "s1"), cols)
+    # another store's rollout manifest (other id) of the same samples: merged; a critic's new row replaces its old
+    rows = et.merge_fixed_rows(path, [_fixed("MC", "0", "r2"), _fixed("ppo-cpu-s0", "0.5", "r2")], cols, "s1")
+    assert [r["critic"] for r in rows] == ["MC", "film-cpu-s0", "ppo-cpu-s0"] and rows[0]["rollout"] == "r2"
+    assert json.loads(path.with_suffix(".json").read_text()) == {"samples": "s1", "rollouts": ["r1", "r2"]}
+    with pytest.raises(SystemExit, match="scored on samples s1, the new rows on s2"):
+        et.merge_fixed_rows(path, [_fixed("concat-cpu-s0", "0.3")], cols, "s2")
+
+
+def test_curve_rows_keep_the_main_columns_to_five_digits():
+    text = "iteration,env_steps,mean_reward,value_loss\n1,12288,0.123456789,3.0\n"
+    rows = et.curve_rows(text)
+    assert rows == [{**dict.fromkeys(et.CURVE_COLUMNS, ""), "iteration": "1", "env_steps": "12288",
+                     "mean_reward": "0.12346"}]
