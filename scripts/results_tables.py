@@ -11,6 +11,8 @@ Outputs:
   the run's own cell (v̄x ± σ over the alive env-steps / S), with several the mean ± std over the seeds of each
   number (n = seeds); then the paper's columns for each trained variant it reports;
 - the fixed-rollout table (Flip / Cos per critic, beside the paper's);
+- every run's walking check (``<run>-walk.json``: Go2 at 1.0 m/s, bar v_x >= 0.8 m/s and S >= 0.9) and when its
+  command curriculum opened (from ``<run>-curve.csv``);
 - the paper's claims (a)-(e), computed by ``morfic_cli.report.claims.check_claims`` from the same rows (never
   typed in), each with the artifact ids its numbers come from;
 - with ``--figures DIR``: ``results-ev.png`` (EV per variant per robot), ``results-distance.png`` (speed against
@@ -18,8 +20,9 @@ Outputs:
   from ``<run>-curve.csv``).
 
 With ``--write FILE`` the tables replace what stands between ``<!-- results-tables:begin -->`` and
-``<!-- results-tables:end -->`` in FILE, and the claims what stands between ``<!-- results-claims:begin -->`` and
-``<!-- results-claims:end -->``; without it both go to stdout.
+``<!-- results-tables:end -->`` in FILE, the claims what stands between ``<!-- results-claims:begin -->`` and
+``<!-- results-claims:end -->``, the walking checks ``<!-- results-walk:begin -->`` ... ``end``; without it all go
+to stdout.
 
 Usage: python scripts/results_tables.py [--results docs/results] [--write docs/results.md] [--figures docs/img]
 """
@@ -38,6 +41,7 @@ import pandas as pd
 
 BEGIN, END = "<!-- results-tables:begin -->", "<!-- results-tables:end -->"
 CLAIMS_BEGIN, CLAIMS_END = "<!-- results-claims:begin -->", "<!-- results-claims:end -->"
+WALK_BEGIN, WALK_END = "<!-- results-walk:begin -->", "<!-- results-walk:end -->"
 ROBOTS = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")
 FIXED_ROBOTS = ("aliengo", "mini_cheetah")
 RUN_NAME = re.compile(r"^(?P<variant>.+)-cpu-s(?P<seed>\d+)$")
@@ -221,6 +225,34 @@ def render(results: Path) -> str:
     return "\n".join(out).rstrip() + "\n"
 
 
+#: The walking check's bar (issue 17): on Go2 at 1.0 m/s, 16 envs x 250 steps.
+WALK_VX, WALK_S = 0.8, 0.9
+
+
+def walk_table(results: Path) -> list[str]:
+    """Every run's walking check (``<run>-walk.json``) and when its command curriculum opened (``<run>-curve.csv``)."""
+    from morfic_cli.rl.variants import variant_order
+
+    runs = sorted((p.name[: -len("-walk.json")] for p in results.glob("*-cpu-s*-walk.json")
+                   if parse_run(p.name[: -len("-walk.json")])),
+                  key=lambda n: (variant_order(parse_run(n)[0]), parse_run(n)[1]))
+    lines = ["| run | v_x ± σ (m/s) | S | verdict | walks (v_x >= 0.8, S >= 0.9) | curriculum past 1 m/s at iteration "
+             "| final vx range |", "|---|---:|---:|---|---|---:|---:|"]
+    for run in runs:
+        row = json.loads((results / f"{run}-walk.json").read_text())[0]
+        walks = row["vx_mean"] >= WALK_VX and row["survival"] >= WALK_S
+        opened, top = "-", "-"
+        curve = results / f"{run}-curve.csv"
+        if curve.is_file():
+            c = pd.read_csv(curve)
+            wide = c[c["curriculum.vx_max"] > 1.0 + 1e-9]
+            opened = str(int(wide["iteration"].iloc[0])) if not wide.empty else "never"
+            top = f"{c['curriculum.vx_max'].iloc[-1]:g} m/s"
+        lines.append(f"| `{run}` | {row['vx_mean']:.2f} ± {row['vx_std']:.2f} | {row['survival']:.3f} | "
+                     f"{row['verdict']} | {'yes' if walks else '**no**'} | {opened} | {top} |")
+    return lines
+
+
 # ----------------------------------------------------------------------------------------------- claims
 def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
     """The eval, calibration and fixed-rollout rows as ``check_claims`` reads them, each with its ``artifact`` id."""
@@ -323,10 +355,11 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     block, claims = render(args.results), render_claims(args.results)
     if args.write is None:
-        sys.stdout.write(block + "\n" + claims)
+        sys.stdout.write(block + "\n" + claims + "\n" + "\n".join(walk_table(args.results)) + "\n")
     else:
         write_between_markers(args.write, block)
         write_between_markers(args.write, claims, CLAIMS_BEGIN, CLAIMS_END)
+        write_between_markers(args.write, "\n".join(walk_table(args.results)) + "\n", WALK_BEGIN, WALK_END)
         print(f"{args.write}: tables and claims of {load(args.results, 'eval')['run'].nunique()} run(s) written")
     if args.figures is not None:
         for path in write_figures(args.results, args.figures):

@@ -96,3 +96,14 @@ def test_curve_rows_keep_the_main_columns_to_five_digits():
     rows = et.curve_rows(text)
     assert rows == [{**dict.fromkeys(et.CURVE_COLUMNS, ""), "iteration": "1", "env_steps": "12288",
                      "mean_reward": "0.12346"}]
+
+
+def test_walk_table_checks_the_bar_and_finds_when_the_curriculum_opened(tmp_path):
+    walk = {"vx_mean": 0.93, "vx_std": 0.18, "survival": 1.0, "verdict": "ok"}
+    (tmp_path / "film-cpu-s0-walk.json").write_text(json.dumps([walk]))
+    (tmp_path / "ppo-cpu-s0-walk.json").write_text(json.dumps([{**walk, "vx_mean": 0.79}]))  # below 0.8: no
+    (tmp_path / "film-cpu-s0-curve.csv").write_text(
+        "iteration,curriculum.vx_max\n1,1.0\n2,1.0\n3,1.5\n4,2.0\n")
+    lines = rt.walk_table(tmp_path)
+    assert lines[2] == "| `ppo-cpu-s0` | 0.79 ± 0.18 | 1.000 | ok | **no** | - | - |"  # paper order: ppo first
+    assert lines[3] == "| `film-cpu-s0` | 0.93 ± 0.18 | 1.000 | ok | yes | 3 | 2 m/s |"
