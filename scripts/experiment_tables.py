@@ -28,6 +28,7 @@ import io
 import json
 import os
 import sys
+import time
 from pathlib import Path
 
 
@@ -128,8 +129,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{curve} (training curve, {len(CURVE_COLUMNS)} columns)")
     if args.run_missing and not args.fixed_rollout_only:
         for step in (pipe.evaluate, pipe.diagnose):
+            start = time.monotonic()
             result = step(spec)
-            print(f"{result.kind} {spec}: {result.status} in {result.seconds:.0f} s", file=sys.stderr)
+            print(f"{result.kind} {spec}: {result.status} in {time.monotonic() - start:.0f} s", file=sys.stderr)
     if not args.fixed_rollout_only:
         found = {"eval": (pipe.stored_eval(spec), "eval.csv"),
                  "diagnosis": (pipe.stored_diagnosis(spec), "calibration.csv")}
