@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import re
 import sys
 from pathlib import Path
@@ -94,11 +93,11 @@ def load_fixed(results: Path) -> pd.DataFrame:
 
 # ----------------------------------------------------------------------------------------------- pooled cells
 def _pm(values: pd.Series, decimals: int) -> str:
-    """``mean ± std`` (population std) of a series of seed values."""
-    xs = [float(v) for v in values]
-    mean = sum(xs) / len(xs)
-    std = math.sqrt(sum((x - mean) ** 2 for x in xs) / len(xs))
-    return f"{mean:.{decimals}f} ± {std:.{decimals}f}"
+    """``mean ± std`` over seeds (population std, as the claims compute it: ``claims.seed_stat``)."""
+    from morfic_cli.report.claims import seed_stat
+
+    stat = seed_stat(values)
+    return f"{stat.mean:.{decimals}f} ± {stat.std:.{decimals}f}"
 
 
 def transfer_cell(rows: pd.DataFrame) -> str:
