@@ -142,8 +142,13 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
 
     main = T.transfer_table(transfer, key="zero_shot_transfer", title="Zero-shot cross-morphology transfer",
                             command_vx=2.0, mode="descriptor", variants=T.MAIN_VARIANTS)
-    sec = _Section("Zero-shot transfer", [t for t in [main] if t] + P(paper.ZERO_SHOT_TRANSFER,
-                                                                       paper.CROSS_EMBODIMENT_BASELINES))
+    # The paper splits its variants over two tables (main, ablation); with runs outside the main table's four, one
+    # more table puts every variant side by side, in our order.
+    every = T.transfer_table(transfer, key="zero_shot_transfer_every", title="Zero-shot transfer, every variant",
+                             command_vx=2.0, mode="descriptor", min_columns=2) \
+        if any(r["variant"] not in T.MAIN_VARIANTS for r in transfer) else None
+    sec = _Section("Zero-shot transfer", [t for t in [main, every] if t] + P(paper.ZERO_SHOT_TRANSFER,
+                                                                              paper.CROSS_EMBODIMENT_BASELINES))
     if not main:
         sec.text = ("No descriptor-mode evaluation at 2.0 m/s of ppo / actor-only / concat / film runs in the store "
                     "(`morfic eval RUN --command-vx 2.0`).")

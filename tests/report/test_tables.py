@@ -167,3 +167,26 @@ def test_ablation_columns_follow_the_papers_order():
     rows = transfer_rows(StoreData(runs=runs, evals=[_eval(r, "go2", 1.0, 0.1, 1.0) for r in runs]))
     table = transfer_table(rows, key="k", title="t", command_vx=2.0, mode="descriptor", variants=ABLATION_VARIANTS)
     assert table.columns == ("MorFiC-F", "MorFiC-F(Scaled)", "MorFiC-H", "MorFiC-A")
+
+
+def test_the_report_adds_an_every_variant_table_when_runs_leave_the_main_tables_four():
+    from morfic_cli.report.build import _sections
+
+    def keys(variants):
+        runs = [_run(v, 0) for v in variants]
+        data = StoreData(runs=runs, evals=[_eval(r, "go2", 1.0 + i / 10, 0.1, 1.0) for i, r in enumerate(runs)])
+        (sec,) = [s for s in _sections(data, {"transfer": transfer_rows(data)}, [], False)
+                  if s.heading == "Zero-shot transfer"]
+        return {t.key: t for t in sec.tables}
+
+    assert list(keys(["ppo", "film"])) == ["zero_shot_transfer"]  # the paper's main table holds them all
+    tables = keys(["adaln", "ppo", "film", "hyper"])
+    assert list(tables) == ["zero_shot_transfer", "zero_shot_transfer_every"]
+    assert tables["zero_shot_transfer"].columns == ("PPO", "MorFiC-F")
+    every = tables["zero_shot_transfer_every"]
+    assert every.columns == ("PPO", "MorFiC-F", "MorFiC-H", "MorFiC-A")  # every variant, in our order
+    # go2 speeds by hand: adaln 1.0, ppo 1.1, film 1.2, hyper 1.3 (the evals' order above); film's the best of PPO/F
+    (row,) = every.rows
+    assert [c[0].value for c in row.cells] == pytest.approx([1.1, 1.2, 1.3, 1.0])
+    assert [c[0].bold for c in row.cells] == [False, False, True, False]
+    assert list(keys(["hyper"])) == []  # one variant, outside the main four: no table of one column
