@@ -8,7 +8,8 @@ report artifact: ``report.json`` (every table with values and bold marks, and th
 pdflatex is installed, ``report.pdf`` with ``latex``; ``figures/*.png|pdf`` with ``figures``.
 
 The same runs, results and options give the same inputs and config: the stored report is then found and reused
-instead of being built again.
+instead of being built again. The config carries :data:`REPORT_LAYOUT`, so a morfic that lays the report out
+differently builds it anew instead of finding the old one.
 """
 
 from __future__ import annotations
@@ -288,11 +289,17 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
     return files
 
 
+REPORT_LAYOUT = 2
+"""The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
+shows. 2: the every-variant zero-shot table."""
+
+
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:
-    """The config of a stored report: options and runs (not the name of its ref)."""
+    """The config of a stored report: options, runs (not the name of its ref) and :data:`REPORT_LAYOUT`."""
     doc = asdict(cfg)
     doc.pop("name")
     doc["runs"] = sorted(r.spec for r in data.runs)
+    doc["layout"] = REPORT_LAYOUT
     return json.loads(json.dumps({"report": "morfic", **doc}))
 
 

@@ -77,6 +77,19 @@ def test_rerun_does_no_work(run_cli, store):
     assert "report:" in err and "reports/smoke" in err
 
 
+def test_a_report_of_another_layout_is_built_anew_not_reused(run_cli, store, monkeypatch):
+    from morfic_cli.report import build
+
+    first = store.resolve("reports/smoke")
+    assert store.read_manifest(first).config["layout"] == build.REPORT_LAYOUT
+    monkeypatch.setattr(build, "REPORT_LAYOUT", build.REPORT_LAYOUT + 1)  # a morfic that lays reports out anew
+    code, out, err = run_cli("reproduce", "--preset", "smoke", "--variants", VARIANTS, "--format", "json")
+    assert code == 0, err
+    assert json.loads(out)["work_done"] == 1  # only the report: the runs, evals and diagnoses are reused
+    again = store.read_manifest("reports/smoke")
+    assert again.id != first and again.config["layout"] == build.REPORT_LAYOUT
+
+
 def test_reproduce_continues_after_ctrl_c(tmp_path):
     """A Ctrl-C during training checkpoints and stops; the next run resumes that run instead of restarting it."""
     from morfic_cli.pipeline import Pipeline, ReproduceCfg
