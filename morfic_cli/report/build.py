@@ -291,7 +291,7 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
 
 REPORT_LAYOUT = 2
 """The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
-shows. 2: the every-variant zero-shot table."""
+shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor."""
 
 
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:

@@ -10,7 +10,8 @@ flat rows with a ``table`` key (so the CSV of all of them is one file):
   and ``survival_seed_std``; ``cell`` = "v ± σ / S". The paper's v_x^max (its 2.5 m/s table) is the v_x of the
   2.5 m/s rows. Evaluations stored before σ was taken over steps (no ``vx_env_std`` column) leave σ empty.
 - ``calibration``: per (preset, variant, robot): EV, |NVB|, NVE, ASA, Flip, CosGrad, each mean and ``_seed_std``.
-- ``fixed_rollout``: per (preset, robot, critic variant): Flip and Cos. over the critics (seeds) and actors.
+- ``fixed_rollout``: per (preset, frozen actor's variant, robot, critic variant): Flip and Cos. over the critics
+  (seeds); critics scored on different actors' rollouts are never averaged together.
 - ``compute``: per (preset, variant): transitions, iterations, s/iter, device-hours, hours per 400M transitions.
 
 ``--with-paper`` adds ``paper_*`` columns (and ``paper_table``, the paper table they come from) taken from
@@ -30,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from morfic_cli.report import paper
 from morfic_cli.report.gather import StoreData
-from morfic_cli.rl.variants import variant_order
+from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, variant_order
 
 if TYPE_CHECKING:
     from morfic_cli.store import Published, Store
@@ -160,22 +161,28 @@ def calibration_rows(data: StoreData) -> list[dict[str, Any]]:
 
 
 def fixed_rollout_rows(data: StoreData) -> list[dict[str, Any]]:
-    """The ``fixed_rollout`` table: Flip and Cos. per (preset, robot, critic variant); ``mc`` is the reference."""
+    """The ``fixed_rollout`` table: Flip and Cos. per (preset, actor variant, robot, critic variant).
+
+    ``mc`` is the reference. The actor's variant is the row's ``actor_variant`` (older CSVs: looked up from its
+    checkpoint).
+    """
     preset_of = {r.checkpoint: r.preset for r in data.runs}
+    variant_of = {r.checkpoint: r.variant for r in data.runs}
     groups = _group(data.fixed, lambda r: (preset_of.get(r["actor_checkpoint"], r.get("preset") or "?"),
+                                           r.get("actor_variant") or variant_of.get(r["actor_checkpoint"], "?"),
                                            r["robot"], r["variant"]))
     out = []
-    for (preset, robot, variant), rows in groups.items():
-        row: dict[str, Any] = {"table": "fixed_rollout", "preset": preset, "variant": variant, "robot": robot,
-                               "mode": rows[0].get("mode"), "n_seeds": len(rows),
+    for (preset, actor_variant, robot, variant), rows in groups.items():
+        row: dict[str, Any] = {"table": "fixed_rollout", "preset": preset, "actor_variant": actor_variant,
+                               "variant": variant, "robot": robot, "mode": rows[0].get("mode"), "n_seeds": len(rows),
                                "runs": ";".join(sorted(str(r["run"]) for r in rows)),
                                "actors": ";".join(sorted({str(r["actor"]) for r in rows}))}
         for m in ("flip", "cos_grad", "asa", "ev"):
             row[m] = mean(r[m] for r in rows)
             row[f"{m}_seed_std"] = seed_std(r[m] for r in rows)
         out.append(row)
-    out.sort(key=lambda r: (r["preset"], robot_order(r["robot"]), -1 if r["variant"] == "mc"
-                            else variant_order(r["variant"])))
+    out.sort(key=lambda r: (r["preset"], r["actor_variant"] != FIXED_ROLLOUT_ACTOR, r["actor_variant"],
+                            robot_order(r["robot"]), -1 if r["variant"] == "mc" else variant_order(r["variant"])))
     return out
 
 

@@ -15,7 +15,7 @@ from typing import Any
 from morfic_cli.report import paper
 from morfic_cli.report.compare import robot_order
 from morfic_cli.report.model import Part, Row, Table, bold_best
-from morfic_cli.rl.variants import table_variants, variant_order
+from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, table_variants, variant_order
 
 MAIN_VARIANTS: tuple[str, ...] = table_variants("main")
 """The zero-shot transfer table's variants (paper Table "Zero-shot cross-morphology transfer")."""
@@ -147,37 +147,49 @@ def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor") -> Table 
 
 
 def fixed_rollout_table(rows: Sequence[dict[str, Any]]) -> Table | None:
-    """Critic sources x (robot: Flip, Cos.); MC first; bold the best learned critic per robot and metric."""
+    """Critic sources x (robot: Flip, Cos.); MC first; bold the best learned critic per robot and metric.
+
+    A source is (frozen actor's variant, preset, critic variant): critics are compared only on the same actor's
+    rollouts, so with several actors each gets its own block of rows (its label names the actor) and its own bold.
+    """
     if not rows:
         return None
     robots = sorted({r["robot"] for r in rows}, key=robot_order)
-    sources = sorted({(r["preset"], r["variant"]) for r in rows},
-                     key=lambda p: (p[1] != "mc", p[0], variant_order(p[1])))
-    multi = len({p for p, v in sources if v != "mc"}) > 1
-    by = {(r["preset"], r["variant"], r["robot"]): r for r in rows}
+    actor_of = lambda r: r.get("actor_variant") or "?"  # noqa: E731
+    actors = sorted({actor_of(r) for r in rows}, key=lambda a: (a != FIXED_ROLLOUT_ACTOR, a))
+    sources = sorted({(actor_of(r), r["preset"], r["variant"]) for r in rows},
+                     key=lambda s: (actors.index(s[0]), s[2] != "mc", s[1], variant_order(s[2])))
+    multi = len({p for _, p, v in sources if v != "mc"}) > 1
+    by = {(actor_of(r), r["preset"], r["variant"], r["robot"]): r for r in rows}
     bold: dict[tuple, bool] = {}
-    for robot in robots:
-        for m, hib in (("flip", False), ("cos_grad", True)):
-            learned = [s for s in sources if s[1] != "mc"]
-            values = [by[(p, v, robot)][m] if (p, v, robot) in by else None for p, v in learned]
-            for s, b in zip(learned, bold_best(values, hib), strict=True):
-                bold[(s, robot, m)] = b
+    for actor in actors:
+        learned = [s for s in sources if s[2] != "mc" and s[0] == actor]
+        for robot in robots:
+            for m, hib in (("flip", False), ("cos_grad", True)):
+                values = [by[(*s, robot)][m] if (*s, robot) in by else None for s in learned]
+                for s, b in zip(learned, bold_best(values, hib), strict=True):
+                    bold[(s, robot, m)] = b
     out_rows = []
-    for p, v in sources:
+    for s in sources:
+        a, p, v = s
         cells = []
         for robot in robots:
-            r = by.get((p, v, robot))
+            r = by.get((*s, robot))
             for m in ("flip", "cos_grad"):
-                cells.append((Part(r[m] if r else None, None, 3, bold.get(((p, v), robot, m), False)),))
+                cells.append((Part(r[m] if r else None, None, 3, bold.get((s, robot, m), False)),))
         label = "MC" if v == "mc" else method_label(v, p, multi)
+        if len(actors) > 1:
+            label += f" ({method_label(a, p, False)}'s rollout)"
         out_rows.append(Row(label, tuple(cells)))
     caption = ("One frozen actor's rollout per robot; each critic scored on exactly those samples. Flip: sign-flip "
                "rate vs. the MC advantage (lower is better); Cos.: actor-gradient cosine with the MC gradient "
                "(higher is better); the MC row is the reference.")
-    actors = sorted({a for r in rows for a in str(r.get("actors", "")).split(";") if a and a != "None"})
+    if len(actors) > 1:
+        caption += " Several actors were frozen: each block of rows is one actor's rollout, bold within the block."
+    runs = sorted({a for r in rows for a in str(r.get("actors", "")).split(";") if a and a != "None"})
     return Table("causal_adv_all", "Fixed-rollout critic diagnostic", caption, "Src.", ("Flip", "Cos.") * len(robots),
                  tuple(out_rows), groups=tuple((robot_label(r), 2) for r in robots), math=False,
-                 notes=(f"Frozen actor(s): {', '.join(actors) or '-'}.",))
+                 notes=(f"Frozen actor(s): {', '.join(runs) or '-'}.",))
 
 
 def _si(value: float | None) -> str:

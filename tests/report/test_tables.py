@@ -113,6 +113,33 @@ def test_fixed_rollout_table_never_bolds_the_mc_reference():
     assert bold == {"MC": [False, False], "PPO": [False, False], "MorFiC-F": [True, True]}
 
 
+def test_fixed_rollout_critics_on_different_actors_rollouts_are_never_averaged():
+    from morfic_cli.report.compare import fixed_rollout_rows
+
+    film, ppo = _run("film", 0), _run("ppo", 0)
+
+    def fixed(critic, actor, flip, cos):
+        return {"run": critic.name, "variant": critic.variant, "robot": "aliengo", "mode": "descriptor",
+                "actor": f"runs/{actor.name}", "actor_checkpoint": actor.checkpoint, "actor_variant": actor.variant,
+                "flip": flip, "cos_grad": cos, "asa": 0.5, "ev": 0.1}
+
+    # the film critic: Flip 0.2 on film's rollout, 0.6 on ppo's (averaged, it would read 0.4); ppo's critic 0.3, 0.5
+    data = StoreData(runs=[film, ppo], fixed=[fixed(film, film, 0.2, 0.4), fixed(film, ppo, 0.6, 0.1),
+                                             fixed(ppo, film, 0.3, 0.2), fixed(ppo, ppo, 0.5, 0.3)])
+    rows = fixed_rollout_rows(data)
+    assert [(r["actor_variant"], r["variant"], r["flip"]) for r in rows] == [
+        ("film", "ppo", 0.3), ("film", "film", 0.2), ("ppo", "ppo", 0.5), ("ppo", "film", 0.6)]  # film's actor first
+    table = fixed_rollout_table(rows)
+    assert [r.label for r in table.rows] == ["PPO (MorFiC-F's rollout)", "MorFiC-F (MorFiC-F's rollout)",
+                                             "PPO (PPO's rollout)", "MorFiC-F (PPO's rollout)"]
+    # bold within each actor's block: film's critic on film's rollout (0.2 < 0.3, 0.4 > 0.2); ppo's on ppo's (0.5 <
+    # 0.6, 0.3 > 0.1)
+    assert [[c[0].bold for c in r.cells] for r in table.rows] == [[False, False], [True, True], [True, True],
+                                                                   [False, False]]
+    one = fixed_rollout_table([r for r in rows if r["actor_variant"] == "film"])
+    assert [r.label for r in one.rows] == ["PPO", "MorFiC-F"]  # one actor: the paper's labels
+
+
 def test_renderers_on_a_paper_table_keep_its_bold_marks_and_missing_entries():
     t = paper_table(paper.CROSS_EMBODIMENT_BASELINES)
     md = table_markdown(t)
