@@ -156,20 +156,31 @@ def _has_values(series: Sequence[float]) -> bool:
     return any(v is not None and not (isinstance(v, float) and math.isnan(v)) for v in series)
 
 
+CURVE_PANELS: tuple[tuple[str, str], ...] = (
+    ("mean_reward", "mean episode return"),
+    ("explained_variance", "critic explained variance (training)"),
+    ("action_std", "policy action std (exploration noise)"),
+    ("curriculum.vx_max", "curriculum: top of the v_x command range (m/s)"),
+)
+"""The training-curve panels: curve column and title (``recording/curves.py`` names the columns)."""
+
+
 def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, str]):
-    """Mean episode return and critic EV against env steps, one line per run, coloured by variant (a Figure).
+    """:data:`CURVE_PANELS` against env steps, one line per run, coloured by variant (a Figure; two panels a row).
 
     A panel whose series are all missing (NaN) is not drawn.
     """
     plt = _plt()
     ordered = sorted(curves, key=lambda n: (variant_order(variants.get(n, "")), n))
     colours = {v: f"C{i}" for i, v in enumerate(sorted(set(variants.values()), key=variant_order))}
-    panels = [(key, title) for key, title in (("mean_reward", "mean episode return"),
-                                              ("explained_variance", "critic explained variance (training)"))
+    panels = [(key, title) for key, title in CURVE_PANELS
               if any(_has_values([r.get(key, math.nan) for r in curves[n]]) for n in ordered)]
-    fig, axes = plt.subplots(1, max(len(panels), 1), figsize=(4.5 * max(len(panels), 1), 3.4),
-                             constrained_layout=True, squeeze=False)
-    for ax, (key, title) in zip(axes[0], panels, strict=False):
+    cols = min(max(len(panels), 1), 2)
+    rows_n = max(math.ceil(len(panels) / 2), 1)
+    fig, axes = plt.subplots(rows_n, cols, figsize=(4.5 * cols, 3.4 * rows_n), constrained_layout=True,
+                             squeeze=False)
+    flat = list(axes.flat)
+    for ax, (key, title) in zip(flat, panels, strict=False):
         for name in ordered:
             rows = curves[name]
             variant = variants.get(name, "")
@@ -179,10 +190,12 @@ def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, s
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("env steps", fontsize=9)
         ax.grid(alpha=0.3)
+    for ax in flat[len(panels):] if panels else ():
+        fig.delaxes(ax)
     if not panels:
-        axes[0, 0].text(0.5, 0.5, "no training curves", ha="center", va="center", transform=axes[0, 0].transAxes)
+        flat[0].text(0.5, 0.5, "no training curves", ha="center", va="center", transform=flat[0].transAxes)
     elif ordered:
-        axes[0, 0].legend(fontsize=8)
+        flat[0].legend(fontsize=8)
     return fig
 
 

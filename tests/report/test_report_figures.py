@@ -54,3 +54,17 @@ def test_curves_skip_an_all_nan_panel():
     curves = {"film-cpu": [{"env_steps": 1, "mean_reward": 1.0}, {"env_steps": 2, "mean_reward": 2.0}]}
     fig = curves_plot(curves, {"film-cpu": "film"})
     assert [ax.get_title() for ax in fig.axes] == ["mean episode return"]
+
+
+def test_curves_draw_the_noise_and_the_curriculum_two_panels_a_row():
+    rows = [{"env_steps": s, "mean_reward": 1.0 + s, "explained_variance": 0.5, "action_std": 1.0 - s / 10,
+             "curriculum.vx_max": 1.0 + 0.5 * s} for s in (0, 1, 2)]
+    fig = curves_plot({"adaln-cpu-s0": rows}, {"adaln-cpu-s0": "adaln"})
+    assert [ax.get_title() for ax in fig.axes] == ["mean episode return", "critic explained variance (training)",
+                                                   "policy action std (exploration noise)",
+                                                   "curriculum: top of the v_x command range (m/s)"]
+    assert tuple(fig.get_size_inches()) == (9.0, 6.8)  # 2 x 2
+    (line,) = fig.axes[3].get_lines()
+    assert list(line.get_ydata()) == [1.0, 1.5, 2.0]
+    three = curves_plot({"a": [{k: v for k, v in r.items() if k != "curriculum.vx_max"} for r in rows]}, {"a": "ppo"})
+    assert len(three.axes) == 3  # the empty fourth cell is removed
