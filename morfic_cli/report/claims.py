@@ -136,9 +136,10 @@ def _differs(value: Any, wanted: Any) -> bool:
 def better(a: Stat, b: Stat, higher: bool = True, resolution: float = 0.0) -> bool | None:
     """Whether ``a`` beats ``b`` (True / False); None within the seeds' spread (several seeds) or ``resolution``.
 
-    The seeds' spread is the larger of the two standard deviations.
+    The seeds' spread is the larger standard deviation of the sides measured over several seeds: a side with seeds
+    counts even when the other has one (its spread is the noise the single seed is just as likely to carry).
     """
-    margin = max(a.std if min(a.n, b.n) > 1 else 0.0, b.std if min(a.n, b.n) > 1 else 0.0, resolution)
+    margin = max([s.std for s in (a, b) if s.n > 1] + [resolution])
     diff = (a.mean - b.mean) if higher else (b.mean - a.mean)
     if abs(diff) <= margin:
         return None
@@ -204,8 +205,13 @@ def claim_a(calibration: Sequence[dict[str, Any]]) -> Claim:
 
 
 def _pool(stats: Sequence[Stat]) -> Stat:
-    """The mean over variants of their seed means; std the largest seed std among them."""
-    return Stat(sum(s.mean for s in stats) / len(stats), max(s.std for s in stats), min(s.n for s in stats))
+    """One statistic for a group of variants.
+
+    Mean: over the variants of their seed means. Std: the largest seed std among the variants with seeds (n > 1).
+    n: the most seeds any of them has, so a group with one multi-seed variant brings its spread to :func:`better`.
+    """
+    seeded = [s.std for s in stats if s.n > 1]
+    return Stat(sum(s.mean for s in stats) / len(stats), max(seeded, default=0.0), max(s.n for s in stats))
 
 
 def _reason(v: str, outcomes: Sequence[bool | None], robots: Sequence[str], what: str) -> str:

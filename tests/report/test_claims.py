@@ -35,6 +35,13 @@ def test_seed_stat_and_better_use_the_seeds_spread():
     assert C.better(C.Stat(1.01, 0, 1), C.Stat(1.0, 0, 1), resolution=0.05) is None
     assert C.better(C.Stat(1.10, 0, 1), C.Stat(1.0, 0, 1), resolution=0.05) is True
     assert C.better(C.Stat(0.2, 0, 1), C.Stat(0.3, 0, 1), higher=False) is True
+    # one side over seeds, the other one seed: the seeded side's spread counts (ppo's EV over 2 seeds, -23.88 +- 9.93,
+    # against a single-seed group mean of -28.27: the difference 4.39 is within 9.93 -> undecided)
+    assert C.better(C.Stat(-28.27, 0.0, 1), C.Stat(-23.88, 9.93, 2)) is None
+    assert C.better(C.Stat(-10.0, 0.0, 1), C.Stat(-23.88, 9.93, 2)) is True  # 13.88 > 9.93
+    # a group's pool: mean of the variants' means, the seeded variants' largest std, the most seeds
+    pooled = C._pool([C.Stat(-12.6, 12.94, 2), C.Stat(-0.55, 0.0, 1), C.Stat(-8.68, 0.0, 1)])
+    assert pooled.mean == pytest.approx((-12.6 - 0.55 - 8.68) / 3) and pooled.std == 12.94 and pooled.n == 2
 
 
 def test_all_of_loses_on_any_lost_comparison():
