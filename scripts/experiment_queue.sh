@@ -5,7 +5,7 @@
 # rollouts), copy its result tables under docs/results/, regenerate docs/results.md's tables, claims and figures
 # (scripts/results_tables.py) and ship it: a seed-0 run as a weights-only bundle
 # (artifacts/bundles/<run>.tar), any other seed as a results-only bundle (artifacts/bundles/results/<run>.tar: its
-# evals and diagnoses without weights or logs, ~7 MiB with the other runs' curves it carries; `morfic store import` it, then `morfic report runs/<run>`).
+# evals and diagnoses without weights, logs or other runs' curves, ~3.6 MiB; `morfic store import` it, then `morfic report runs/<run>`).
 #
 # Usage: scripts/experiment_queue.sh [--stop-at HH:MM] VARIANT:SEED ...
 #   e.g.  MORFIC_STORE=/work/stores/exp nohup scripts/experiment_queue.sh --stop-at 23:05 concat:0 actor-only:0 \

@@ -40,8 +40,8 @@ def human_size(size: Any) -> str:
 def _left_out(omitted: Any, files: Any = ()) -> str:
     """The note on what a weights-only or results-only export left out (``omitted``, ``files``: their ids)."""
     if files:
-        return (f"{len(omitted)} trainer state(s) and {len(files)} weight and rollout-log file(s) left out (results "
-                "only: `morfic report` reads it; it cannot evaluate, diagnose or resume)")
+        return (f"{len(omitted)} trainer state(s) and {len(files)} weight, rollout-log and curve file(s) left out "
+                "(results only: `morfic report` reads it; it cannot evaluate, diagnose or resume)")
     return f"{len(omitted)} trainer state(s) left out (weights only: evaluates and exports, cannot be resumed)"
 
 
@@ -159,8 +159,8 @@ def verify(store: StoreOpt = DEFAULT_STORE) -> None:
         if report.temp_files else ""
     omitted = f"; {report.omitted} trainer state(s) left out by a weights-only import" if report.omitted else ""
     if report.omitted_files:
-        omitted = (f"; {report.omitted} trainer state(s) and {report.omitted_files} weight and rollout-log file(s) "
-                   "left out by a results-only import")
+        omitted = (f"; {report.omitted} trainer state(s) and {report.omitted_files} weight, rollout-log and curve "
+                   "file(s) left out by a results-only import")
     info(f"store {escape(str(store))} OK: {report.objects} objects ({human_size(report.bytes)}), "
          f"{report.manifests} manifests, {report.refs} refs checked{leftovers}{omitted}")
 
@@ -206,8 +206,8 @@ def export(
     results_only: Annotated[bool, typer.Option(
         "--results-only", help="A results-only bundle of the named runs (runs/NAME; other refs are an error): each "
         "run's current checkpoint (config, curves) and every eval, diagnosis and check made from it (tables, "
-        "figures), without weights, trainer states or rollout logs. `morfic report` reads it; it cannot evaluate, "
-        "diagnose or resume.")] = False,
+        "figures), without weights, trainer states, rollout logs or other runs' curves. `morfic report` reads it; it "
+        "cannot evaluate, diagnose or resume.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the tar if it exists.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,

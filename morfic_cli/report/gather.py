@@ -249,7 +249,7 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
 
         for run in runs:
             manifest = store.read_manifest(run.checkpoint)
-            if "curve.csv" in manifest.files:
+            if "curve.csv" in manifest.files and "curve.csv" not in store.omitted_files(manifest):
                 data.curves[run.name] = read_curve_csv(store.read_file(run.checkpoint, "curve.csv"))
     data.provenance = list(used.values())
     return data

@@ -169,7 +169,7 @@ class Store:
                 if role in OMITTABLE_ROLES and self.is_omitted(oid)}
 
     def omitted_files(self, manifest: Manifest) -> dict[str, str]:
-        """File name -> id of the files of ``manifest`` that a results-only import left out (weights, logs)."""
+        """File name -> id of the files of ``manifest`` that a results-only import left out (weights, logs, curves)."""
         return {name: entry.id for name, entry in manifest.files.items()
                 if name in OMITTABLE_FILES and self.is_omitted(entry.id)}
 
@@ -262,9 +262,9 @@ class Store:
         entry = self.read_manifest(manifest_spec).file(name)
         if name in OMITTABLE_FILES and self.is_omitted(entry.id):
             raise ArtifactNotFoundError(f"file '{name}' ({entry.id[:12]}) of {manifest_spec} is not in store "
-                                        f"{self.root}: a results-only bundle left it out (results without weights or "
-                                        "rollout logs); import a bundle that holds it (the run's weights-only or "
-                                        "full bundle) to get it.")
+                                        f"{self.root}: a results-only bundle left it out (results without weights, "
+                                        "rollout logs or other runs' curves); import a bundle that holds it (the "
+                                        "run's weights-only or full bundle) to get it.")
         return entry
 
     # -- refs ---------------------------------------------------------------------------------

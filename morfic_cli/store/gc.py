@@ -141,8 +141,9 @@ def walk(store: Store, roots: Iterable[str], *, strict: bool = True, leave_out: 
     Roots and inputs must be manifests. Ids that are not stored are included (they are referenced) but not
     followed. An input under a role of :data:`~morfic_cli.store.shallow.OMITTABLE_ROLES`, or a file under a name
     of :data:`~morfic_cli.store.shallow.OMITTABLE_FILES`, that is missing but marked omitted (``shallow/<id>``) is
-    known-absent, not damage; inputs under ``leave_out.roles`` and files named in ``leave_out.files`` are not
-    followed (a weights-only or results-only export) unless something else reaches them.
+    known-absent, not damage; inputs under ``leave_out.roles`` and the files it leaves out
+    (:meth:`~morfic_cli.store.shallow.LeaveOut.leaves_out`) are not followed (a weights-only or results-only export)
+    unless something else reaches them.
 
     Args:
         store: The store.
@@ -192,7 +193,7 @@ def walk(store: Store, roots: Iterable[str], *, strict: bool = True, leave_out: 
                 continue
             manifests.add(oid)
             for file_name, entry in manifest.files.items():
-                if file_name in leave_out.files:
+                if leave_out.leaves_out(oid, file_name):
                     skipped_files.setdefault(entry.id, file_name)
                 else:
                     stack.append((entry.id, None, file_name))

@@ -11,11 +11,13 @@
   run's last result was added. A prefix of a history merges with any longer one (import says ``unchanged`` or
   ``extended``), so the results bundles of several runs of one store import in any order, and the refs shared
   between runs come out as the source store had them. Earlier versions of a shared ref (other runs' diagnoses)
-  come along, without their heavy files like everything else.
+  come along, without their heavy files like everything else; so do other runs' checkpoint manifests (the frozen
+  actor of a fixed rollout, the critics of an earlier diagnosis), without their curves too.
 
 Tables made from other results, and reports (``tables/compare-baselines``, ``reports/*``), stay out: ``morfic
 report`` rebuilds them from these results, and a local rebuild would diverge from a shipped history. What the
-bundle leaves out is :data:`~morfic_cli.store.shallow.RESULTS_ONLY` (weights, trainer states, rollout logs).
+bundle leaves out is :data:`~morfic_cli.store.shallow.RESULTS_ONLY` (weights, trainer states, rollout logs, the
+curves of checkpoints other than the runs').
 """
 
 from __future__ import annotations

@@ -7,10 +7,14 @@ What a bundle may leave out comes in two forms, both named here and nowhere else
   as its input ``trainer_state``.
 - a *file* under an omittable name (:data:`OMITTABLE_FILES`): the file's object, while its manifest (and every
   other file of it) stays: a checkpoint's weights ``model.pt``, a rollout's log ``rollout.mcap`` and its
-  observations ``obs.npz``.
+  observations ``obs.npz``; and a checkpoint's training curve (``curve.csv``, ``curve.png``,
+  :data:`FOREIGN_FILES`), but only where the checkpoint is not one the bundle is about.
 
 ``morfic store export --without-trainer-state`` leaves out the trainer-state inputs (:data:`WEIGHTS_ONLY`);
-``--results-only`` also the weight and log files (:data:`RESULTS_ONLY`). The tar's header lists what it left out
+``--results-only`` also the weight and log files, and the curves of every checkpoint but the exported runs' own
+(:data:`RESULTS_ONLY` with :meth:`LeaveOut.keeping`): other runs' checkpoints come into a results bundle as the
+frozen actor of a fixed-rollout diagnosis or through a shared ref's earlier versions, and their curves (1.5 MiB a
+run with the ``cpu`` preset) are in those runs' own bundles. The tar's header lists what it left out
 (``"omitted": {id: role}``, ``"omitted_files": {id: file name}``); the manifests themselves are unchanged, so
 every id stays the same. An import records each listed id it does not hold as an empty marker
 ``<store>/shallow/<id>``, and every walk over manifests (gc, verify, export, ``--resume``, eval, rsl-rl export)
@@ -20,7 +24,7 @@ damaged. Importing a bundle that holds it later brings it and drops its marker. 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from morfic_cli.store.manifest import ManifestIndex
@@ -31,33 +35,53 @@ TRAINER_STATE_ROLE = "trainer_state"
 OMITTABLE_ROLES = frozenset({TRAINER_STATE_ROLE})
 """The only input roles a bundle may leave out (the input manifest); any other missing input is damage."""
 
-OMITTABLE_FILES = frozenset({"model.pt", "rollout.mcap", "obs.npz"})
+FOREIGN_FILES = frozenset({"curve.csv", "curve.png"})
+"""A checkpoint's training curve: a results-only bundle leaves it out of the checkpoints other than its runs'."""
+
+OMITTABLE_FILES = frozenset({"model.pt", "rollout.mcap", "obs.npz"}) | FOREIGN_FILES
 """The only file names a bundle may leave out (the file's object; its manifest stays): a checkpoint's weights, a
-rollout's MCAP log and its observation arrays. Any other missing file is damage."""
+rollout's MCAP log and its observation arrays, a training curve (:data:`FOREIGN_FILES`). Any other missing file is
+damage."""
 
 
 @dataclass(frozen=True)
 class LeaveOut:
-    """What one export leaves out: the inputs under ``roles`` and the files named ``files``.
+    """What one export leaves out: input roles, file names, and file names left out of other runs' manifests.
+
+    The inputs under ``roles`` and the files named ``files`` stay out everywhere; the files named ``foreign_files``
+    stay out of every manifest but those in ``own``.
 
     Attributes:
         roles: Input roles (a subset of :data:`OMITTABLE_ROLES`).
         files: File names (a subset of :data:`OMITTABLE_FILES`).
+        foreign_files: File names left out of the manifests not in ``own`` (a subset of :data:`OMITTABLE_FILES`).
+        own: Manifest ids whose ``foreign_files`` stay in (the exported runs' checkpoints).
     """
 
     roles: frozenset[str] = frozenset()
     files: frozenset[str] = frozenset()
+    foreign_files: frozenset[str] = frozenset()
+    own: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
-        assert self.roles <= OMITTABLE_ROLES and self.files <= OMITTABLE_FILES, self
+        assert self.roles <= OMITTABLE_ROLES and self.files | self.foreign_files <= OMITTABLE_FILES, self
+
+    def keeping(self, own: frozenset[str]) -> LeaveOut:
+        """The same, keeping every file of the manifests ``own``, e.g. ``RESULTS_ONLY.keeping({checkpoint id})``."""
+        return replace(self, own=own)
+
+    def leaves_out(self, manifest_id: str, file_name: str) -> bool:
+        """Whether file ``file_name`` of manifest ``manifest_id`` stays out."""
+        return file_name in self.files or (file_name in self.foreign_files and manifest_id not in self.own)
 
 
 NOTHING = LeaveOut()
 """A full export."""
 WEIGHTS_ONLY = LeaveOut(roles=OMITTABLE_ROLES)
 """``--without-trainer-state``: the weights and everything else, no trainer states (evaluates, cannot resume)."""
-RESULTS_ONLY = LeaveOut(roles=OMITTABLE_ROLES, files=OMITTABLE_FILES)
-"""``--results-only``: tables, figures, curves and configs; no trainer states, weights or rollout logs."""
+RESULTS_ONLY = LeaveOut(roles=OMITTABLE_ROLES, files=OMITTABLE_FILES - FOREIGN_FILES, foreign_files=FOREIGN_FILES)
+"""``--results-only``: tables, figures, configs and the runs' own curves (:meth:`LeaveOut.keeping` their
+checkpoints); no trainer states, weights, rollout logs or other checkpoints' curves."""
 
 
 class OmittedIndex(ManifestIndex):

@@ -16,10 +16,10 @@ ref history (see :func:`morfic_cli.store.refs.merge_status`); it is idempotent a
 
 A weights-only export (``without_trainer_state``) leaves out the ``trainer_state`` inputs of the checkpoints
 and lists them under ``omitted``; a results-only export (``results_only``, refs chosen by
-:mod:`morfic_cli.store.results`) also leaves out the weight and rollout-log files and lists them under
-``omitted_files``. Their manifests are the store's, byte for byte. Importing one records the omitted ids the
-store lacks under ``shallow/`` (:mod:`morfic_cli.store.shallow`); exporting from such a store leaves them out
-(and lists them) by itself.
+:mod:`morfic_cli.store.results`) also leaves out the weight and rollout-log files (and other runs'
+curves) and lists them under ``omitted_files``. Their manifests are the store's, byte for byte. Importing one
+records the omitted ids the store lacks under ``shallow/`` (:mod:`morfic_cli.store.shallow`); exporting from such
+a store leaves them out (and lists them) by itself.
 """
 
 from __future__ import annotations
@@ -186,8 +186,9 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
 
     With ``results_only``, ``refs`` are runs and the tar holds their results
     (:func:`morfic_cli.store.results.results_histories` picks the refs and history prefixes; ``latest`` changes
-    nothing) without the trainer states, weights and rollout logs (listed under ``omitted`` and
-    ``omitted_files``): a bundle that ``morfic report`` reads, but that cannot evaluate, diagnose or resume.
+    nothing) without the trainer states, weights, rollout logs and the training curves of checkpoints other than
+    the runs' own (listed under ``omitted`` and ``omitted_files``): a bundle that ``morfic report`` reads, but
+    that cannot evaluate, diagnose or resume.
 
     Raises:
         ArtifactNotFoundError: A name that is not a ref.
@@ -217,7 +218,10 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
             if latest:
                 histories = {name: [RefEntry(1, h[-1].id, h[-1].time)] for name, h in histories.items()}
         report = ExportReport(path=out, refs=names)
-        leave_out = RESULTS_ONLY if results_only else WEIGHTS_ONLY if without_trainer_state else NOTHING
+        if results_only:  # the runs' own curves stay in; other checkpoints' are in their runs' bundles
+            leave_out = RESULTS_ONLY.keeping(frozenset(histories[name][-1].id for name in set(refs)))
+        else:
+            leave_out = WEIGHTS_ONLY if without_trainer_state else NOTHING
         reached = walk(store, [entry.id for h in histories.values() for entry in h], leave_out=leave_out)
         ids = sorted(reached.ids)
         missing = [oid for oid in ids if not store.objects.has(oid)]

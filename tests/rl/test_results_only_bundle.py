@@ -58,16 +58,20 @@ def _tar_objects(path) -> set[str]:
 def test_the_bundle_holds_the_results_and_none_of_the_weights_or_logs(bundles):
     src, results, weights, full = bundles
     assert results.refs == ["diagnoses/calibration", "diagnoses/fixed-rollout/aliengo", "evals/film-smoke-s1", RUN]
-    # every weight, trainer state and rollout log in the source store, found by kind and file name
+    # every weight, trainer state and rollout log in the source store, and seed 0's curve, by kind and file name
     heavy, states = set(), set()
+    seed0 = src.read_manifest("runs/film-smoke-s0")
     for oid in src.index.ids():
         manifest = src.read_manifest(oid)
         heavy |= {e.id for n, e in manifest.files.items() if n in HEAVY}
         if manifest.config.get("role") == "trainer-state":
             states |= {oid, *(e.id for e in manifest.files.values())}
+    curves0 = {seed0.files[n].id for n in ("curve.csv", "curve.png")}
     in_tar = _tar_objects(results.path)
-    assert in_tar and not in_tar & (heavy | states)
-    assert set(results.omitted_files) <= heavy and set(results.omitted) <= states
+    assert in_tar and not in_tar & (heavy | states | curves0)
+    # seed 0's checkpoint comes along (the frozen actor, the first calibration's critic), without its curve
+    assert seed0.id in in_tar and curves0 <= set(results.omitted_files)
+    assert set(results.omitted_files) <= heavy | curves0 and set(results.omitted) <= states
     assert {results.omitted_files[e.id] for e in src.read_manifest(RUN).files.values() if e.id in
             results.omitted_files} == {"model.pt"}
     # the results are in: the eval table, both calibration tables, the fixed-rollout table, the run's curve

@@ -116,9 +116,11 @@ def test_a_results_only_bundle_leaves_out_weights_states_and_logs(src, tmp_path)
     header, objects, markers, refs = _members(report.path)
     assert refs == report.refs == ["diagnoses/calibration", "diagnoses/fixed-rollout/x", "evals/b", "runs/b"]
     # what stays out: both trainer states (a's checkpoint comes with calibration@1 and the fixed rollout), both
-    # weights, every rollout log and observation file (b's and a's eval rollouts are not reached: evals/a is not in)
+    # weights, a's curve (b's stays: b is the run exported), every rollout log and observation file (b's and a's
+    # eval rollouts are not reached: evals/a is not in)
     assert report.omitted == dict(sorted({a["state"]: STATE, b["state"]: STATE}.items()))
-    left_files = {**dict.fromkeys(_files(src, a["ckpt"], "model.pt"), "model.pt"),
+    left_files = {**dict(zip(_files(src, a["ckpt"], "model.pt", "curve.csv", "curve.png"),
+                             ("model.pt", "curve.csv", "curve.png"), strict=True)),
                   **dict.fromkeys(_files(src, b["ckpt"], "model.pt"), "model.pt")}
     for rollout in (b["rollout"], a["drollout"], b["drollout"]):
         mcap, obs = _files(src, rollout, "rollout.mcap", "obs.npz")
@@ -129,14 +131,14 @@ def test_a_results_only_bundle_leaves_out_weights_states_and_logs(src, tmp_path)
     # what goes in: 9 manifests and their kept files, nothing else
     manifests = sorted([a["ckpt"], b["ckpt"], b["rollout"], b["eval"], a["drollout"], b["drollout"], a["diag"],
                         b["diag"], src.ids["fixed"]])
-    kept = [*_files(src, a["ckpt"], "curve.csv", "curve.png"), *_files(src, b["ckpt"], "curve.csv", "curve.png"),
+    kept = [*_files(src, b["ckpt"], "curve.csv", "curve.png"),
             *_files(src, b["rollout"], "speed.png"), *_files(src, b["eval"], "eval.csv"),
             *_files(src, a["diag"], "calibration.csv"), *_files(src, b["diag"], "calibration.csv"),
             *_files(src, src.ids["fixed"], "fixed_rollout.csv")]
     assert markers == manifests and objects == sorted([*manifests, *kept])
     assert not set(objects) & (set(left_files) | set(report.omitted))
     assert report.bytes == sum(src.objects.size(oid) for oid in objects)
-    assert sum(src.objects.size(oid) for oid in left_files) == 2 * 1000 + 2000 + 500 + 2 * (701 + 301)
+    assert sum(src.objects.size(oid) for oid in left_files) == 2 * 1000 + 4 + 4 + 2000 + 500 + 2 * (701 + 301)
 
 
 def test_import_gives_the_same_refs_and_ids_and_every_walk_knows_the_gaps(src, tmp_path):
@@ -154,8 +156,8 @@ def test_import_gives_the_same_refs_and_ids_and_every_walk_knows_the_gaps(src, t
     assert sorted(p.name for p in (dst.root / "shallow").iterdir()) == sorted([*report.omitted,
                                                                                 *report.omitted_files])
     check = dst.verify()
-    assert check.ok and check.omitted == 2 and check.omitted_files == len(report.omitted_files) == 8
-    assert dst.gc(dry_run=False).removed == [] and dst.gc(dry_run=True).omitted == 10
+    assert check.ok and check.omitted == 2 and check.omitted_files == len(report.omitted_files) == 10
+    assert dst.gc(dry_run=False).removed == [] and dst.gc(dry_run=True).omitted == 12
     assert sorted(dst.omitted.ids()) == sorted([*report.omitted, *report.omitted_files])
     reached = walk(dst, [b["ckpt"]])
     assert reached.absent == {b["state"]: STATE} and reached.absent_files == {_files(src, b["ckpt"], "model.pt")[0]:
@@ -168,6 +170,11 @@ def test_import_gives_the_same_refs_and_ids_and_every_walk_knows_the_gaps(src, t
             reader("runs/b", "model.pt")
     with pytest.raises(ArtifactNotFoundError, match="a results-only bundle left it out"):
         dst.read_file(b["rollout"], "rollout.mcap")
+    a = src.ids["a"]  # a's checkpoint is here (the fixed rollout's actor), its curve is in a's own bundle
+    names = ("curve.csv", "curve.png", "model.pt")
+    assert dst.describe(a["ckpt"])["omitted_files"] == dict(zip(names, _files(src, a["ckpt"], *names), strict=True))
+    with pytest.raises(ArtifactNotFoundError, match="a results-only bundle left it out"):
+        dst.read_file(a["ckpt"], "curve.csv")
     # a re-export from the imported store is the same tar
     again = dst.export_tar(["runs/b"], tmp_path / "again.tar", results_only=True)
     assert again.path.read_bytes() == report.path.read_bytes()
@@ -199,7 +206,7 @@ def test_a_weights_only_bundle_on_top_fills_the_weights(src, tmp_path):
     model = _files(src, b["ckpt"], "model.pt")[0]
     assert filled.refs == {"runs/b": "unchanged"} and filled.filled == [model] and filled.objects_added == 1
     assert dst.read_file("runs/b", "model.pt") == b"b" * 1000 and not dst.is_omitted(model)
-    assert dst.is_omitted(b["state"]) and dst.verify().ok and dst.verify().omitted_files == 7
+    assert dst.is_omitted(b["state"]) and dst.verify().ok and dst.verify().omitted_files == 9
 
 
 @pytest.mark.parametrize(("spec", "needle"), [
@@ -224,6 +231,10 @@ def test_a_run_without_results_is_an_error(src, tmp_path):
 
 def test_results_only_leaves_out_only_what_shallow_names():
     assert RESULTS_ONLY.roles == {STATE} and RESULTS_ONLY.files == {"model.pt", "rollout.mcap", "obs.npz"}
+    assert RESULTS_ONLY.foreign_files == {"curve.csv", "curve.png"} and not RESULTS_ONLY.own
+    kept = RESULTS_ONLY.keeping(frozenset({"k"}))
+    assert [kept.leaves_out(m, f) for m, f in (("k", "curve.csv"), ("o", "curve.csv"), ("k", "model.pt"),
+                                               ("o", "eval.csv"))] == [False, True, True, False]
 
 
 # -- hand-made bundles: only the weight and log files may be left out, and only when the header says so ----------
@@ -246,7 +257,8 @@ def _file_bundle(path, name: str, omitted_files: object, *, hold: bool = False):
 
 REFUSED = {
     "a-file-name-that-may-not-be-left-out": (dict(name="eval.csv", omitted_files={oid_of(_GONE): "eval.csv"}),
-                                             "may only leave out model.pt, obs.npz, rollout.mcap files"),
+                                             "may only leave out curve.csv, curve.png, model.pt, obs.npz, rollout.mcap "
+                                             "files"),
     "declared-as-another-file": (dict(name="eval.csv", omitted_files={oid_of(_GONE): "model.pt"}),
                                  "names the left-out file"),
     "undeclared-gap": (dict(name="model.pt", omitted_files=None), "the export is incomplete"),
@@ -286,12 +298,13 @@ def test_cli_results_only_round_trip(run_cli, src, tmp_path):
                              "--store", str(src.root))
     assert code == 0, err
     assert out == f"{tmp_path / 'bundles' / 'b.tar'}\n"
-    assert "exported 4 ref(s)" in err and "2 trainer state(s) and 8 weight and rollout-log file(s) left out" in err
+    left = "2 trainer state(s) and 10 weight, rollout-log and curve file(s) left out"
+    assert "exported 4 ref(s)" in err and left in err
     dst = str(tmp_path / "dst")
     code, _, err = run_cli("store", "import", str(tmp_path / "bundles" / "b.tar"), "--store", dst)
-    assert code == 0 and "2 trainer state(s) and 8 weight and rollout-log file(s) left out" in err
+    assert code == 0 and left in err
     code, _, err = run_cli("store", "verify", "--store", dst)
-    assert code == 0 and "8 weight and rollout-log file(s) left out by a results-only import" in err
+    assert code == 0 and "10 weight, rollout-log and curve file(s) left out by a results-only import" in err
     code, out, _ = run_cli("store", "show", "runs/b", "--store", dst, "-f", "json")
     assert code == 0 and json.loads(out)["omitted_files"] == {"model.pt": _files(src, b["ckpt"], "model.pt")[0]}
     code, _, err = run_cli("store", "get", "runs/b", "--file", "model.pt", "--out", str(tmp_path / "got"),
