@@ -226,17 +226,24 @@ def render(results: Path) -> str:
 
 #: The walking check's bar (issue 17): on Go2 at 1.0 m/s, 16 envs x 250 steps.
 WALK_VX, WALK_S = 0.8, 0.9
+#: The paper's evaluation command (m/s), shown on the template beside the walking check.
+TEMPLATE_VX = 2.0
 
 
 def walk_table(results: Path) -> list[str]:
-    """Every run's walking check (``<run>-walk.json``) and when its command curriculum opened (``<run>-curve.csv``)."""
+    """Every run's walking check, its curriculum, and its own template at the paper's command.
+
+    From ``<run>-walk.json`` (the check), ``<run>-curve.csv`` (when the command curriculum opened, how far it
+    reached) and ``<run>-eval.csv`` (Go2, descriptor mode, 2.0 m/s: a command that a run whose curriculum stopped
+    short of it never trained for).
+    """
     from morfic_cli.rl.variants import variant_order
 
     runs = sorted((p.name[: -len("-walk.json")] for p in results.glob("*-cpu-s*-walk.json")
                    if parse_run(p.name[: -len("-walk.json")])),
                   key=lambda n: (variant_order(parse_run(n)[0]), parse_run(n)[1]))
     lines = ["| run | v_x ± σ (m/s) | S | verdict | walks (v_x >= 0.8, S >= 0.9) | curriculum past 1 m/s at iteration "
-             "| final vx range |", "|---|---:|---:|---|---|---:|---:|"]
+             "| final vx range | Go2 at 2.0 m/s: v_x / S |", "|---|---:|---:|---|---|---:|---:|---|"]
     for run in runs:
         row = json.loads((results / f"{run}-walk.json").read_text())[0]
         walks = row["vx_mean"] >= WALK_VX and row["survival"] >= WALK_S
@@ -247,8 +254,16 @@ def walk_table(results: Path) -> list[str]:
             wide = c[c["curriculum.vx_max"] > 1.0 + 1e-9]
             opened = str(int(wide["iteration"].iloc[0])) if not wide.empty else "never"
             top = f"{c['curriculum.vx_max'].iloc[-1]:g} m/s"
+        at_cmd = "-"
+        evals = results / f"{run}-eval.csv"
+        if evals.is_file():
+            e = pd.read_csv(evals)
+            at = (e["command_vx"] - TEMPLATE_VX).abs() < 1e-9
+            hit = e[(e["robot"] == "go2") & (e["mode"] == "descriptor") & at]
+            if not hit.empty:
+                at_cmd = f"{hit['vx_mean'].iloc[0]:.2f} / {hit['survival'].iloc[0]:.3f}"
         lines.append(f"| `{run}` | {row['vx_mean']:.2f} ± {row['vx_std']:.2f} | {row['survival']:.3f} | "
-                     f"{row['verdict']} | {'yes' if walks else '**no**'} | {opened} | {top} |")
+                     f"{row['verdict']} | {'yes' if walks else '**no**'} | {opened} | {top} | {at_cmd} |")
     return lines
 
 

@@ -104,6 +104,9 @@ def test_walk_table_checks_the_bar_and_finds_when_the_curriculum_opened(tmp_path
     (tmp_path / "ppo-cpu-s0-walk.json").write_text(json.dumps([{**walk, "vx_mean": 0.79}]))  # below 0.8: no
     (tmp_path / "film-cpu-s0-curve.csv").write_text(
         "iteration,curriculum.vx_max\n1,1.0\n2,1.0\n3,1.5\n4,2.0\n")
+    (tmp_path / "film-cpu-s0-eval.csv").write_text(  # the template at 2.0 m/s: the descriptor row, not full's
+        EVAL_HEAD + "go2,full,2.0,0.0,1.1,0.3,0.5,ok\ngo2,descriptor,2.5,0.0,0.7,0.3,0.2,falls\n"
+        "go2,descriptor,2.0,0.0,1.4567,0.3,0.65625,falls\naliengo,descriptor,2.0,0.324,1.6,0.6,0.0,falls\n")
     lines = rt.walk_table(tmp_path)
-    assert lines[2] == "| `ppo-cpu-s0` | 0.79 ± 0.18 | 1.000 | ok | **no** | - | - |"  # paper order: ppo first
-    assert lines[3] == "| `film-cpu-s0` | 0.93 ± 0.18 | 1.000 | ok | yes | 3 | 2 m/s |"
+    assert lines[2] == "| `ppo-cpu-s0` | 0.79 ± 0.18 | 1.000 | ok | **no** | - | - | - |"  # paper order: ppo first
+    assert lines[3] == "| `film-cpu-s0` | 0.93 ± 0.18 | 1.000 | ok | yes | 3 | 2 m/s | 1.46 / 0.656 |"
