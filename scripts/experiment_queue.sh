@@ -7,19 +7,32 @@
 # (artifacts/bundles/<run>.tar), any other seed as a results-only bundle (artifacts/bundles/results/<run>.tar: its
 # evals and diagnoses without weights, logs or other runs' curves, ~3.6 MiB; `morfic store import` it, then `morfic report runs/<run>`).
 #
-# Usage: scripts/experiment_queue.sh [--stop-at HH:MM] VARIANT:SEED ...
+# Usage: scripts/experiment_queue.sh [--stop-at HH:MM] [--last-start HH:MM] VARIANT:SEED ...
 #   e.g.  MORFIC_STORE=/work/stores/exp nohup scripts/experiment_queue.sh --stop-at 23:05 concat:0 actor-only:0 \
 #           > queue.log 2>&1 &
 #
 # --stop-at (UTC) is for a machine that goes away: at that time a training still running gets Ctrl-C (it finishes
 # its iteration and checkpoints), its full bundle (with the trainer state, so `morfic train --resume` continues it
 # bit-identically elsewhere) goes to artifacts/bundles/partial/<run>.tar, and the queue stops. Commit what it wrote.
+# --last-start (UTC): no training starts (or resumes) at or after that time; the queue stops there instead, so a
+# run that could not finish before --stop-at is not begun (its partial bundle, ~25 MiB with the trainer state, would
+# stay in git history). A finished run is still evaluated and shipped.
 # Runs are done strictly one after another: two CPU-heavy jobs on 2 cores slow each other.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 : "${MORFIC_STORE:?set MORFIC_STORE to the experiment store (kept between runs)}"
 STOP_AT=""
-if [ "${1:-}" = "--stop-at" ]; then STOP_AT=$2; shift 2; fi
+LAST_START=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --stop-at) STOP_AT=${2:?--stop-at takes a time HH:MM (UTC)}; shift 2 ;;
+    --last-start) LAST_START=${2:?--last-start takes a time HH:MM (UTC)}; shift 2 ;;
+    *) break ;;
+  esac
+done
+for t in "$STOP_AT" "$LAST_START"; do
+  [ -z "$t" ] || date -u -d "$t" +%s >/dev/null 2>&1 || { echo "Error: '$t' is not a time; give HH:MM (UTC)" >&2; exit 1; }
+done
 [ $# -gt 0 ] || { echo "Error: name at least one run as VARIANT:SEED, e.g. concat:0" >&2; exit 1; }
 RESULTS=docs/results
 BUNDLES=artifacts/bundles
@@ -31,15 +44,19 @@ finished() {  # 0 when runs/$1 is a finished run in the store
   python3 -c "import json,sys; sys.exit(0 if json.loads(sys.argv[1])['meta'].get('finished') else 1)" "$doc"
 }
 
-seconds_left() {  # seconds until STOP_AT today (UTC), or a large number
-  [ -n "$STOP_AT" ] || { echo 999999; return; }
-  echo $(( $(date -u -d "$STOP_AT" +%s) - $(date -u +%s) ))
+seconds_until() {  # seconds until time $1 today (UTC), or a large number when $1 is empty
+  [ -n "$1" ] || { echo 999999; return; }
+  echo $(( $(date -u -d "$1" +%s) - $(date -u +%s) ))
 }
+seconds_left() { seconds_until "$STOP_AT"; }
 
 for item in "$@"; do
   variant=${item%:*}; seed=${item#*:}; name="$variant-cpu-s$seed"
   if [ "$(seconds_left)" -le 0 ]; then echo "== $(date -u +%T) stop time reached before $name"; exit 0; fi
   if ! finished "$name"; then
+    if [ "$(seconds_until "$LAST_START")" -le 0 ]; then
+      echo "== $(date -u +%T) last start time $LAST_START passed: $name is not begun; the queue stops"; exit 0
+    fi
     if morfic store show "runs/$name" >/dev/null 2>&1; then
       args=(--resume "runs/$name")
     else
