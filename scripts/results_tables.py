@@ -237,8 +237,13 @@ def walk_table(results: Path) -> list[str]:
     reached) and ``<run>-eval.csv`` (Go2, descriptor mode, 2.0 m/s: a command that a run whose curriculum stopped
     short of it never trained for).
     """
+    from morfic_cli.envs.locomotion import TEMPLATE
     from morfic_cli.rl.variants import variant_order
 
+    evals = load(results, "eval")
+    if not evals.empty:
+        at = (evals["command_vx"] - TEMPLATE_VX).abs() < 1e-9
+        evals = evals[(evals["robot"] == TEMPLATE) & (evals["mode"] == "descriptor") & at].set_index("run")
     runs = sorted((p.name[: -len("-walk.json")] for p in results.glob("*-cpu-s*-walk.json")
                    if parse_run(p.name[: -len("-walk.json")])),
                   key=lambda n: (variant_order(parse_run(n)[0]), parse_run(n)[1]))
@@ -255,13 +260,9 @@ def walk_table(results: Path) -> list[str]:
             opened = str(int(wide["iteration"].iloc[0])) if not wide.empty else "never"
             top = f"{c['curriculum.vx_max'].iloc[-1]:g} m/s"
         at_cmd = "-"
-        evals = results / f"{run}-eval.csv"
-        if evals.is_file():
-            e = pd.read_csv(evals)
-            at = (e["command_vx"] - TEMPLATE_VX).abs() < 1e-9
-            hit = e[(e["robot"] == "go2") & (e["mode"] == "descriptor") & at]
-            if not hit.empty:
-                at_cmd = f"{hit['vx_mean'].iloc[0]:.2f} / {hit['survival'].iloc[0]:.3f}"
+        if run in evals.index:
+            hit = evals.loc[run]
+            at_cmd = f"{hit['vx_mean']:.2f} / {hit['survival']:.3f}"
         lines.append(f"| `{run}` | {row['vx_mean']:.2f} ± {row['vx_std']:.2f} | {row['survival']:.3f} | "
                      f"{row['verdict']} | {'yes' if walks else '**no**'} | {opened} | {top} | {at_cmd} |")
     return lines
