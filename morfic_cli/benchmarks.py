@@ -275,6 +275,9 @@ class TrainBenchResult:
         load_before: 1-minute load average when the measurement started.
         load_after: 1-minute load average when it ended.
         omp_wait_policy: ``OMP_WAIT_POLICY`` of the process (morfic_cli/threads.py).
+        mixed_precision: The preset's ``ppo.use_mixed_precision`` (bf16 autocast).
+        bf16_kernels: Whether this CPU has fast bf16 matrix kernels (None: unknown); without them bf16 autocast is
+            several times slower than float32 (morfic_cli/rl/precision.py).
     """
 
     preset: str
@@ -299,6 +302,8 @@ class TrainBenchResult:
     load_before: float = float("nan")
     load_after: float = float("nan")
     omp_wait_policy: str = ""
+    mixed_precision: bool = False
+    bf16_kernels: bool | None = None
 
     def as_dict(self) -> dict:
         """Plain dict for JSON/CSV."""
@@ -317,6 +322,7 @@ def bench_train(preset: str = "cpu", variant: str = "film", iterations: int = 5,
     import torch
 
     from morfic_cli.rl.config import apply_overrides, preset_cfg
+    from morfic_cli.rl.precision import cpu_bf16_kernels
     from morfic_cli.rl.runner import new_run
     from morfic_cli.store import Store
 
@@ -359,7 +365,8 @@ def bench_train(preset: str = "cpu", variant: str = "film", iterations: int = 5,
         torch_threads=torch.get_num_threads(), cpu_model=cpu_model(), cores=os.cpu_count() or 1,
         s_per_iteration_spread=_spread(per_iter, 3), fraction_spread=_spread(fractions),
         noisy=fraction > MAX_CREDIBLE_RATIO, load_before=load_before, load_after=load_average(),
-        omp_wait_policy=os.environ.get("OMP_WAIT_POLICY", ""),
+        omp_wait_policy=os.environ.get("OMP_WAIT_POLICY", ""), mixed_precision=cfg.ppo.use_mixed_precision,
+        bf16_kernels=cpu_bf16_kernels(),
     )
 
 

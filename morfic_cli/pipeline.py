@@ -285,6 +285,14 @@ class Pipeline:
         return [(v, s, RUNS_PREFIX + run_name(v, s, self.cfg.preset)) for v in self.cfg.variants
                 for s in range(self.cfg.seeds)]
 
+    def trains_in_bf16(self) -> bool:
+        """True when a run this pipeline has yet to train (not finished in the store) autocasts to bf16."""
+        if self.cfg.bundles:
+            return False
+        return any(self.train_cfg(v, s).ppo.use_mixed_precision
+                   and not (self.store.has_ref(spec) and self.store.read_manifest(spec).meta.get("finished"))
+                   for v, s, spec in self.run_specs())
+
     def plan(self) -> list[tuple[str, str, Callable[[], StepResult]]]:
         """Every step as (kind, label, function), in order."""
         runs = self.run_specs()

@@ -32,6 +32,9 @@ def bench(
     compare: Annotated[str | None, typer.Option("--compare", help="bench train: also time this git commit, branch "
                                                 "or tag, side by side in alternating runs (e.g. main).")] = None,
     rounds: Annotated[int, typer.Option("--rounds", min=1, help="bench train --compare: runs per side.")] = 2,
+    overrides: Annotated[list[str] | None, typer.Option(
+        "--set", help="bench train: config override key=value, repeatable, as in `morfic train` (e.g. "
+        "ppo.use_mixed_precision=false).")] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
@@ -58,14 +61,18 @@ def bench(
     Example: morfic bench env --backend warp --device cuda --envs 4096,8192
     Example: morfic bench train --preset cpu --iterations 5
     Example: morfic bench train --preset cpu --iterations 3 --compare main --rounds 3
+    Example: morfic bench train --preset cpu --iterations 2 --set ppo.use_mixed_precision=false
     """
     check_args(store=store, env_counts=envs if what is _options.Benchmark.env else None, steps=steps, seed=seed)
     backend = backend.value
+    if overrides and (what is not _options.Benchmark.train or compare is not None):
+        raise MorficError("--set overrides the training config of `morfic bench train` (without --compare); drop it.")
     if what is _options.Benchmark.train:
         if compare is not None:
             _compare_train(compare, preset.value, variant, iterations, rounds, seed, fmt, quiet, device.value, backend)
             return
-        _bench_train(preset.value, variant, iterations, seed, fmt, quiet, store, device.value, backend)
+        _bench_train(preset.value, variant, iterations, seed, fmt, quiet, store, device.value, backend,
+                     list(overrides or []))
         return
     if compare is not None:
         raise MorficError("--compare times training; use it with `morfic bench train`.")
@@ -165,15 +172,23 @@ def _compare_train(ref: str, preset: str, variant: str, iterations: int, rounds:
 
 
 def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: OutputFormat, quiet: bool,
-                 store, device: str, backend: str) -> None:
+                 store, device: str, backend: str, overrides: list[str]) -> None:
     from morfic_cli.benchmarks import bench_train
     from morfic_cli.recording.tables import write_bench_table
+    from morfic_cli.rl.config import apply_overrides, preset_cfg
+    from morfic_cli.rl.precision import cpu_bf16_kernels, slow_bf16_warning
     from morfic_cli.rl.runner import check_device
 
     check_device(device)
+    cfg = apply_overrides(preset_cfg(preset, variant, seed), overrides)  # unknown keys: Error before any work
     if not quiet:
-        info(f"bench train: {preset} preset, {variant}, {device}, 1 warm-up + {iterations} timed iterations ...")
-    overrides = [] if backend == "cpu" else [f"env.sim.backend={backend}"]  # --device cuda selects warp itself
+        info(f"bench train: {preset} preset, {variant}, {device}, 1 warm-up + {iterations} timed iterations"
+             + (f", {' '.join(overrides)}" if overrides else "") + " ...")
+    warning = slow_bf16_warning(cfg.ppo.use_mixed_precision, device, cpu_bf16_kernels())
+    if warning:
+        info(warning)
+    if backend != "cpu":  # --device cuda selects warp itself
+        overrides = [f"env.sim.backend={backend}", *overrides]
     row = bench_train(preset, variant, iterations, seed, overrides, device=device).as_dict()
     artifact = write_bench_table(store, "train", [row])
     if fmt == OutputFormat.csv:

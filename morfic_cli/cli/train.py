@@ -76,6 +76,7 @@ def train(
     check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None)
     from morfic_cli.rl.config import apply_overrides, preset_cfg
     from morfic_cli.rl.live_log import check_logger
+    from morfic_cli.rl.precision import cpu_bf16_kernels, slow_bf16_warning
     from morfic_cli.rl.runner import new_run, resume_run
     from morfic_cli.store import Store
 
@@ -94,6 +95,10 @@ def train(
         run = new_run(st, cfg, name or run_name(cfg.variant, cfg.seed), device.value, live=live)
 
     cfg = run.cfg
+    if run.dist.rank == 0:
+        warning = slow_bf16_warning(cfg.ppo.use_mixed_precision, device.value, cpu_bf16_kernels())
+        if warning:
+            info(warning)  # also with -q: a run that is ~7x slower than it need be is not noise
     quiet = quiet or run.dist.rank != 0  # torchrun: one progress bar, rank 0's
     if not quiet:
         info(f"train: runs/{run.name} variant={cfg.variant} preset={cfg.preset} seed={cfg.seed} "

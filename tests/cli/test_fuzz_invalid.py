@@ -155,6 +155,8 @@ ROWS: list[tuple[str, ...]] = [
     ("bench", "env", "--backend", "nosuch"),
     ("bench", "train", "--iterations", "0"),
     ("bench", "train", "--preset", "nosuch"),
+    ("bench", "train", "--set", "nosuch=1"),
+    ("bench", "env", "--set", "ppo.gamma=0.9"),
     # reproduce
     ("reproduce", "--variants", ""),
     ("reproduce", "--variants", " , "),
