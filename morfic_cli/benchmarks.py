@@ -276,8 +276,9 @@ class TrainBenchResult:
         load_after: 1-minute load average when it ended.
         omp_wait_policy: ``OMP_WAIT_POLICY`` of the process (morfic_cli/threads.py).
         mixed_precision: The preset's ``ppo.use_mixed_precision`` (bf16 autocast).
-        bf16_kernels: Whether this CPU has fast bf16 matrix kernels (None: unknown); without them bf16 autocast is
-            several times slower than float32 (morfic_cli/rl/precision.py).
+        bf16_kernels: Whether this CPU has fast bf16 matrix kernels (None: unknown).
+        bf16_matmul: How the run's bf16 matrix products ran: "native", "float32" (a CPU without bf16 kernels,
+            morfic_cli/rl/precision.py), or None without mixed precision.
     """
 
     preset: str
@@ -304,6 +305,7 @@ class TrainBenchResult:
     omp_wait_policy: str = ""
     mixed_precision: bool = False
     bf16_kernels: bool | None = None
+    bf16_matmul: str | None = None
 
     def as_dict(self) -> dict:
         """Plain dict for JSON/CSV."""
@@ -331,6 +333,7 @@ def bench_train(preset: str = "cpu", variant: str = "film", iterations: int = 5,
     load_before = load_average()
     with tempfile.TemporaryDirectory(prefix="morfic-bench-") as tmp:
         run = new_run(Store(tmp), cfg, "bench", device)
+        matmul = run.runner.alg.bf16_matmul
         cfg = run.cfg
         rows: list[dict] = []
         floors: list[float] = []
@@ -366,7 +369,7 @@ def bench_train(preset: str = "cpu", variant: str = "film", iterations: int = 5,
         s_per_iteration_spread=_spread(per_iter, 3), fraction_spread=_spread(fractions),
         noisy=fraction > MAX_CREDIBLE_RATIO, load_before=load_before, load_after=load_average(),
         omp_wait_policy=os.environ.get("OMP_WAIT_POLICY", ""), mixed_precision=cfg.ppo.use_mixed_precision,
-        bf16_kernels=cpu_bf16_kernels(),
+        bf16_kernels=cpu_bf16_kernels(), bf16_matmul=matmul,
     )
 
 

@@ -17,9 +17,6 @@
 # --last-start (UTC): no training starts (or resumes) at or after that time; the queue stops there instead, so a
 # run that could not finish before --stop-at is not begun (its partial bundle, ~25 MiB with the trainer state, would
 # stay in git history). A finished run is still evaluated and shipped.
-# A run to train on a CPU without bf16 matrix kernels (AVX2 only) is an error: the cpu preset's bf16 autocast runs
-# ~7x slower there (docs/benchmarks.md), and training it in float32 instead would not be the same preset as the
-# other runs.
 # Runs are done strictly one after another: two CPU-heavy jobs on 2 cores slow each other.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -47,10 +44,6 @@ finished() {  # 0 when runs/$1 is a finished run in the store
   python3 -c "import json,sys; sys.exit(0 if json.loads(sys.argv[1])['meta'].get('finished') else 1)" "$doc"
 }
 
-bf16_kernels() {  # 0 unless this CPU has no bf16 matrix kernels (morfic_cli/rl/precision.py)
-  python3 -c "import sys; from morfic_cli.rl.precision import cpu_bf16_kernels; sys.exit(cpu_bf16_kernels() is False)"
-}
-
 seconds_until() {  # seconds until time $1 today (UTC), or a large number when $1 is empty
   [ -n "$1" ] || { echo 999999; return; }
   echo $(( $(date -u -d "$1" +%s) - $(date -u +%s) ))
@@ -63,12 +56,6 @@ for item in "$@"; do
   if ! finished "$name"; then
     if [ "$(seconds_until "$LAST_START")" -le 0 ]; then
       echo "== $(date -u +%T) last start time $LAST_START passed: $name is not begun; the queue stops"; exit 0
-    fi
-    if ! bf16_kernels; then
-      echo "Error: this CPU has no bf16 matrix kernels (AVX2 only), and the experiment's runs train under bf16" \
-           "autocast (the cpu preset): $name would take ~16 hours instead of ~1 (58 s/iteration measured on such a" \
-           "machine). Train it on a CPU with AVX-512 or AMX; $name is not begun, the queue stops." >&2
-      exit 1
     fi
     if morfic store show "runs/$name" >/dev/null 2>&1; then
       args=(--resume "runs/$name")

@@ -176,7 +176,7 @@ def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: Out
     from morfic_cli.benchmarks import bench_train
     from morfic_cli.recording.tables import write_bench_table
     from morfic_cli.rl.config import apply_overrides, preset_cfg
-    from morfic_cli.rl.precision import cpu_bf16_kernels, slow_bf16_warning
+    from morfic_cli.rl.precision import bf16_matmul, cpu_bf16_kernels, float32_note
     from morfic_cli.rl.runner import check_device
 
     check_device(device)
@@ -184,9 +184,9 @@ def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: Out
     if not quiet:
         info(f"bench train: {preset} preset, {variant}, {device}, 1 warm-up + {iterations} timed iterations"
              + (f", {' '.join(overrides)}" if overrides else "") + " ...")
-    warning = slow_bf16_warning(cfg.ppo.use_mixed_precision, device, cpu_bf16_kernels())
-    if warning:
-        info(warning)
+    note = float32_note(bf16_matmul(device, cpu_bf16_kernels())) if cfg.ppo.use_mixed_precision else None
+    if note and not quiet:
+        info(note)
     if backend != "cpu":  # --device cuda selects warp itself
         overrides = [f"env.sim.backend={backend}", *overrides]
     row = bench_train(preset, variant, iterations, seed, overrides, device=device).as_dict()

@@ -148,12 +148,12 @@ def reproduce(
     view = _View(quiet) if executor is Executor.local else _RayView(quiet)
     pipeline = Pipeline(st, cfg, out=out_dir, progress=view)
     view.total = len(pipeline.plan())
-    if executor is Executor.local and pipeline.trains_in_bf16():  # ray: the workers' CPUs, not this one's
-        from morfic_cli.rl.precision import cpu_bf16_kernels, slow_bf16_warning
+    if not quiet and executor is Executor.local and pipeline.trains_in_bf16():  # ray: the workers' CPUs decide
+        from morfic_cli.rl.precision import bf16_matmul, cpu_bf16_kernels, float32_note
 
-        warning = slow_bf16_warning(True, cfg.device, cpu_bf16_kernels())
-        if warning:
-            info(warning)
+        note = float32_note(bf16_matmul(cfg.device, cpu_bf16_kernels()))
+        if note:
+            info(note)
     if not quiet:
         where = "" if executor is Executor.local else f", executor ray ({address or 'local instance'})"
         info(f"reproduce: preset {preset.value}, {len(cfg.variants)} variants ({', '.join(cfg.variants)}) x "

@@ -76,7 +76,7 @@ def train(
     check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None)
     from morfic_cli.rl.config import apply_overrides, preset_cfg
     from morfic_cli.rl.live_log import check_logger
-    from morfic_cli.rl.precision import cpu_bf16_kernels, slow_bf16_warning
+    from morfic_cli.rl.precision import float32_note
     from morfic_cli.rl.runner import new_run, resume_run
     from morfic_cli.store import Store
 
@@ -95,10 +95,6 @@ def train(
         run = new_run(st, cfg, name or run_name(cfg.variant, cfg.seed), device.value, live=live)
 
     cfg = run.cfg
-    if run.dist.rank == 0:
-        warning = slow_bf16_warning(cfg.ppo.use_mixed_precision, device.value, cpu_bf16_kernels())
-        if warning:
-            info(warning)  # also with -q: a run that is ~7x slower than it need be is not noise
     quiet = quiet or run.dist.rank != 0  # torchrun: one progress bar, rank 0's
     if not quiet:
         info(f"train: runs/{run.name} variant={cfg.variant} preset={cfg.preset} seed={cfg.seed} "
@@ -106,6 +102,9 @@ def train(
              f"({cfg.env.num_envs * cfg.num_steps_per_env:,} transitions each) "
              f"sim={cfg.env.sim.backend} on {cfg.env.sim.device}"
              + (f" x {run.dist.world_size} processes" if run.dist.world_size > 1 else ""))
+        note = float32_note(run.runner.alg.bf16_matmul)
+        if note:
+            info(note)
         if run.live is not None:
             kind, folder = run.live
             hint = f" (tensorboard --logdir {log_dir})" if kind == "tensorboard" else ""

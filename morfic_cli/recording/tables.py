@@ -65,6 +65,7 @@ BENCH_TRAIN_COLUMNS: tuple[str, ...] = (
     "collect_s_per_iteration", "learn_s_per_iteration", "train_steps_per_s", "floor_env_steps_per_s",
     "fraction_of_floor", "torch_threads", "cpu_model", "cores", "s_per_iteration_spread", "fraction_spread", "noisy",
     "load_before", "load_after", "omp_wait_policy", "mixed_precision", "bf16_kernels",
+    "bf16_matmul",
 )
 """Columns of the training benchmark table (``morfic bench train``)."""
 

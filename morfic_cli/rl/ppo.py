@@ -34,6 +34,7 @@ from rsl_rl.utils import reduce_gradients_in_buckets, resolve_optimizer
 from tensordict import TensorDict
 
 from morfic_cli.rl.models import MorficActor, MorficCritic, link_morphology_encoder
+from morfic_cli.rl.precision import bf16_matmul, cpu_bf16_kernels, matmul_region
 from morfic_cli.rl.rsl_rl_patches import raw_models, tapped_mini_batches
 
 ALGORITHM_CLASS = "morfic_cli.rl.ppo:MorficPPO"
@@ -184,6 +185,9 @@ class MorficPPO(PPO):
             )
         link_morphology_encoder(actor, critic)  # one f_psi for both (model.shared_morphology_encoder)
         super().__init__(actor, critic, storage, **kwargs)
+        #: How the bf16 matrix products run (morfic_cli/rl/precision.py); None without mixed precision.
+        self.bf16_matmul = (bf16_matmul(str(self.device), cpu_bf16_kernels()) if self.use_mixed_precision
+                            else None)
         self.adaptation_loss_coef = adaptation_loss_coef
         self.adaptation_learning_rate = (
             adaptation_learning_rate if adaptation_learning_rate is not None else self.learning_rate
@@ -203,7 +207,8 @@ class MorficPPO(PPO):
         The update passes ``autocast=False``: rsl-rl opens one autocast region per mini-batch itself, and an
         enclosing region, even a disabled one, would keep autocast's cache of bf16 weight copies alive across
         mini-batches (the cache is cleared when the outermost region exits), so every mini-batch would run on the
-        weights of the first.
+        weights of the first. On a CPU without bf16 kernels the region's bf16 matrix products, forward and
+        backward, are computed in float32 from the bf16 operands (``bf16_matmul``, :mod:`morfic_cli.rl.precision`).
         """
         if not self.use_mixed_precision:
             yield
@@ -215,7 +220,7 @@ class MorficPPO(PPO):
         try:
             region = (torch.autocast(device_type=torch.device(self.device).type, dtype=torch.bfloat16) if autocast
                       else contextlib.nullcontext())
-            with region:
+            with region, matmul_region(self.bf16_matmul):
                 yield
         finally:
             for head, cls in zip(heads, classes, strict=True):

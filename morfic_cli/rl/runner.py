@@ -380,6 +380,7 @@ class TrainingRun:
             "wall_time_s": round(logger.wall_time_s, 3), "git_commit": self.git_commit, "finished": finished,
             "interrupted": interrupted, "parent": self.parent, "device": self.device, "run": self.name,
             "vx_max": float(self.env.command_ranges.vx[1]), **variant_record(self.cfg),
+            **({"bf16_matmul": alg.bf16_matmul} if getattr(alg, "bf16_matmul", None) else {}),
         }
         with self.store.writing():
             state = self.store.put_manifest("checkpoint", config={"role": "trainer-state"}, files=trainer,

@@ -107,7 +107,7 @@ def test_bench_compare_times_both_sides_in_alternation(run_cli):
 
 
 def test_bench_train_applies_set_and_records_the_precision(run_cli):
-    from morfic_cli.rl.precision import cpu_bf16_kernels
+    from morfic_cli.rl.precision import bf16_matmul, cpu_bf16_kernels
 
     for mixed in (True, False):
         code, out, err = run_cli("bench", "train", "--preset", "smoke", "--iterations", "1", "--set",
@@ -115,6 +115,7 @@ def test_bench_train_applies_set_and_records_the_precision(run_cli):
         assert code == 0, err
         row = json.loads(out)
         assert row["mixed_precision"] is mixed and row["bf16_kernels"] is cpu_bf16_kernels()
+        assert row["bf16_matmul"] == (bf16_matmul("cpu", cpu_bf16_kernels()) if mixed else None)
         assert row["iterations"] == 1 and row["transitions"] == 8 * 8  # the smoke preset: 8 envs x 8 steps
     code, _, err = run_cli("bench", "train", "--preset", "smoke", "--compare", "HEAD", "--set", "max_iterations=3")
     assert code == 1 and err.startswith("Error: ") and "--set" in err
