@@ -27,11 +27,17 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --stop-at) STOP_AT=${2:?--stop-at takes a time HH:MM (UTC)}; shift 2 ;;
     --last-start) LAST_START=${2:?--last-start takes a time HH:MM (UTC)}; shift 2 ;;
+    -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    -*) echo "Error: unknown option '$1'; see scripts/experiment_queue.sh --help" >&2; exit 1 ;;
     *) break ;;
   esac
 done
+declare -A DAY_SHIFT=()
 for t in "$STOP_AT" "$LAST_START"; do
-  [ -z "$t" ] || date -u -d "$t" +%s >/dev/null 2>&1 || { echo "Error: '$t' is not a time; give HH:MM (UTC)" >&2; exit 1; }
+  [ -n "$t" ] || continue
+  at=$(date -u -d "$t" +%s 2>/dev/null) || { echo "Error: '$t' is not a time; give HH:MM (UTC)" >&2; exit 1; }
+  # a time more than 12 h before the queue starts means tomorrow (a session that crosses midnight UTC)
+  if [ $(( $(date -u +%s) - at )) -gt 43200 ]; then DAY_SHIFT["$t"]=86400; else DAY_SHIFT["$t"]=0; fi
 done
 [ $# -gt 0 ] || { echo "Error: name at least one run as VARIANT:SEED, e.g. concat:0" >&2; exit 1; }
 RESULTS=docs/results
@@ -44,12 +50,15 @@ finished() {  # 0 when runs/$1 is a finished run in the store
   python3 -c "import json,sys; sys.exit(0 if json.loads(sys.argv[1])['meta'].get('finished') else 1)" "$doc"
 }
 
-seconds_until() {  # seconds until time $1 today (UTC), or a large number when $1 is empty
+seconds_until() {  # seconds until the next time $1 (UTC; past midnight when the queue starts late), or a large number when $1 is empty
   [ -n "$1" ] || { echo 999999; return; }
-  echo $(( $(date -u -d "$1" +%s) - $(date -u +%s) ))
+  echo $(( $(date -u -d "$1" +%s) + DAY_SHIFT["$1"] - $(date -u +%s) ))
 }
 seconds_left() { seconds_until "$STOP_AT"; }
 
+for item in "$@"; do
+  [[ "$item" =~ ^[a-z][a-z0-9_-]*:[0-9]+$ ]] || { echo "Error: '$item' is not VARIANT:SEED (e.g. concat:1)" >&2; exit 1; }
+done
 for item in "$@"; do
   variant=${item%:*}; seed=${item#*:}; name="$variant-cpu-s$seed"
   if [ "$(seconds_left)" -le 0 ]; then echo "== $(date -u +%T) stop time reached before $name"; exit 0; fi
