@@ -162,7 +162,11 @@ def decode_obs(data: bytes) -> dict[str, np.ndarray]:
 
 
 def find_rollout(store: Store, checkpoint_id: str, config: dict[str, Any]) -> str | None:
-    """The newest stored rollout manifest with exactly this config and checkpoint, else None."""
+    """The newest stored rollout manifest with exactly this config and checkpoint, else None.
+
+    A manifest whose rollout log a results-only bundle left out (``store.omitted_files``) does not count: its
+    samples cannot be read, so the rollout is collected again.
+    """
     found = None
     for row in store.ls("rollout"):  # oldest first
         manifest = store.read_manifest(row["id"])
@@ -170,6 +174,7 @@ def find_rollout(store: Store, checkpoint_id: str, config: dict[str, Any]) -> st
             manifest.config == config
             and manifest.inputs == {"checkpoint": checkpoint_id}
             and {"rollout.mcap", "obs.npz"} <= set(manifest.files)
+            and not store.omitted_files(manifest)
         ):
             found = manifest.id
     return found

@@ -166,3 +166,26 @@ def test_the_weights_only_bundle_on_top_makes_it_evaluate(run_cli, bundles, tmp_
     assert code == 0, err
     code, _, err = run_cli("train", "--resume", RUN, "-q", "--store", str(dst.root))
     assert code == 1 and "was imported without its trainer state (a weights-only bundle)" in err
+
+
+def test_a_fixed_rollout_whose_log_was_left_out_is_collected_again(run_cli, bundles, tmp_path):
+    """The frozen actor's rollout rides along without its log: a new critic's fixed rollout collects it again."""
+    from morfic_cli.diagnostics.samples import find_rollout
+
+    src, results, _, _ = bundles
+    actor = src.export_tar(["runs/film-smoke-s0"], tmp_path / "actor.tar", latest=True, without_trainer_state=True)
+    dst = _imported(tmp_path, results, actor)
+    fixed = src.read_manifest("diagnoses/fixed-rollout/aliengo")
+    samples = src.read_manifest(fixed.inputs["rollout"])
+    checkpoint = samples.inputs["checkpoint"]
+    assert find_rollout(src, checkpoint, samples.config) == samples.id
+    # the manifest came along, its log did not: it does not count as a stored rollout
+    assert dst.has(samples.id) and "rollout.mcap" in dst.omitted_files(samples)
+    assert find_rollout(dst, checkpoint, samples.config) is None
+    code, _, err = run_cli("diagnose", "--fixed-rollout", "aliengo", "--actor", "runs/film-smoke-s0", "--critics",
+                           "runs/film-smoke-s0", "--envs", "2", "--steps", "80", "--trunc-eps", "0.5", "--command-vx", "2.0", "-q", "--store",
+                           str(dst.root))
+    assert code == 0, err
+    again = dst.read_manifest("diagnoses/fixed-rollout/aliengo").inputs["rollout"]
+    assert again != samples.id and find_rollout(dst, checkpoint, samples.config) == again
+    assert not dst.omitted_files(dst.read_manifest(again))
