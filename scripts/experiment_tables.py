@@ -5,9 +5,11 @@ so a table is never another run's):
 
 - ``<out>/RUN-eval.csv`` and ``<out>/RUN-calibration.csv``: the eval's and the diagnosis's files, verbatim;
 - ``<out>/fixed-rollout-<robot>.csv``: RUN's critic row (and the MC reference row) of the fixed-rollout analysis
-  on each robot, the frozen film actor's one rollout, merged with the rows of the critics scored before; a row of
-  other samples is refused (every critic of that table must be scored on the same samples; the samples' content id
-  is kept in ``<out>/fixed-rollout-<robot>.json``);
+  on each robot, the frozen film actor's rollout, merged with the rows of the critics scored before, each row with
+  the content id of the samples it was scored on (``samples``). The first samples are the reference
+  (``<out>/fixed-rollout-<robot>.json``); a store that lacks them (a results-only bundle leaves rollout logs out, and
+  another CPU does not reproduce them bit for bit) scores on a new rollout, whose rows go in beside the reference
+  rows (:func:`merge_fixed_rows`);
 - ``<out>/RUN-curve.csv``: the training curve's main columns (:data:`CURVE_COLUMNS`);
 - ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, diagnosis and fixed-rollout analyses.
 
@@ -34,28 +36,32 @@ from pathlib import Path
 
 def merge_fixed_rows(path: Path, new_rows: list[dict[str, str]], columns: list[str],
                      samples: str) -> list[dict[str, str]]:
-    """``path``'s rows with ``new_rows`` merged in (a critic's new row replaces its old one; MC row first).
+    """``path``'s rows with ``new_rows`` merged in, one row per (critic, samples); MC rows first.
 
-    ``samples`` is the content id of the new rows' rollout samples (its ``obs.npz``); the rows already in ``path``
-    were scored on the samples recorded in the sidecar ``<path>.json``. A rollout's manifest id (the ``rollout``
-    column) differs between stores (it hashes its creation time), its samples' content id does not: the frozen
-    actor's rollout is deterministic on CPU.
-
-    Raises:
-        SystemExit: the new rows come from other samples than the rows already in ``path``.
+    ``samples`` is the content id of the new rows' rollout samples (its ``obs.npz``). A rollout's manifest id (the
+    ``rollout`` column) differs between stores (it hashes its creation time), its samples' content id does not when
+    the frozen actor's rollout is collected again on the same kind of CPU; another CPU's float rounding gives other
+    samples. The first samples of ``path`` are the reference (the sidecar ``<path>.json``: ``samples``, and the
+    rollout manifests that held them); rows on other samples are kept beside them (``other_samples``), so a critic
+    scored on both measures what the samples change, and ``results_tables.load_fixed`` reads one row per critic,
+    the reference row where there is one. A critic's new row on the same samples replaces its old one.
     """
     side = path.with_suffix(".json")
     old = list(csv.DictReader(path.open())) if path.is_file() else []
     known = json.loads(side.read_text()) if side.is_file() else {"samples": samples, "rollouts": []}
-    if old and known["samples"] != samples:
-        raise SystemExit(f"Error: {path} holds critics scored on samples {known['samples'][:12]}, the new rows on "
-                         f"{samples[:12]}: every critic must be scored on the same samples; rescore them all with "
-                         "one fixed-rollout analysis.")
-    known["rollouts"] = sorted({*known["rollouts"], *(r["rollout"] for r in new_rows)})
+    for r in old:  # rows written before the samples column: the reference samples
+        r["samples"] = r.get("samples") or known["samples"]
+    new_rows = [{**r, "samples": samples} for r in new_rows]
+    if samples == known["samples"]:
+        known["rollouts"] = sorted({*known["rollouts"], *(r["rollout"] for r in new_rows)})
+    else:
+        others = known.setdefault("other_samples", {})
+        others[samples] = sorted({*others.get(samples, []), *(r["rollout"] for r in new_rows)})
     side.write_text(json.dumps(known, indent=1) + "\n")
-    merged = {r["critic"]: r for r in old}
-    merged.update({r["critic"]: r for r in new_rows})
-    rows = sorted(merged.values(), key=lambda r: r["critic"] != "MC")
+    merged = {(r["critic"], r["samples"]): r for r in old}
+    merged.update({(r["critic"], r["samples"]): r for r in new_rows})
+    order = [known["samples"], *known.get("other_samples", {})]
+    rows = sorted(merged.values(), key=lambda r: (order.index(r["samples"]), r["critic"] != "MC"))
     return [{c: r.get(c, "") for c in columns} for r in rows]
 
 
@@ -158,9 +164,13 @@ def main(argv: list[str] | None = None) -> int:
         mine = [r for r in rows if r["critic"] in ("MC", args.run)]
         samples = store.read_manifest(mine[0]["rollout"]).files["obs.npz"].id
         path = args.out / f"fixed-rollout-{robot}.csv"
-        columns = list(FIXED_ROLLOUT_COLUMNS)
+        columns = [*FIXED_ROLLOUT_COLUMNS, "samples"]
         write_csv(path, merge_fixed_rows(path, mine, columns, samples), columns)
-        fixed_ids[robot] = step.id
+        reference = json.loads(path.with_suffix(".json").read_text())["samples"]
+        if samples == reference or robot not in fixed_ids:
+            fixed_ids[robot] = step.id  # the analysis of the row the claims read
+        else:  # this run was scored on the reference samples before: its analysis on these is kept aside
+            ids.setdefault("fixed_rollout_other_samples", {}).setdefault(robot, {})[samples[:12]] = step.id
         print(f"{path}: {args.run}'s critic (artifact {step.id[:12]})")
     ids_path.write_text(json.dumps(ids, indent=1) + "\n")
     return 0

@@ -81,14 +81,60 @@ def load_artifacts(results: Path) -> dict[str, dict[str, Any]]:
             for p in sorted(results.glob("*-artifacts.json"))}
 
 
-def load_fixed(results: Path) -> pd.DataFrame:
-    """Every ``fixed-rollout-<robot>.csv``: one row per critic (and the MC reference), ``seed`` the critic run's."""
-    frames = [pd.read_csv(p) for p in sorted(results.glob("fixed-rollout-*.csv"))]
+def load_fixed_all(results: Path) -> pd.DataFrame:
+    """Every row of every ``fixed-rollout-<robot>.csv``, with ``samples``, ``reference`` and ``seed``.
+
+    ``samples``: the content id of the samples a row was scored on (rows written before that column: the reference
+    samples of the sidecar ``fixed-rollout-<robot>.json``); ``reference``: scored on those; ``seed``: the critic
+    run's.
+    """
+    frames = []
+    for p in sorted(results.glob("fixed-rollout-*.csv")):
+        frame = pd.read_csv(p, dtype={"samples": str})
+        side = p.with_suffix(".json")
+        ref = json.loads(side.read_text())["samples"] if side.is_file() else ""
+        frame["samples"] = frame["samples"].fillna(ref) if "samples" in frame else ref
+        frame["reference"] = frame["samples"] == ref
+        frames.append(frame)
     if not frames:
         return pd.DataFrame()
     out = pd.concat(frames, ignore_index=True)
     out["seed"] = [parsed[1] if (parsed := parse_run(str(c))) else 0 for c in out["critic"]]
     return out
+
+
+def load_fixed(results: Path) -> pd.DataFrame:
+    """One row per (robot, critic) and the MC reference, the row on the reference samples where there is one.
+
+    A critic without one keeps its row on other samples (``reference`` False: the frozen actor's rollout collected
+    again where the reference samples were not at hand).
+    """
+    rows = load_fixed_all(results)
+    if rows.empty:
+        return rows
+    rows = rows.sort_values("reference", ascending=False, kind="stable")
+    mc = rows[rows["variant"] == "mc"].drop_duplicates(["robot"])  # Flip 0, Cos 1 on any samples
+    critics = rows[rows["variant"] != "mc"].drop_duplicates(["robot", "critic"])
+    return pd.concat([mc, critics]).sort_index()
+
+
+def sample_effect(results: Path) -> pd.DataFrame:
+    """What collecting the frozen actor's rollout again changes, from the critics scored on both samples.
+
+    One row per critic and other samples: robot, critic, samples, ``d_flip`` and ``d_cos`` (other minus reference).
+    """
+    rows = load_fixed_all(results)
+    if rows.empty:
+        return rows
+    rows = rows[rows["variant"] != "mc"]
+    ref = rows[rows["reference"]].set_index(["robot", "critic"])
+    out = []
+    for r in rows[~rows["reference"]].itertuples():
+        if (r.robot, r.critic) in ref.index:
+            base = ref.loc[(r.robot, r.critic)]
+            out.append({"robot": r.robot, "critic": r.critic, "samples": r.samples,
+                        "d_flip": r.flip - base["flip"], "d_cos": r.cos_grad - base["cos_grad"]})
+    return pd.DataFrame(out, columns=["robot", "critic", "samples", "d_flip", "d_cos"])
 
 
 # ----------------------------------------------------------------------------------------------- pooled cells
@@ -192,16 +238,39 @@ def fixed_table(fixed: pd.DataFrame) -> list[str]:
             mine = rows[(rows["variant"] == v) & (rows["robot"] == robot)]
             if mine.empty:
                 cells.append("-")
-            elif len(mine) == 1:
-                cells.append(f"{mine['flip'].iloc[0]:.3f} / {mine['cos_grad'].iloc[0]:.3f}")
             else:
-                cells.append(f"{_pm(mine['flip'], 3)} / {_pm(mine['cos_grad'], 3)} (n={len(mine)})")
+                mark = "" if mine["reference"].all() else " †" * (v != "mc")
+                if len(mine) == 1:
+                    cells.append(f"{mine['flip'].iloc[0]:.3f} / {mine['cos_grad'].iloc[0]:.3f}{mark}")
+                else:
+                    cells.append(f"{_pm(mine['flip'], 3)} / {_pm(mine['cos_grad'], 3)} (n={len(mine)}){mark}")
         for robot in robots:
             p = fixed_rollout_values(v, robot)
             cells.append("-" if p.get("flip") is None else f"{p['flip']:.3f} / {p['cos_grad']:.3f}")
         name = "MC (reference)" if v == "mc" else _seeds_label(rows, v)
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return lines
+
+
+def sample_note(results: Path, fixed: pd.DataFrame) -> list[str]:
+    """The paragraph under the fixed-rollout table when some critic (†) was scored on other samples.
+
+    It names those critics and what the samples change (:func:`sample_effect`); empty when every row is a reference
+    row.
+    """
+    other = fixed[(~fixed["reference"]) & (fixed["variant"] != "mc")]
+    if other.empty:
+        return []
+    effect = sample_effect(results)
+    who = ", ".join(f"`{c}` ({', '.join(sorted(set(g['robot'])))})" for c, g in other.groupby("critic", sort=True))
+    text = (f"† scored on another rollout of the same frozen actor (same config, collected again on another machine: "
+            f"the reference rollout's log is not shipped and another CPU's rounding does not reproduce it): {who}.")
+    parts = [f"on {robot} ({len(g)} critics) by {g['d_flip'].mean():+.3f} on average (|Δ| at most "
+             f"{g['d_flip'].abs().max():.3f}) and Cos by {g['d_cos'].mean():+.3f} (|Δ| at most "
+             f"{g['d_cos'].abs().max():.3f})" for robot, g in effect.groupby("robot", sort=True)]
+    if parts:
+        text += " Scored on both, a critic's Flip changes " + "; ".join(parts) + "."
+    return [text, ""]
 
 
 def render(results: Path) -> str:
@@ -220,7 +289,7 @@ def render(results: Path) -> str:
                 *calibration_table(cal), ""]
     if not fixed.empty:
         out += ["### Fixed rollout (`morfic diagnose --fixed-rollout ROBOT`: the film actor frozen, every critic "
-                "scored on its one rollout)", "", *fixed_table(fixed), ""]
+                "scored on its one rollout)", "", *fixed_table(fixed), "", *sample_note(results, fixed)]
     return "\n".join(out).rstrip() + "\n"
 
 

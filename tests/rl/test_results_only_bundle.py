@@ -182,9 +182,9 @@ def test_a_fixed_rollout_whose_log_was_left_out_is_collected_again(run_cli, bund
     # the manifest came along, its log did not: it does not count as a stored rollout
     assert dst.has(samples.id) and "rollout.mcap" in dst.omitted_files(samples)
     assert find_rollout(dst, checkpoint, samples.config) is None
+    settings = ("--envs", "2", "--steps", "80", "--trunc-eps", "0.5", "--command-vx", "2.0", "-q")
     code, _, err = run_cli("diagnose", "--fixed-rollout", "aliengo", "--actor", "runs/film-smoke-s0", "--critics",
-                           "runs/film-smoke-s0", "--envs", "2", "--steps", "80", "--trunc-eps", "0.5", "--command-vx", "2.0", "-q", "--store",
-                           str(dst.root))
+                           "runs/film-smoke-s0", *settings, "--store", str(dst.root))
     assert code == 0, err
     again = dst.read_manifest("diagnoses/fixed-rollout/aliengo").inputs["rollout"]
     assert again != samples.id and find_rollout(dst, checkpoint, samples.config) == again

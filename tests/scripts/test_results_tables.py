@@ -79,16 +79,42 @@ def _fixed(critic, flip, rollout="r1"):
     return {"critic": critic, "variant": critic.split("-cpu")[0].lower(), "flip": flip, "rollout": rollout}
 
 
-def test_fixed_rollout_rows_merge_on_the_same_samples_only(tmp_path):
-    cols = ["critic", "variant", "flip", "rollout"]
+def test_fixed_rollout_rows_merge_per_samples_and_the_reference_row_is_read(tmp_path):
+    cols = ["critic", "variant", "robot", "actor_variant", "flip", "cos_grad", "rollout", "samples"]
     path = tmp_path / "fixed-rollout-aliengo.csv"
-    et.write_csv(path, et.merge_fixed_rows(path, [_fixed("MC", "0"), _fixed("film-cpu-s0", "0.4")], cols, "s1"), cols)
+
+    def rows(*critics, rollout="r1"):
+        return [{**_fixed(c, f), "robot": "aliengo", "actor_variant": "film", "cos_grad": cos, "rollout": rollout}
+                for c, f, cos in critics]
+
+    et.write_csv(path, et.merge_fixed_rows(path, rows(("MC", 0, 1), ("film-cpu-s0", 0.4, 0.3)), cols, "s1"), cols)
     # another store's rollout manifest (other id) of the same samples: merged; a critic's new row replaces its old
-    rows = et.merge_fixed_rows(path, [_fixed("MC", "0", "r2"), _fixed("ppo-cpu-s0", "0.5", "r2")], cols, "s1")
-    assert [r["critic"] for r in rows] == ["MC", "film-cpu-s0", "ppo-cpu-s0"] and rows[0]["rollout"] == "r2"
-    assert json.loads(path.with_suffix(".json").read_text()) == {"samples": "s1", "rollouts": ["r1", "r2"]}
-    with pytest.raises(SystemExit, match="scored on samples s1, the new rows on s2"):
-        et.merge_fixed_rows(path, [_fixed("concat-cpu-s0", "0.3")], cols, "s2")
+    merged = et.merge_fixed_rows(path, rows(("MC", 0, 1), ("ppo-cpu-s0", 0.5, 0.2), rollout="r2"), cols, "s1")
+    assert [r["critic"] for r in merged] == ["MC", "film-cpu-s0", "ppo-cpu-s0"] and merged[0]["rollout"] == "r2"
+    et.write_csv(path, merged, cols)
+    # other samples (another machine's rollout): kept beside the reference rows, the sidecar names both
+    merged = et.merge_fixed_rows(path, rows(("MC", 0, 1), ("film-cpu-s0", 0.43, 0.25), ("concat-cpu-s1", 0.3, 0.6),
+                                            rollout="r3"), cols, "s2")
+    assert [(r["critic"], r["samples"]) for r in merged] == [
+        ("MC", "s1"), ("film-cpu-s0", "s1"), ("ppo-cpu-s0", "s1"), ("MC", "s2"), ("film-cpu-s0", "s2"),
+        ("concat-cpu-s1", "s2")]
+    assert json.loads(path.with_suffix(".json").read_text()) == {
+        "samples": "s1", "rollouts": ["r1", "r2"], "other_samples": {"s2": ["r3"]}}
+    et.write_csv(path, merged, cols)
+    # one row per critic, the reference one where there is one; the samples' effect from film, scored on both
+    fixed = rt.load_fixed(tmp_path)
+    assert [(r.critic, r.samples, r.reference) for r in fixed.itertuples()] == [
+        ("MC", "s1", True), ("film-cpu-s0", "s1", True), ("ppo-cpu-s0", "s1", True), ("concat-cpu-s1", "s2", False)]
+    effect = rt.sample_effect(tmp_path)
+    assert effect[["critic", "samples"]].values.tolist() == [["film-cpu-s0", "s2"]]
+    assert effect["d_flip"].iloc[0] == pytest.approx(0.03) and effect["d_cos"].iloc[0] == pytest.approx(-0.05)
+    note = " ".join(rt.sample_note(tmp_path, fixed))
+    assert "`concat-cpu-s1` (aliengo)" in note and "Flip changes on aliengo (1 critics) by +0.030" in note
+    assert "Cos by -0.050 (|Δ| at most 0.050)" in note
+    assert "0.300 / 0.600 †" in "\n".join(rt.fixed_table(fixed))
+    # a table written before the samples column: its rows are the sidecar's reference samples
+    et.write_csv(path, [{c: r[c] for c in cols[:-1]} for r in merged[:3]], cols[:-1])
+    assert set(rt.load_fixed(tmp_path)["samples"]) == {"s1"}
 
 
 def test_curve_rows_keep_the_main_columns_to_five_digits():
