@@ -554,13 +554,17 @@ class Pipeline:
                               files=("fixed_rollout.csv",))
         return StepResult("fixed-rollout", robot, "skipped", found) if found else None
 
-    def fixed_rollout(self, robot: str) -> StepResult:
-        """One frozen actor (the seed-0 run of ``actor_variant``), every run's critic, on ``robot``."""
+    def fixed_rollout(self, robot: str, *, reuse: bool = True) -> StepResult:
+        """One frozen actor (the seed-0 run of ``actor_variant``), every run's critic, on ``robot``.
+
+        With ``reuse`` False the critics are scored again even where the store holds the analysis (on the rollout
+        this store holds or collects, which may be other samples than the stored analysis's).
+        """
         from morfic_cli.diagnostics.fixed_rollout import fixed_rollout, load_models
 
         actor, critics = self.fixed_rollout_models()
         cfg = self.diagnose_cfg((robot,))
-        found = self.stored_fixed_rollout(robot)
+        found = self.stored_fixed_rollout(robot) if reuse else None
         if found is not None:
             return found
         why = self.fixed_rollout_unavailable()

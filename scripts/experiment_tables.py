@@ -17,9 +17,12 @@ With ``--run-missing`` the run is first evaluated, diagnosed and its critic scor
 each step with the paper's protocol (``morfic reproduce --preset cpu``'s configs) and skipped when the store holds
 it: the experiment queue's evaluation of a run, without re-evaluating the variant's other seeds. With
 ``--fixed-rollout-only`` only the fixed-rollout rows are written (the analysis run first when the store lacks it).
+When RUN's critic had to be scored on other samples than the reference (:func:`merge_fixed_rows`), ``--run-missing``
+also scores every seed-0 critic whose weights the store holds on those samples (:func:`seed0_to_rescore`), which
+measures what the other samples change.
 
 Usage: python scripts/experiment_tables.py RUN_NAME [--out docs/results] [--store STORE] [--run-missing]
-       [--fixed-rollout-only]
+       [--fixed-rollout-only [--rescore]]
 """
 
 from __future__ import annotations
@@ -119,6 +122,9 @@ def main(argv: list[str] | None = None) -> int:
                         "with the paper's protocol, skipped when the store holds it)")
     p.add_argument("--fixed-rollout-only", action="store_true",
                    help="only the fixed-rollout rows; run the analysis (film actor frozen) if the store lacks it")
+    p.add_argument("--rescore", action="store_true",
+                   help="with --fixed-rollout-only: score the critic again on the film actor's rollout this store "
+                        "holds or collects, even where it holds the analysis (on other samples)")
     args = p.parse_args(argv)
     store = Store(args.store)
     spec = f"runs/{args.run}"
@@ -152,9 +158,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{path} (artifact {step.id[:12]})")
     fixed_ids = ids.setdefault("fixed_rollout", {})
     for robot in pipe.cfg.fixed_rollout_robots:
-        step = pipe.stored_fixed_rollout(robot)
-        if step is None and (args.fixed_rollout_only or args.run_missing):
-            step = pipe.fixed_rollout(robot)
+        step = None if args.rescore else pipe.stored_fixed_rollout(robot)
+        if step is None and (args.fixed_rollout_only or args.run_missing or args.rescore):
+            step = pipe.fixed_rollout(robot, reuse=not args.rescore)
         if step is None or step.id is None:
             why = pipe.fixed_rollout_unavailable() or "rerun with --run-missing or --fixed-rollout-only"
             print(f"Error: no fixed-rollout analysis of {spec}'s critic on {robot} in {store.root}: {why}.",
@@ -173,7 +179,42 @@ def main(argv: list[str] | None = None) -> int:
             ids.setdefault("fixed_rollout_other_samples", {}).setdefault(robot, {})[samples[:12]] = step.id
         print(f"{path}: {args.run}'s critic (artifact {step.id[:12]})")
     ids_path.write_text(json.dumps(ids, indent=1) + "\n")
+    if args.run_missing and not args.fixed_rollout_only:
+        for run in seed0_to_rescore(store, args.out, pipe.cfg.fixed_rollout_robots):
+            print(f"{run}: rescored on the new samples (what they change, beside the reference rows)")
+            main([run, "--fixed-rollout-only", "--rescore", "--out", str(args.out), "--store", str(args.store)])
     return 0
+
+
+def seed0_to_rescore(store, out: Path, robots: tuple[str, ...]) -> list[str]:
+    """The seed-0 runs to score on the fixed rollout's other samples, so that what those change is measured.
+
+    For each robot whose table (``out/fixed-rollout-<robot>.csv``) has rows on other samples than the reference:
+    every seed-0 run with results in ``out`` (``<run>-artifacts.json``) that has a reference row, no row on those
+    samples, and its weights in ``store``.
+    """
+    from morfic_cli.errors import MorficError
+
+    todo: list[str] = []
+    seed0 = sorted(p.name[: -len("-artifacts.json")] for p in out.glob("*-cpu-s0-artifacts.json"))
+    for robot in robots:
+        path = out / f"fixed-rollout-{robot}.csv"
+        if not path.is_file():
+            continue
+        reference = json.loads(path.with_suffix(".json").read_text())["samples"]
+        rows = list(csv.DictReader(path.open()))
+        scored = {(r["critic"], r.get("samples") or reference) for r in rows}
+        for samples in {r["samples"] for r in rows if r.get("samples")} - {reference}:
+            for run in seed0:
+                if (run, reference) not in scored or (run, samples) in scored or run in todo:
+                    continue
+                try:
+                    manifest = store.read_manifest(f"runs/{run}")
+                except MorficError:
+                    continue
+                if "model.pt" not in store.omitted_files(manifest):
+                    todo.append(run)
+    return todo
 
 
 if __name__ == "__main__":

@@ -189,3 +189,25 @@ def test_a_fixed_rollout_whose_log_was_left_out_is_collected_again(run_cli, bund
     again = dst.read_manifest("diagnoses/fixed-rollout/aliengo").inputs["rollout"]
     assert again != samples.id and find_rollout(dst, checkpoint, samples.config) == again
     assert not dst.omitted_files(dst.read_manifest(again))
+
+
+def test_reuse_false_scores_the_critics_again_as_a_new_analysis(bundles, tmp_path):
+    from morfic_cli.pipeline import Pipeline, ReproduceCfg
+
+    src = bundles[0]
+    shutil.copytree(src.root, tmp_path / "copy")
+    store = Store(tmp_path / "copy")
+    cfg = ReproduceCfg(preset="smoke", variants=("film",), seeds=1, robots=("go2", "aliengo"), command_vx=(2.0,),
+                        modes=("descriptor",), eval_envs=2, eval_steps=5, diagnose_envs=2, diagnose_steps=80,
+                        trunc_eps=0.5, fixed_rollout_robots=("aliengo",), torch_threads=1)
+    pipe = Pipeline(store, cfg)
+    skipped = pipe.fixed_rollout("aliengo")
+    assert skipped.status == "skipped"
+    before = store.ref_history("diagnoses/fixed-rollout/aliengo")[-1].version
+    again = pipe.fixed_rollout("aliengo", reuse=False)
+    assert again.status == "done" and again.id != skipped.id
+    assert store.ref_history("diagnoses/fixed-rollout/aliengo")[-1].version == before + 1
+    # the same critic on the same stored rollout: the same scores
+    rows = [store.read_file(i, "fixed_rollout.csv").decode().splitlines() for i in (skipped.id, again.id)]
+    first = [r.split(",")[:6] for r in rows[0][1:]]
+    assert [r.split(",")[:6] for r in rows[1][1:]] == first

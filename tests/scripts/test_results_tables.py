@@ -136,3 +136,41 @@ def test_walk_table_checks_the_bar_and_finds_when_the_curriculum_opened(tmp_path
     lines = rt.walk_table(tmp_path)
     assert lines[2] == "| `ppo-cpu-s0` | 0.79 ± 0.18 | 1.000 | ok | **no** | - | - | - |"  # paper order: ppo first
     assert lines[3] == "| `film-cpu-s0` | 0.93 ± 0.18 | 1.000 | ok | yes | 3 | 2 m/s | 1.46 / 0.656 |"
+
+
+class _Store:
+    """``read_manifest`` / ``omitted_files`` of a store holding ``runs`` (name -> its weights were left out)."""
+
+    def __init__(self, runs: dict[str, bool]):
+        self.runs = runs
+
+    def read_manifest(self, spec):
+        from morfic_cli.errors import ArtifactNotFoundError
+
+        if spec[len("runs/"):] not in self.runs:
+            raise ArtifactNotFoundError(spec)
+        return spec
+
+    def omitted_files(self, spec):
+        return {"model.pt": "x"} if self.runs[spec[len("runs/"):]] else {}
+
+
+def test_seed0_critics_with_weights_are_rescored_on_other_samples(tmp_path):
+    cols = ["critic", "samples"]
+    (tmp_path / "fixed-rollout-aliengo.json").write_text(json.dumps({"samples": "s1", "rollouts": []}))
+    et.write_csv(tmp_path / "fixed-rollout-aliengo.csv",
+                 [{"critic": c, "samples": s} for c, s in (
+                     ("MC", "s1"), ("film-cpu-s0", "s1"), ("ppo-cpu-s0", "s1"), ("adaln-cpu-s0", "s1"),
+                     ("hyper-cpu-s0", "s1"), ("film-cpu-s1", "s1"), ("MC", "s2"), ("concat-cpu-s1", "s2"),
+                     ("film-cpu-s0", "s2"))], cols)
+    for run in ("film", "ppo", "adaln", "hyper", "actor-only"):
+        (tmp_path / f"{run}-cpu-s0-artifacts.json").write_text("{}")
+    (tmp_path / "film-cpu-s1-artifacts.json").write_text("{}")
+    # film: already on s2; adaln: weights left out; hyper: not in the store; actor-only: no reference row;
+    # film-cpu-s1: not seed 0. Only ppo is scored again.
+    store = _Store({"film-cpu-s0": False, "ppo-cpu-s0": False, "adaln-cpu-s0": True, "actor-only-cpu-s0": False,
+                    "film-cpu-s1": False})
+    assert et.seed0_to_rescore(store, tmp_path, ("aliengo", "mini_cheetah")) == ["ppo-cpu-s0"]
+    # every row on the reference samples: nothing to measure
+    et.write_csv(tmp_path / "fixed-rollout-aliengo.csv", [{"critic": "ppo-cpu-s0", "samples": "s1"}], cols)
+    assert et.seed0_to_rescore(store, tmp_path, ("aliengo",)) == []
