@@ -157,6 +157,7 @@ def main(argv: list[str] | None = None) -> int:
             ids[what] = step.id
             print(f"{path} (artifact {step.id[:12]})")
     fixed_ids = ids.setdefault("fixed_rollout", {})
+    used: dict[str, str] = {}  # robot -> the samples RUN's critic was scored on here
     for robot in pipe.cfg.fixed_rollout_robots:
         step = None if args.rescore else pipe.stored_fixed_rollout(robot)
         if step is None and (args.fixed_rollout_only or args.run_missing or args.rescore):
@@ -171,49 +172,49 @@ def main(argv: list[str] | None = None) -> int:
         samples = store.read_manifest(mine[0]["rollout"]).files["obs.npz"].id
         path = args.out / f"fixed-rollout-{robot}.csv"
         columns = [*FIXED_ROLLOUT_COLUMNS, "samples"]
-        write_csv(path, merge_fixed_rows(path, mine, columns, samples), columns)
+        merged = merge_fixed_rows(path, mine, columns, samples)
+        write_csv(path, merged, columns)
+        used[robot] = samples
         reference = json.loads(path.with_suffix(".json").read_text())["samples"]
-        if samples == reference or robot not in fixed_ids:
+        if samples == reference or not any(r["critic"] == args.run and r["samples"] == reference for r in merged):
             fixed_ids[robot] = step.id  # the analysis of the row the claims read
-        else:  # this run was scored on the reference samples before: its analysis on these is kept aside
+        else:  # this run has a row on the reference samples: its analysis on these is kept aside
             ids.setdefault("fixed_rollout_other_samples", {}).setdefault(robot, {})[samples[:12]] = step.id
         print(f"{path}: {args.run}'s critic (artifact {step.id[:12]})")
     ids_path.write_text(json.dumps(ids, indent=1) + "\n")
     if args.run_missing and not args.fixed_rollout_only:
-        for run in seed0_to_rescore(store, args.out, pipe.cfg.fixed_rollout_robots):
+        for run in seed0_to_rescore(store, args.out, used):
             print(f"{run}: rescored on the new samples (what they change, beside the reference rows)")
             main([run, "--fixed-rollout-only", "--rescore", "--out", str(args.out), "--store", str(args.store)])
     return 0
 
 
-def seed0_to_rescore(store, out: Path, robots: tuple[str, ...]) -> list[str]:
+def seed0_to_rescore(store, out: Path, used: dict[str, str]) -> list[str]:
     """The seed-0 runs to score on the fixed rollout's other samples, so that what those change is measured.
 
-    For each robot whose table (``out/fixed-rollout-<robot>.csv``) has rows on other samples than the reference:
-    every seed-0 run with results in ``out`` (``<run>-artifacts.json``) that has a reference row, no row on those
-    samples, and its weights in ``store``.
+    ``used`` maps each robot to the samples a critic was just scored on (the rollout ``store`` holds). Where those
+    are not the reference samples of ``out/fixed-rollout-<robot>.csv``: every seed-0 run with results in ``out``
+    (``<run>-artifacts.json``) that has a reference row, no row on those samples, and its weights in ``store``.
     """
     from morfic_cli.errors import MorficError
 
     todo: list[str] = []
     seed0 = sorted(p.name[: -len("-artifacts.json")] for p in out.glob("*-cpu-s0-artifacts.json"))
-    for robot in robots:
+    for robot, samples in used.items():
         path = out / f"fixed-rollout-{robot}.csv"
-        if not path.is_file():
-            continue
         reference = json.loads(path.with_suffix(".json").read_text())["samples"]
-        rows = list(csv.DictReader(path.open()))
-        scored = {(r["critic"], r.get("samples") or reference) for r in rows}
-        for samples in {r["samples"] for r in rows if r.get("samples")} - {reference}:
-            for run in seed0:
-                if (run, reference) not in scored or (run, samples) in scored or run in todo:
-                    continue
-                try:
-                    manifest = store.read_manifest(f"runs/{run}")
-                except MorficError:
-                    continue
-                if "model.pt" not in store.omitted_files(manifest):
-                    todo.append(run)
+        if samples == reference:
+            continue
+        scored = {(r["critic"], r.get("samples") or reference) for r in csv.DictReader(path.open())}
+        for run in seed0:
+            if (run, reference) not in scored or (run, samples) in scored or run in todo:
+                continue
+            try:
+                manifest = store.read_manifest(f"runs/{run}")
+            except MorficError:
+                continue
+            if "model.pt" not in store.omitted_files(manifest):
+                todo.append(run)
     return todo
 
 

@@ -170,7 +170,6 @@ def test_seed0_critics_with_weights_are_rescored_on_other_samples(tmp_path):
     # film-cpu-s1: not seed 0. Only ppo is scored again.
     store = _Store({"film-cpu-s0": False, "ppo-cpu-s0": False, "adaln-cpu-s0": True, "actor-only-cpu-s0": False,
                     "film-cpu-s1": False})
-    assert et.seed0_to_rescore(store, tmp_path, ("aliengo", "mini_cheetah")) == ["ppo-cpu-s0"]
-    # every row on the reference samples: nothing to measure
-    et.write_csv(tmp_path / "fixed-rollout-aliengo.csv", [{"critic": "ppo-cpu-s0", "samples": "s1"}], cols)
-    assert et.seed0_to_rescore(store, tmp_path, ("aliengo",)) == []
+    assert et.seed0_to_rescore(store, tmp_path, {"aliengo": "s2"}) == ["ppo-cpu-s0"]
+    # a critic scored on the reference samples: nothing to measure
+    assert et.seed0_to_rescore(store, tmp_path, {"aliengo": "s1"}) == []
