@@ -127,14 +127,10 @@ def sample_effect(results: Path) -> pd.DataFrame:
     if rows.empty:
         return rows
     rows = rows[rows["variant"] != "mc"]
-    ref = rows[rows["reference"]].set_index(["robot", "critic"])
-    out = []
-    for r in rows[~rows["reference"]].itertuples():
-        if (r.robot, r.critic) in ref.index:
-            base = ref.loc[(r.robot, r.critic)]
-            out.append({"robot": r.robot, "critic": r.critic, "samples": r.samples,
-                        "d_flip": r.flip - base["flip"], "d_cos": r.cos_grad - base["cos_grad"]})
-    return pd.DataFrame(out, columns=["robot", "critic", "samples", "d_flip", "d_cos"])
+    both = rows[~rows["reference"]].merge(rows[rows["reference"]], on=["robot", "critic"], suffixes=("", "_ref"))
+    both["d_flip"] = both["flip"] - both["flip_ref"]
+    both["d_cos"] = both["cos_grad"] - both["cos_grad_ref"]
+    return both[["robot", "critic", "samples", "d_flip", "d_cos"]]
 
 
 # ----------------------------------------------------------------------------------------------- pooled cells
