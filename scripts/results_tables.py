@@ -15,16 +15,19 @@ Outputs:
   command curriculum opened (from ``<run>-curve.csv``);
 - the paper's claims (a)-(e), computed by ``morfic_cli.report.claims.check_claims`` from the same rows (never
   typed in), each with the artifact ids its numbers come from;
+- the shipped bundles' weight (``--bundles``, default artifacts/bundles): every tar, what it ships and its size in
+  MiB, and the total, measured from the files (the repository's bundle weight that docs/results.md reports);
 - with ``--figures DIR``: ``results-ev.png`` (EV per variant per robot), ``results-distance.png`` (speed against
   the normalised distance d, the paper's points beside ours) and ``results-curves.png`` (every run's training curve,
   from ``<run>-curve.csv``).
 
 With ``--write FILE`` the tables replace what stands between ``<!-- results-tables:begin -->`` and
 ``<!-- results-tables:end -->`` in FILE, the claims what stands between ``<!-- results-claims:begin -->`` and
-``<!-- results-claims:end -->``, the walking checks ``<!-- results-walk:begin -->`` ... ``end``; without it all go
-to stdout.
+``<!-- results-claims:end -->``, the walking checks ``<!-- results-walk:begin -->`` ... ``end``, the bundles
+``<!-- results-bundles:begin -->`` ... ``end``; without it all go to stdout.
 
 Usage: python scripts/results_tables.py [--results docs/results] [--write docs/results.md] [--figures docs/img]
+                                        [--bundles artifacts/bundles]
 """
 
 from __future__ import annotations
@@ -41,6 +44,8 @@ import pandas as pd
 BEGIN, END = "<!-- results-tables:begin -->", "<!-- results-tables:end -->"
 CLAIMS_BEGIN, CLAIMS_END = "<!-- results-claims:begin -->", "<!-- results-claims:end -->"
 WALK_BEGIN, WALK_END = "<!-- results-walk:begin -->", "<!-- results-walk:end -->"
+BUNDLES_BEGIN, BUNDLES_END = "<!-- results-bundles:begin -->", "<!-- results-bundles:end -->"
+MIB = 2**20
 ROBOTS = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")
 FIXED_ROBOTS = ("aliengo", "mini_cheetah")
 RUN_NAME = re.compile(r"^(?P<variant>.+)-cpu-s(?P<seed>\d+)$")
@@ -333,6 +338,28 @@ def walk_table(results: Path) -> list[str]:
     return lines
 
 
+def bundle_table(bundles: Path) -> list[str]:
+    """The shipped bundles under ``bundles``: one row per tar (its path, what it ships, MiB), then the totals.
+
+    ``<run>.tar`` directly under ``bundles`` ships a run's weights (seed 0, ``--without-trainer-state``),
+    ``results/<run>.tar`` its results only, ``partial/<run>.tar`` an unfinished run with its trainer state. Sizes are
+    the files' own, in MiB (2^20 bytes), so the total is what git carries.
+    """
+    kinds = (("", "weights-only"), ("results/", "results only"), ("partial/", "partial, with trainer state"))
+    rows, totals = [], {}
+    for sub, kind in kinds:
+        for tar in sorted((bundles / sub).glob("*.tar")):
+            size = tar.stat().st_size / MIB
+            rows.append(f"| `{tar.as_posix()}` | {kind} | {size:.1f} |")
+            totals[kind] = totals.get(kind, 0.0) + size
+    if not rows:
+        return [f"No bundle under {bundles}."]
+    lines = ["| bundle | ships | MiB |", "|---|---|---:|", *rows]
+    lines += [f"| {len(rows)} tars | {', '.join(f'{k} {v:.1f}' for k, v in totals.items())} | "
+              f"**{sum(totals.values()):.1f}** |"]
+    return lines
+
+
 # ----------------------------------------------------------------------------------------------- claims
 def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
     """The eval, calibration and fixed-rollout rows as ``check_claims`` reads them, each with its ``artifact`` id."""
@@ -432,14 +459,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--results", type=Path, default=Path("docs/results"))
     p.add_argument("--write", type=Path, default=None, help="markdown file whose marked blocks to replace")
     p.add_argument("--figures", type=Path, default=None, help="folder for the results-*.png figures")
+    p.add_argument("--bundles", type=Path, default=Path("artifacts/bundles"), help="the shipped bundles' folder")
     args = p.parse_args(argv)
     block, claims = render(args.results), render_claims(args.results)
     if args.write is None:
-        sys.stdout.write(block + "\n" + claims + "\n" + "\n".join(walk_table(args.results)) + "\n")
+        tables = (walk_table(args.results), bundle_table(args.bundles))
+        sys.stdout.write(block + "\n" + claims + "\n" + "".join("\n".join(t) + "\n" for t in tables))
     else:
         write_between_markers(args.write, block)
         write_between_markers(args.write, claims, CLAIMS_BEGIN, CLAIMS_END)
         write_between_markers(args.write, "\n".join(walk_table(args.results)) + "\n", WALK_BEGIN, WALK_END)
+        write_between_markers(args.write, "\n".join(bundle_table(args.bundles)) + "\n", BUNDLES_BEGIN, BUNDLES_END)
         print(f"{args.write}: tables and claims of {load(args.results, 'eval')['run'].nunique()} run(s) written")
     if args.figures is not None:
         for path in write_figures(args.results, args.figures):

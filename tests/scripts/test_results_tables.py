@@ -173,3 +173,19 @@ def test_seed0_critics_with_weights_are_rescored_on_other_samples(tmp_path):
     assert et.seed0_to_rescore(store, tmp_path, {"aliengo": "s2"}) == ["ppo-cpu-s0"]
     # a critic scored on the reference samples: nothing to measure
     assert et.seed0_to_rescore(store, tmp_path, {"aliengo": "s1"}) == []
+
+
+def test_bundle_table_sizes_every_tar_from_the_files(tmp_path):
+    """Sizes in MiB from the files themselves: 3 MiB + 1.5 MiB weights, 0.25 MiB results -> 4.75 in all."""
+    bundles = tmp_path / "bundles"
+    (bundles / "results").mkdir(parents=True)
+    (bundles / "film-cpu-s0.tar").write_bytes(b"\0" * (3 * rt.MIB))
+    (bundles / "ppo-cpu-s0.tar").write_bytes(b"\0" * (3 * rt.MIB // 2))
+    (bundles / "results" / "film-cpu-s1.tar").write_bytes(b"\0" * (rt.MIB // 4))
+    (bundles / "notes.txt").write_text("not a bundle")
+    lines = rt.bundle_table(bundles)
+    assert lines[2] == f"| `{(bundles / 'film-cpu-s0.tar').as_posix()}` | weights-only | 3.0 |"
+    assert lines[3] == f"| `{(bundles / 'ppo-cpu-s0.tar').as_posix()}` | weights-only | 1.5 |"
+    assert lines[4] == f"| `{(bundles / 'results' / 'film-cpu-s1.tar').as_posix()}` | results only | 0.2 |"
+    assert lines[-1] == "| 3 tars | weights-only 4.5, results only 0.2 | **4.8** |"
+    assert rt.bundle_table(tmp_path / "none") == [f"No bundle under {tmp_path / 'none'}."]
