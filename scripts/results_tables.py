@@ -147,6 +147,16 @@ def _pm(values: pd.Series, decimals: int) -> str:
     return f"{stat.mean:.{decimals}f} ± {stat.std:.{decimals}f}"
 
 
+def _pooled(values: pd.Series, decimals: int) -> str:
+    """One seed's value as it is; several seeds' as :func:`_pm`'s ``mean ± std``."""
+    return f"{values.iloc[0]:.{decimals}f}" if len(values) == 1 else _pm(values, decimals)
+
+
+def _n(rows: pd.DataFrame) -> str:
+    """`` (n=k)`` after a cell pooled over k > 1 seeds; nothing after one seed's."""
+    return "" if len(rows) == 1 else f" (n={len(rows)})"
+
+
 def transfer_cell(rows: pd.DataFrame) -> str:
     """One variant's cell on one robot: the run's own ``v̄x ± σ / S (verdict)``, or over seeds ``v̄x / S (n=k)``."""
     if rows.empty:
@@ -208,13 +218,9 @@ def calibration_table(cal: pd.DataFrame) -> list[str]:
             if mine.empty:
                 evs.append("-")
                 trio.append("-")
-            elif len(mine) == 1:
-                r = mine.iloc[0]
-                evs.append(f"{r['ev']:.3f}")
-                trio.append(f"{r['abs_nvb']:.3f}/{r['nve']:.3f}/{r['asa']:.3f}")
-            else:
-                evs.append(f"{_pm(mine['ev'], 3)} (n={len(mine)})")
-                trio.append("/".join(f"{mine[m].mean():.3f}" for m in ("abs_nvb", "nve", "asa")) + f" (n={len(mine)})")
+            else:  # the trio pooled as means only: three ± in one cell would not read
+                evs.append(f"{_pooled(mine['ev'], 3)}{_n(mine)}")
+                trio.append("/".join(f"{mine[m].mean():.3f}" for m in ("abs_nvb", "nve", "asa")) + _n(mine))
         ours = []
         for v in paper:
             p = critic_values(v, robot)
@@ -241,10 +247,7 @@ def fixed_table(fixed: pd.DataFrame) -> list[str]:
                 cells.append("-")
             else:
                 mark = "" if mine["reference"].all() else " †" * (v != "mc")
-                if len(mine) == 1:
-                    cells.append(f"{mine['flip'].iloc[0]:.3f} / {mine['cos_grad'].iloc[0]:.3f}{mark}")
-                else:
-                    cells.append(f"{_pm(mine['flip'], 3)} / {_pm(mine['cos_grad'], 3)} (n={len(mine)}){mark}")
+                cells.append(f"{_pooled(mine['flip'], 3)} / {_pooled(mine['cos_grad'], 3)}{_n(mine)}{mark}")
         for robot in robots:
             p = fixed_rollout_values(v, robot)
             cells.append("-" if p.get("flip") is None else f"{p['flip']:.3f} / {p['cos_grad']:.3f}")
