@@ -91,7 +91,6 @@ for item in "$@"; do
   # the paper's protocol for this run alone (`morfic reproduce --preset cpu`'s configs; the variant's other seeds are
   # not re-evaluated), its critic scored on the frozen film actor's rollouts, the tables copied with their ids
   python scripts/experiment_tables.py "$name" --run-missing --out "$RESULTS"
-  python scripts/results_tables.py --write docs/results.md --figures docs/img
   if [ "$seed" = 0 ]; then
     shipped="$BUNDLES/$name.tar"
     morfic store export "runs/$name" --latest --without-trainer-state --out "$BUNDLES" --force
@@ -100,6 +99,8 @@ for item in "$@"; do
     morfic store export "runs/$name" --results-only --out "$BUNDLES/results" --force
   fi
   rm -f "$BUNDLES/partial/$name.tar"
+  # after the export, so that the generated bundle weight counts this run's bundle
+  python scripts/results_tables.py --write docs/results.md --figures docs/img
   echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,calibration.csv,curve.csv,artifacts.json}," \
        "docs/results.md's tables and claims, docs/img/results-*.png and $shipped"
 done
