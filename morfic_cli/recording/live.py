@@ -1,11 +1,16 @@
 """The live view of ``morfic play``: the rollout log's channels served over the Foxglove WebSocket protocol.
 
-:class:`LiveView` publishes, through ``foxglove-sdk``'s WebSocket server (subprotocol ``foxglove.websocket.v1``),
-the same three channels a rollout log holds (``docs/mcap.md``), encoded by the same code:
-``/rollout/step`` (``morfic.RolloutStep``), ``/scene`` (``foxglove.SceneUpdate``) and ``/tf``
-(``foxglove.FrameTransforms``), all protobuf. Message times are wall-clock ns (what Foxglove's live timeline
-shows). The scene and the fixed frames are sent again when a client subscribes and every
-:data:`SCENE_REPEAT_S` seconds, so a client that connects late sees the robots too.
+:class:`LiveView` publishes, through ``foxglove-sdk``'s WebSocket server, the same channels a rollout log holds
+(``docs/mcap.md``), encoded by the same code: ``/rollout/step`` (``morfic.RolloutStep``), ``/scene``
+(``foxglove.SceneUpdate``) and ``/tf`` (``foxglove.FrameTransforms``, the moving bodies), all protobuf, plus
+``/tf_static``: the fixed frames (each env's offset, feet, rotors) on their own channel, so the moving ``/tf``
+stream never has to carry them. Message times are wall-clock ns (what Foxglove's live timeline shows). The scene
+and the fixed frames are sent again when a client subscribes and every :data:`SCENE_REPEAT_S` seconds, so a client
+that connects late, or seeks back in its buffer, has them again within that time.
+
+The SDK's server accepts only the subprotocol ``foxglove.sdk.v1``; it listens on a private port of 127.0.0.1 and
+a :class:`~morfic_cli.recording.ws_relay.SubprotocolRelay` listens where the user asked, accepting
+``foxglove.sdk.v1`` and ``foxglove.websocket.v1`` (the protocol's original name, the same messages).
 """
 
 from __future__ import annotations
@@ -29,6 +34,8 @@ from morfic_cli.recording.scene import RolloutScene
 
 SCENE_REPEAT_S = 2.0
 """Seconds between two sends of the scene and the fixed frames."""
+TF_STATIC_TOPIC = "/tf_static"
+"""The live view's channel of the fixed frames (``foxglove.FrameTransforms``)."""
 
 
 class _Resend(ServerListener):
@@ -51,6 +58,9 @@ class LiveView:
         scene: The 3D scene of some envs (None: numbers only).
         host: Interface to bind (``127.0.0.1``: this machine only).
         port: TCP port (0: any free one; :attr:`port` says which).
+
+    Raises:
+        OSError: ``host:port`` cannot be bound (e.g. the port is taken).
     """
 
     def __init__(self, *, num_envs: int, term_names: Sequence[str], scene: RolloutScene | None, host: str,
@@ -65,30 +75,42 @@ class LiveView:
         self.scene = scene
         self._codec = step_codec(self.term_names)
         self._listener = _Resend()
-        self.server = foxglove.start_server(name="morfic play", host=host, port=port,
+        from morfic_cli.recording.ws_relay import SubprotocolRelay
+
+        self.server = foxglove.start_server(name="morfic play", host="127.0.0.1", port=0,
                                             server_listener=self._listener)
+        try:
+            self.relay = SubprotocolRelay(self.server.port, host=host, port=port)
+        except BaseException:
+            self.server.stop()
+            raise
+        self.host = host
 
         def channel(topic: str, name: str, data: bytes) -> foxglove.Channel:
             return foxglove.Channel(topic, schema=foxglove.Schema(name=name, encoding="protobuf", data=data),
                                     message_encoding="protobuf")
 
         self._steps = channel(ROLLOUT_TOPIC, ROLLOUT_SCHEMA_NAME, self._codec.schema_data)
-        self._scene = self._tf = None
+        self._scene = self._tf = self._tf_static = None
         if scene is not None:
             self._scene = channel(SCENE_TOPIC, "foxglove.SceneUpdate",
                                   build_file_descriptor_set(SceneUpdate).SerializeToString())
-            self._tf = channel(TF_TOPIC, "foxglove.FrameTransforms",
-                               build_file_descriptor_set(FrameTransforms).SerializeToString())
+            tf_schema = build_file_descriptor_set(FrameTransforms).SerializeToString()
+            self._tf = channel(TF_TOPIC, "foxglove.FrameTransforms", tf_schema)
+            self._tf_static = channel(TF_STATIC_TOPIC, "foxglove.FrameTransforms", tf_schema)
         self._last_scene = -np.inf
 
     @property
     def port(self) -> int:
-        """The port the server listens on."""
-        return int(self.server.port)
+        """The port clients connect to (the relay's)."""
+        return int(self.relay.port)
 
     def app_url(self) -> str:
         """The Foxglove app URL that opens this server as a data source."""
-        return self.server.app_url() or ""
+        from urllib.parse import quote
+
+        host = "127.0.0.1" if self.host in ("", "0.0.0.0", "::") else self.host
+        return f"https://app.foxglove.dev?ds=foxglove-websocket&ds.url={quote(f'ws://{host}:{self.port}', safe='')}"
 
     def publish(self, step: int, time_s: float, data: Mapping[str, np.ndarray]) -> None:
         """Send one policy step (numbers and, with a scene, the moving frames); the scene again when due.
@@ -105,14 +127,17 @@ class LiveView:
                 self._listener.wanted.clear()
                 self._last_scene = time.monotonic()
                 self._scene.log(self.scene.scene_update(now).SerializeToString(), log_time=now)
-                self._tf.log(self.scene.static_transforms(now).SerializeToString(), log_time=now)
+                self._tf_static.log(self.scene.static_transforms(now).SerializeToString(), log_time=now)
             qpos = self.scene.qpos(arrays["base_pos"], arrays["base_quat"], arrays["joint_pos"])
             self._tf.log(self.scene.step_transforms(qpos, now).SerializeToString(), log_time=now)
         self._steps.log(self._codec.encode(step, time_s, arrays), log_time=now)
 
     def close(self) -> None:
-        """Close the channels and stop the server."""
-        for ch in (self._steps, self._scene, self._tf):
+        """Close the channels, the relay and the server."""
+        for ch in (self._steps, self._scene, self._tf, self._tf_static):
             if ch is not None:
                 ch.close()
-        self.server.stop()
+        try:
+            self.relay.close()
+        finally:
+            self.server.stop()

@@ -17,7 +17,9 @@ from smoke_runs import train_smoke_runs
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-SUBPROTOCOLS = ["foxglove.websocket.v1", "foxglove.sdk.v1"]  # the protocol's name; foxglove-sdk >= 0.2x: sdk.v1
+# The Foxglove app offers both names; older clients (Lichtblick < 1.22, @foxglove/ws-protocol) only the first, which
+# foxglove-sdk's own server refuses: morfic play accepts it (tests/recording/test_live.py checks each name alone).
+SUBPROTOCOLS = ["foxglove.websocket.v1"]
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +89,8 @@ def test_play_serves_the_scene_and_numbers_over_foxglove_websocket(smoke_store, 
                              "--envs", "2", "--port", str(port), "--record", str(record)],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        subprotocol, channels, got = asyncio.run(_watch(port, {"/rollout/step": 3, "/tf": 3, "/scene": 1}, 240))
+        subprotocol, channels, got = asyncio.run(_watch(port, {"/rollout/step": 3, "/tf": 3, "/tf_static": 1,
+                                                               "/scene": 1}, 240))
     finally:
         proc.send_signal(signal.SIGINT)  # Ctrl-C
         try:
@@ -100,11 +103,13 @@ def test_play_serves_the_scene_and_numbers_over_foxglove_websocket(smoke_store, 
     assert {(c["topic"], c["schemaName"], c["encoding"], c["schemaEncoding"]) for c in channels} == {
         ("/rollout/step", "morfic.RolloutStep", "protobuf", "protobuf"),
         ("/scene", "foxglove.SceneUpdate", "protobuf", "protobuf"),
-        ("/tf", "foxglove.FrameTransforms", "protobuf", "protobuf")}
+        ("/tf", "foxglove.FrameTransforms", "protobuf", "protobuf"),
+        ("/tf_static", "foxglove.FrameTransforms", "protobuf", "protobuf")}
     step = got["/rollout/step"][0]
     assert len(step.envs) == 2 and len(step.envs[0].joint_pos) == 12 and step.envs[0].command[0] == 1.0
     moving = {t.child_frame_id for t in got["/tf"][-1].transforms}
     assert {"env0/base", "env1/base", "env1/RR_calf"} <= moving
+    assert {"env0/world", "env1/FL_foot"} <= {t.child_frame_id for t in got["/tf_static"][0].transforms}
     assert {e.frame_id for e in got["/scene"][0].entities} >= {"world", "env0/base", "env1/FL_foot"}
     assert f"ws://127.0.0.1:{port}" in err and "stopped after" in err
     log = read_rollout(record)  # --record wrote the session
