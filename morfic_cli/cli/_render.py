@@ -30,8 +30,12 @@ class Column:
         fmt: Formatter for the rich table cell; json/csv always get the raw value.
         justify: rich justification ("left", "right", "center").
         no_wrap: Keep the cell on one line (rich shrinks other columns first).
-        overflow: What a cell too long for its column does: "ellipsis" (cut, rich's default) or "fold" (wrap
-            at any character, nothing lost: paths a user copies).
+        overflow: What a cell too long for its column does: "fold" (wrap at any character, nothing lost) or
+            "ellipsis" (cut).
+        whole: Never cut, fold or drop this column: what a user copies (refs, ids, runs, robots, modes). None:
+            whole if ``key`` is one of :data:`WHOLE_KEYS`.
+        drop: In a terminal too narrow for the table, columns with ``drop > 0`` are left out, highest first,
+            until the rest fits (the caption names them; json/csv keep every column). 0: never left out.
     """
 
     key: str
@@ -39,7 +43,19 @@ class Column:
     fmt: Callable[[Any], str] | None = None
     justify: str = "left"
     no_wrap: bool = False
-    overflow: str = "ellipsis"
+    overflow: str = "fold"
+    whole: bool | None = None
+    drop: int = 0
+
+    @property
+    def is_whole(self) -> bool:
+        """Whether the column is shown whole (:attr:`whole`, else its key is one of :data:`WHOLE_KEYS`)."""
+        return self.key in WHOLE_KEYS if self.whole is None else self.whole
+
+
+#: Keys of columns a user copies into the next command; never cut (``Column.whole``).
+WHOLE_KEYS = frozenset({"ref", "id", "run", "name", "robot", "mode", "variant", "critic", "preset", "kind",
+                        "file", "path", "version"})
 
 
 def _cell(value: Any, col: Column) -> str:
@@ -79,13 +95,79 @@ def emit_rows(
         frame.to_csv(sys.stdout, index=False)
         return
     cols = list(columns) if columns else [Column(k) for k in (rows[0].keys() if rows else [])]
+    cells = [[_cell(row.get(col.key), col) for col in cols] for row in rows]
+    keep, widths = fit_columns(cols, cells, out_console.width)
+    left_out = [col.header or col.key for i, col in enumerate(cols) if i not in keep]
+    if left_out:
+        note = f"left out at this terminal width: {', '.join(left_out)} (--format json or csv has every column)"
+        caption = f"{caption}\n{note}" if caption else note
     table = Table(title=title, caption=caption)
-    for col in cols:
-        table.add_column(col.header or col.key, justify=col.justify, no_wrap=col.no_wrap,  # type: ignore[arg-type]
-                         overflow=col.overflow)  # type: ignore[arg-type]
-    for row in rows:
-        table.add_row(*(Text(_cell(row.get(col.key), col)) for col in cols))  # Text: no markup in cells
+    for i in keep:
+        col = cols[i]
+        folded = widths is not None and widths[i] < max((len(row[i]) for row in cells), default=0)
+        table.add_column(col.header or col.key, justify=col.justify,  # type: ignore[arg-type]
+                         no_wrap=(col.no_wrap or col.is_whole) and not folded,
+                         overflow="fold" if col.is_whole else col.overflow,  # type: ignore[arg-type]
+                         width=None if widths is None else widths[i])
+    for row in cells:
+        table.add_row(*(Text(row[i]) for i in keep))  # Text: no markup in cells
     out_console.print(table)
+
+
+def _longest_word(text: str) -> int:
+    return max((len(word) for word in text.split()), default=0)
+
+
+def fit_columns(cols: Sequence[Column], cells: Sequence[Sequence[str]], width: int,
+                ) -> tuple[list[int], list[int] | None]:
+    """Which columns a rich table of ``width`` characters shows, and how wide, so that no whole column is cut.
+
+    While the columns at their longest cells are wider than ``width``, the column with the highest ``drop`` is
+    left out (rows stay one line). If the rest is still too wide, the widest wrapping columns give up characters,
+    never below their longest word; whole and ``no_wrap`` columns keep their longest cell. Whole columns are only
+    ever folded (wrapped at any character, nothing lost) when nothing else is left to shrink.
+
+    Args:
+        cols: The columns, n of them.
+        cells: The formatted cells, one list of n strings per row.
+        width: The console's width in characters.
+
+    Returns:
+        The indices of the columns shown, in order, and the content width of each column (a list of n, entries of
+        left-out columns unused), or None where every column fits at its longest cell (rich lays them out).
+    """
+    n = len(cols)
+    heads = [col.header or col.key for col in cols]
+    longest = [max([len(line) for text in [heads[i], *(row[i] for row in cells)] for line in text.splitlines()]
+                   or [0]) for i in range(n)]
+    rigid = [cols[i].is_whole or cols[i].no_wrap for i in range(n)]
+    least = [longest[i] if rigid[i] else max(_longest_word(heads[i]),
+                                             *(_longest_word(row[i]) for row in cells), 1) for i in range(n)]
+    keep = list(range(n))
+
+    def room(shown: list[int]) -> int:  # content width left: each column has 2 of padding and 1 of border, + 1
+        return width - 3 * len(shown) - 1
+
+    while sum(longest[i] for i in keep) > room(keep):  # one line per row where leaving out columns gets there
+        droppable = [i for i in keep if cols[i].drop > 0]
+        if not droppable:
+            break
+        keep.remove(max(droppable, key=lambda i: (cols[i].drop, i)))
+    if sum(longest[i] for i in keep) <= room(keep):
+        return keep, None
+    widths = list(longest)
+    excess = sum(widths[i] for i in keep) - room(keep)
+    while excess > 0:
+        shrinkable = [i for i in keep if widths[i] > least[i]]
+        if not shrinkable:  # even at their least the columns do not fit: the lesser ones fold, then the whole ones
+            shrinkable = ([i for i in keep if widths[i] > 1 and not cols[i].is_whole]
+                          or [i for i in keep if widths[i] > 1])
+            if not shrinkable:
+                break
+        widest = max(shrinkable, key=lambda i: (widths[i], -i))
+        widths[widest] -= 1
+        excess -= 1
+    return keep, widths
 
 
 def json_safe(obj: Any) -> Any:

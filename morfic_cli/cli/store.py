@@ -57,9 +57,9 @@ _LS_COLUMNS = [
     Column("ref"),
     Column("id", fmt=_short_id),
     Column("kind"),
-    Column("created", header="created (UTC)", fmt=_short_time),
-    Column("files", justify="right"),
-    Column("size", fmt=human_size, justify="right"),
+    Column("created", header="created (UTC)", fmt=_short_time, drop=2),
+    Column("files", justify="right", drop=3),
+    Column("size", fmt=human_size, justify="right", no_wrap=True, drop=1),
 ]
 
 
