@@ -85,3 +85,85 @@ def ev_figure(rows: Sequence[dict[str, Any]]) -> tuple[bytes, bytes]:
     fig.savefig(pdf, format="pdf", metadata={"CreationDate": None})
     plt.close(fig)
     return png.getvalue(), pdf.getvalue()
+
+
+STUDY_METRICS: tuple[tuple[str, str, bool], ...] = (
+    ("ev", "EV (clipped at -1)", True),
+    ("flip", "Flip (lower is better)", False),
+    ("cos_grad", "CosGrad (higher is better)", True),
+)
+"""The critic study figure's columns: metric, axis label, higher is better."""
+
+
+def critic_study_plot(summary: Sequence[dict[str, Any]]):
+    """The critic study figure: one row per command, columns EV / Flip / CosGrad, robots on x, a marker per variant.
+
+    Each marker is a variant's mean over its fit seeds with its 95 % bootstrap interval as an error bar
+    (:func:`~morfic_cli.diagnostics.study_summary.cell_summary`); multiplicative critics are filled, additive ones
+    hollow. EV below -1 is drawn at -1 with a downward triangle (EV is unbounded below on robots that fall).
+
+    Args:
+        summary: Rows with ``command_vx, robot, variant, multiplicative, metric, mean, lo, hi``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    commands = sorted({r["command_vx"] for r in summary})
+    robots = list(dict.fromkeys(r["robot"] for r in summary))
+    variants = list(dict.fromkeys(r["variant"] for r in summary))
+    mult = {r["variant"]: bool(r["multiplicative"]) for r in summary}
+    cell = {(r["command_vx"], r["robot"], r["variant"], r["metric"]): r for r in summary}
+    fig, axes = plt.subplots(len(commands), len(STUDY_METRICS), squeeze=False, constrained_layout=True,
+                             figsize=(4.6 * len(STUDY_METRICS), 2.9 * len(commands) + 0.6))
+    width = 0.8 / max(len(variants), 1)
+    for i, command in enumerate(commands):
+        for j, (metric, ylabel, _higher) in enumerate(STUDY_METRICS):
+            ax = axes[i][j]
+            for k, variant in enumerate(variants):
+                xs, ys, lo, hi, clipped = [], [], [], [], []
+                for x, robot in enumerate(robots):
+                    c = cell.get((command, robot, variant, metric))
+                    if c is None or c["mean"] is None or math.isnan(c["mean"]):
+                        continue
+                    m, a, b = c["mean"], c["lo"], c["hi"]
+                    a, b = (m, m) if a is None or math.isnan(a) else (a, b)
+                    if metric == "ev":
+                        m, a, b = max(m, -1.0), max(a, -1.0), max(b, -1.0)
+                        clipped.append(c["mean"] < -1.0)
+                    else:
+                        clipped.append(False)
+                    xs.append(x + (k - (len(variants) - 1) / 2) * width)
+                    ys.append(m)
+                    lo.append(m - a)
+                    hi.append(b - m)
+                color = f"C{k}"
+                face = color if mult.get(variant) else "white"
+                ax.errorbar(xs, ys, yerr=[lo, hi], fmt="none", ecolor=color, elinewidth=1.0, capsize=2)
+                for x, y, c in zip(xs, ys, clipped, strict=True):
+                    ax.plot([x], [y], marker="v" if c else "o", ms=5, mfc=face, mec=color,
+                            label=variant_label(variant) if (x, y) == (xs[0], ys[0]) and i == 0 and j == 0 else None)
+            if metric == "ev":
+                ax.axhline(0.0, color="black", lw=0.6)
+                ax.set_ylim(-1.08, 1.05)
+            ax.set_xticks(range(len(robots)), robots, fontsize=7, rotation=30)
+            ax.set_title(f"{ylabel}, {command:g} m/s", fontsize=9)
+            ax.grid(axis="y", alpha=0.3)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 7), fontsize=8, frameon=False)
+    fig.suptitle("Critic study: critics fitted from scratch on one frozen actor's data (mean and 95 % interval over "
+                 "fit seeds; filled = multiplicative)", fontsize=10)
+    return fig
+
+
+def critic_study_figure(summary: Sequence[dict[str, Any]]) -> bytes:
+    """:func:`critic_study_plot` as PNG bytes."""
+    import matplotlib.pyplot as plt
+
+    fig = critic_study_plot(summary)
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=120)
+    plt.close(fig)
+    return png.getvalue()
