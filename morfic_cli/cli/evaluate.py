@@ -46,8 +46,8 @@ def evaluate(
     video: Annotated[bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")]
     = False,
     out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Also write eval.csv, a speed/survival figure per robot and "
-                                       "command (and the videos) into this directory.")
+        Path | None, typer.Option("--out", "-o", help="Also write eval.csv and, per robot and command, the MCAP "
+                                       "rollout log, a speed/survival figure (and the video) into this directory.")
     ] = None,
     training_conditions: Annotated[
         bool,
@@ -126,6 +126,10 @@ def evaluate(
 
         for path in write_figures(st, result.id, out):
             info(f"figure: {path}")
+        from morfic_cli.evaluation.media import write_logs
+
+        for path in write_logs(st, result.id, out):
+            info(f"rollout log (MCAP, open in Foxglove): {path}")
     if not quiet:
         info(f"stored {result.ref}@{result.version} ({result.id[:12]}) with {len(result.rollouts)} MCAP rollout logs")
     emit_rows(

@@ -1,4 +1,7 @@
-"""Videos of evaluation rollouts (``morfic eval --video``): render, encode, store, and write next to ``--out``.
+"""Videos of evaluation rollouts (``morfic eval --video``) and the files ``morfic eval --out`` copies out.
+
+Videos are rendered, encoded, stored, and written next to ``--out``; :func:`write_logs` copies the MCAP rollout
+logs there.
 
 Each rollout that kept its first envs' models (``keep_models``) becomes one ``media`` manifest holding
 ``video.mp4`` (or ``video.gif`` without ffmpeg) and ``frames.png`` (a contact sheet of six frames), with inputs
@@ -12,6 +15,9 @@ from pathlib import Path
 from morfic_cli.evaluation.protocol import EvalResult
 from morfic_cli.store import Store
 
+ROLLOUT_LOG = "rollout.mcap"
+"""The MCAP log's file name in a ``rollout`` manifest."""
+
 VIDEO_EVERY = 2
 """Render every second policy step: 25 frames per second of a 50 Hz policy."""
 
@@ -22,6 +28,29 @@ VIDEO_ENVS = 4
 def media_name(role: str) -> str:
     """File stem of a rollout's media: ``rollout/go1/descriptor/vx2`` -> ``go1-descriptor-vx2``."""
     return role.removeprefix("rollout/").replace("/", "-")
+
+
+def write_logs(store: Store, eval_id: str, out: Path) -> list[Path]:
+    """Copy the MCAP rollout log of every rollout of eval ``eval_id`` into the ``--out`` directory.
+
+    Names: ``<robot>-<mode>-vx<cmd>.mcap`` (beside that rollout's figure and video), each the stored
+    ``rollout.mcap`` byte for byte, ready for Foxglove or ``mcap info``.
+
+    Args:
+        store: The store the eval is in.
+        eval_id: The ``eval`` manifest's id.
+        out: The directory (exists).
+
+    Returns:
+        The paths written.
+    """
+    written = []
+    for role, rid in store.read_manifest(eval_id).inputs.items():
+        if role.startswith("rollout/") and ROLLOUT_LOG in store.read_manifest(rid).files:
+            path = out / f"{media_name(role)}.mcap"
+            path.write_bytes(store.read_file(rid, ROLLOUT_LOG))
+            written.append(path)
+    return written
 
 
 def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: int = VIDEO_EVERY) -> list[Path | str]:

@@ -133,7 +133,8 @@ def test_video_is_stored_and_written_into_out(run_cli, store, tmp_path, gl_backe
     videos = sorted(p.name for p in out.iterdir())
     ext = "mp4" if any(n.endswith(".mp4") for n in videos) else "gif"
     assert videos == sorted(["eval.csv", "go2-descriptor-vx1-frames.png", f"go2-descriptor-vx1.{ext}",
-                             "go2-descriptor-vx1-speed.png", "go2-descriptor-vx1-speed.pdf"])
+                             "go2-descriptor-vx1-speed.png", "go2-descriptor-vx1-speed.pdf",
+                             "go2-descriptor-vx1.mcap"])
     media = store.ls("media")
     assert len(media) == 1
     manifest = store.read_manifest(media[0]["id"])
@@ -143,6 +144,26 @@ def test_video_is_stored_and_written_into_out(run_cli, store, tmp_path, gl_backe
     # the eval figure in --out is the one stored with the rollout
     speed = (out / "go2-descriptor-vx1-speed.png").read_bytes()
     assert speed.startswith(b"\x89PNG") and store.read_file(manifest.inputs["rollout"], "speed.png") == speed
+
+
+def test_out_holds_the_mcap_log_of_every_rollout(run_cli, store, tmp_path):
+    from morfic_cli.recording.rollout_log import read_rollout
+
+    out = tmp_path / "results"
+    code, _, err = run_cli("eval", "runs/film-s0", "--robots", "go2,a1", "--envs", "2", "--steps", "3",
+                           "--command-vx", "1.0,1.5", "--out", str(out), "--format", "json")
+    assert code == 0, err
+    logs = sorted(p.name for p in out.glob("*.mcap"))
+    assert logs == sorted(f"{r}-descriptor-vx{vx}.mcap" for r in ("a1", "go2") for vx in ("1", "1.5"))
+    manifest = store.read_manifest("evals/film-s0")
+    for role, rid in manifest.inputs.items():
+        if role.startswith("rollout/"):
+            name = role.removeprefix("rollout/").replace("/", "-") + ".mcap"
+            assert (out / name).read_bytes() == store.read_file(rid, "rollout.mcap")
+            assert f"rollout log (MCAP, open in Foxglove): {out / name}" in err
+    log = read_rollout(out / "a1-descriptor-vx1.5.mcap")
+    assert log.num_envs == 2 and log.num_steps == 3
+    assert log.metadata["robot"] == "a1" and log.metadata["command"] == [1.5, 0.0, 0.0]
 
 
 def _compose(transforms: dict, frame: str, stop: str) -> tuple[np.ndarray, np.ndarray]:
