@@ -13,7 +13,7 @@ Use it from the command line by import path, with this folder on PYTHONPATH (or 
 package)::
 
     PYTHONPATH=examples morfic train --variant custom_variant:GatedCritic --preset smoke
-    morfic eval runs/custom_variant.GatedCritic-s0 --robots go2
+    morfic eval runs/custom_variant.GatedCritic-smoke-s0 --robots go2
     morfic compare-baselines
 
 docs/extending.md walks through it.

@@ -17,7 +17,7 @@ no ``--mjcf`` file is given (``morfic robots show go1 --xml > go1.xml`` writes o
 
 Usage::
 
-    morfic export runs/film-s0 --robot go1 --out deploy/go1
+    morfic export runs/film-cpu-s0 --robot go1 --out deploy/go1
     python examples/deploy_loop.py deploy/go1 --vx 1.0 --seconds 10
 """
 

@@ -15,14 +15,18 @@ RESUME_PREFIX = "resume/"
 """Ref prefix of the trainer states: ``resume/NAME`` -> what ``--resume`` continues from."""
 
 
-def run_name(variant: str, seed: int, preset: str | None = None) -> str:
-    """The default name of a new run: ``<variant>-s<seed>`` (train), ``<variant>-<preset>-s<seed>`` (reproduce).
+def run_name(variant: str, seed: int, preset: str) -> str:
+    """The default name of a new run, the one rule of ``train``, ``reproduce`` and the shipped bundles.
+
+    ``<variant>-<preset>-s<seed>``: ``film-smoke-s0`` (``train --variant film``, smoke is the default preset),
+    ``film-cpu-s0`` (``--preset cpu``; the shipped runs), so that runs of different budgets never collide. Runs
+    named otherwise (``--name``, or ``film-s0`` by an earlier ``train``) are read the same way: the name is only a ref,
+    what a run is comes from its manifest.
 
     A user variant's import path becomes a valid ref segment by writing its ``:`` as ``.``
-    (``my_lab.critics:GatedCritic`` -> ``my_lab.critics.GatedCritic-s0``).
+    (``my_lab.critics:GatedCritic`` -> ``my_lab.critics.GatedCritic-smoke-s0``).
     """
-    slug = variant.replace(":", ".")
-    return f"{slug}-{preset}-s{seed}" if preset else f"{slug}-s{seed}"
+    return f"{variant.replace(':', '.')}-{preset}-s{seed}"
 
 
 def run_of(spec: str, meta: Mapping[str, Any] | None = None) -> str:

@@ -291,7 +291,7 @@ def check_args(
     if out_dir is not None:
         check_out_dir(out_dir)
     if name is not None:
-        _check_ref_part("--name", name, "runs/", "film-s0")
+        _check_ref_part("--name", name, "runs/", "film-cpu-s0")
     if report_name is not None:
         _check_ref_part("--name", report_name, "reports/", "latest")
     if seed is not None and not integer(0, MAX_SEED).test(seed):
@@ -364,7 +364,7 @@ def check_spec(spec: str) -> None:
     """An artifact name (ref, ``ref@N``, id or prefix): non-empty, printable, at most 300 characters."""
     if not spec.strip() or len(spec) > 300 or any(ord(c) < 32 for c in spec):
         shown = spec[:40] + ("..." if len(spec) > 40 else "")
-        raise MorficError(f"{shown!r} is not an artifact name; give a ref (runs/film-s0), ref@N or an id (see "
+        raise MorficError(f"{shown!r} is not an artifact name; give a ref (runs/film-cpu-s0), ref@N or an id (see "
                           "`morfic store ls`).")
 
 

@@ -66,7 +66,7 @@ def _columns(table: str, with_paper: bool) -> list[Column]:
 
 
 def compare_baselines(
-    runs: Annotated[list[str] | None, typer.Argument(help="Run refs (runs/film-s0) or checkpoint ids; none: every "
+    runs: Annotated[list[str] | None, typer.Argument(help="Run refs (runs/film-cpu-s0) or checkpoint ids; none: every "
                                                     "run in the store.")] = None,
     with_paper: Annotated[bool, typer.Option("--with-paper", help="Add the paper's published numbers in "
                                              "paper_* columns.")] = False,
@@ -82,7 +82,7 @@ def compare_baselines(
     prints none). json/csv print every table's rows in one list, with a "table" column. The comparison is stored
     as a table artifact (ref tables/compare-baselines).
 
-    Example: morfic compare-baselines runs/film-s0 runs/ppo-s0 --with-paper --format csv
+    Example: morfic compare-baselines runs/film-cpu-s0 runs/ppo-cpu-s0 --with-paper --format csv
     """
     from morfic_cli.report.compare import TABLE_ORDER, compare_tables, flat_rows, store_comparison
     from morfic_cli.report.gather import gather, resolve_runs

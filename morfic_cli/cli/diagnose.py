@@ -32,7 +32,7 @@ def _num(v: float | None) -> str:
 def diagnose(
     runs: Annotated[
         list[str] | None,
-        typer.Argument(help="Run refs (runs/film-s0 = its latest checkpoint), ref@N or checkpoint ids."),
+        typer.Argument(help="Run refs (runs/film-cpu-s0 = its latest checkpoint), ref@N or checkpoint ids."),
     ] = None,
     robots: RobotsOpt = "all",
     fixed_rollout: Annotated[
@@ -88,8 +88,8 @@ def diagnose(
     an EV figure (ref diagnoses/calibration). With --fixed-rollout ROBOT, one actor is frozen, its rollout
     collected once, and every critic scored on exactly those samples (ref diagnoses/fixed-rollout/ROBOT).
 
-    Example: morfic diagnose runs/film-s0 runs/ppo-s0 --robots aliengo,mini_cheetah
-    Example: morfic diagnose --fixed-rollout aliengo --actor runs/film-s0 --critics runs/film-s0,runs/ppo-s0
+    Example: morfic diagnose runs/film-cpu-s0 runs/ppo-cpu-s0 --robots aliengo,mini_cheetah
+    Example: morfic diagnose --fixed-rollout aliengo --actor runs/film-cpu-s0 --critics runs/film-cpu-s0,runs/ppo-cpu-s0
     """
     check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=str(command_vx), specs=runs)
     from morfic_cli.diagnostics.samples import DiagnoseCfg
@@ -104,11 +104,11 @@ def diagnose(
         if actor is not None or critics is not None:
             raise MorficError(
                 "--actor and --critics belong to --fixed-rollout ROBOT; without it, name the runs to "
-                "diagnose: morfic diagnose runs/film-s0 runs/ppo-s0."
+                "diagnose: morfic diagnose runs/film-cpu-s0 runs/ppo-cpu-s0."
             )
         if not runs:
             raise MorficError(
-                "name the runs to diagnose (e.g. morfic diagnose runs/film-s0), or give "
+                "name the runs to diagnose (e.g. morfic diagnose runs/film-cpu-s0), or give "
                 "--fixed-rollout ROBOT; see `morfic store ls --kind checkpoint` for runs."
             )
         if len(set(runs)) != len(runs):
@@ -130,7 +130,8 @@ def diagnose(
         robot = targets[0]
         critic_specs = [c.strip() for c in critics.split(",") if c.strip()] if critics is not None else None
         if critics is not None and not critic_specs:
-            raise MorficError("--critics is empty; give runs such as runs/film-s0,runs/ppo-s0, or leave it out.")
+            raise MorficError("--critics is empty; give runs such as runs/film-cpu-s0,runs/ppo-cpu-s0, or leave it "
+                              "out.")
         cfg = DiagnoseCfg(robots=(robot,), **settings)
         _fixed(st, robot, actor, critic_specs, cfg, out, fmt, quiet)
 

@@ -24,7 +24,8 @@ from morfic_cli.validation import check_args
 
 
 def evaluate(
-    run: Annotated[str, typer.Argument(help="Run ref (runs/film-s0 = its latest checkpoint), ref@N or checkpoint id.")],
+    run: Annotated[str, typer.Argument(help="Run ref (runs/film-cpu-s0 = its latest checkpoint), ref@N or "
+                                       "checkpoint id.")],
     robots: RobotsOpt = "all",
     command_vx: Annotated[
         str | None, typer.Option("--command-vx", help="Forward command(s) in m/s, e.g. 2.0,2.5 [default: 2.0; 1.0 "
@@ -74,7 +75,7 @@ def evaluate(
 
     With --training-conditions: does evaluation agree with training? (docs/eval.md, "Training conditions").
 
-    Example: morfic eval runs/film-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
+    Example: morfic eval runs/film-cpu-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
     """
     check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=command_vx, robots=robots,
                specs=[run])

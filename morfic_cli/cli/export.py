@@ -23,7 +23,7 @@ def export(
     run: Annotated[
         str,
         typer.Argument(
-            help="Run ref (runs/film-s0 = its latest checkpoint), ref@N or checkpoint id; with --check: an export "
+            help="Run ref (runs/film-cpu-s0 = its latest checkpoint), ref@N or checkpoint id; with --check: an export "
             "(exports/... ref or id) or a directory written with --out."
         ),
     ],
@@ -70,7 +70,7 @@ def export(
     critic_state_dict, optimizer_state_dict, iter, infos; agent.json = the runner config; train.json = morfic's
     config), stored as exports/<run>/rsl-rl.
 
-    Example: morfic export runs/film-s0 --robot go1 --to onnx --out deploy/go1
+    Example: morfic export runs/film-cpu-s0 --robot go1 --to onnx --out deploy/go1
     """
     check_args(store=store, out_dir=out, specs=[run])
     from morfic_cli.export.artifact import ExportCfg, export_policy

@@ -13,7 +13,8 @@ from morfic_cli.errors import MorficError
 
 
 def play(
-    run: Annotated[str, typer.Argument(help="Run ref (runs/film-s0 = its latest checkpoint), ref@N or checkpoint id.")],
+    run: Annotated[str, typer.Argument(help="Run ref (runs/film-cpu-s0 = its latest checkpoint), ref@N or "
+                                       "checkpoint id.")],
     robot: Annotated[str, typer.Option("--robot", help="Robot to walk (see `morfic robots ls`).")] = "go2",
     mode: ModeOpt = EvalMode.descriptor,
     command_vx: Annotated[float, typer.Option("--command-vx", help="Forward command in m/s.")] = 1.0,
@@ -36,7 +37,7 @@ def play(
     Serves the channels of an eval log (/scene, /tf, /rollout/step; docs/mcap.md) over the Foxglove WebSocket
     protocol and prints the URL to open in Foxglove (Open connection -> Foxglove WebSocket). Ctrl-C stops.
 
-    Example: morfic play runs/film-s0 --robot go1 --command-vx 1.5 --envs 4 --record go1.mcap
+    Example: morfic play runs/film-cpu-s0 --robot go1 --command-vx 1.5 --envs 4 --record go1.mcap
     """
     from morfic_cli.evaluation.play import PlayCfg
     from morfic_cli.evaluation.play import play as run_play

@@ -94,14 +94,14 @@ def ls(
 
 @app.command("show")
 def show(
-    spec: Annotated[str, typer.Argument(help="Ref (runs/film-s0), ref@N, id or unique id prefix.")],
+    spec: Annotated[str, typer.Argument(help="Ref (runs/film-cpu-s0), ref@N, id or unique id prefix.")],
     history: Annotated[bool, typer.Option("--history", help="List every version of the ref instead.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Print one manifest (or, with --history, every version of a ref).
 
-    Example: morfic store show runs/film-s0@1
+    Example: morfic store show runs/film-cpu-s0@1
     """
     st = Store(store)
     if not history:
@@ -117,7 +117,7 @@ def show(
 
 @app.command("get")
 def get(
-    spec: Annotated[str, typer.Argument(help="Ref (runs/film-s0), ref@N, id or unique id prefix.")],
+    spec: Annotated[str, typer.Argument(help="Ref (runs/film-cpu-s0), ref@N, id or unique id prefix.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Directory to write the files into (created if "
                                       "missing); each file's path is printed.")],
     files: Annotated[
@@ -131,7 +131,7 @@ def get(
     Files keep their names in the artifact (model.pt, eval.csv, table.csv, policy.onnx); a rollout's
     rollout.mcap is named after its robot, mode and command (go1-descriptor-vx2.0.mcap).
 
-    Example: morfic store get runs/film-s0 --file model.pt --out ckpt/
+    Example: morfic store get runs/film-cpu-s0 --file model.pt --out ckpt/
     """
     from morfic_cli.store.get import get_files
 
@@ -215,12 +215,12 @@ def export(
     """Write the named refs and everything they reach into one tar file, DIR/NAME.tar; print its path.
 
     The tar is named after the refs unless --name says otherwise: runs/film-cpu-s0 -> film-cpu-s0.tar;
-    runs/film-s0 runs/film-s1 -> film-s0+film-s1.tar; five refs -> film-s0+4-more.tar. An existing
+    runs/film-cpu-s0 runs/film-cpu-s1 -> film-cpu-s0+film-cpu-s1.tar; five refs -> film-cpu-s0+4-more.tar. An existing
     tar is kept unless --force. With --latest only the current version of each ref goes in; it arrives as version
     1 of that ref. With --results-only the refs are runs: each goes in as with --latest, together with the refs
     of their evals and diagnoses (evals/NAME, diagnoses/...) up to the run's last result (docs/concepts.md).
 
-    Example: morfic store export runs/film-s0 runs/film-s1 --out bundles/ --name film
+    Example: morfic store export runs/film-cpu-s0 runs/film-cpu-s1 --out bundles/ --name film
     """
     check_args(store=store, out_dir=out, specs=refs)
     path = export_path(out, refs, name, force=force)

@@ -37,8 +37,8 @@ def train(
         Preset | None, typer.Option("--preset", help="Budget: smoke (seconds), cpu (2-core machine), paper (GPU).")
     ] = None,
     seed: SeedOpt = 0,
-    name: Annotated[str | None, typer.Option("--name", help="Run name: ref runs/NAME (default <variant>-s<seed>).")]
-    = None,
+    name: Annotated[str | None, typer.Option("--name", help="Run name: ref runs/NAME (default "
+                                             "<variant>-<preset>-s<seed>, e.g. film-smoke-s0).")] = None,
     resume: Annotated[
         str | None, typer.Option("--resume", help="Continue a run: runs/NAME (its latest checkpoint) or a checkpoint.")
     ] = None,
@@ -92,7 +92,7 @@ def train(
     else:
         base = preset_cfg((preset or Preset.smoke).value, variant or "film", seed)
         cfg = apply_overrides(base, list(overrides or []))
-        run = new_run(st, cfg, name or run_name(cfg.variant, cfg.seed), device.value, live=live)
+        run = new_run(st, cfg, name or run_name(cfg.variant, cfg.seed, cfg.preset), device.value, live=live)
 
     cfg = run.cfg
     quiet = quiet or run.dist.rank != 0  # torchrun: one progress bar, rank 0's

@@ -203,7 +203,7 @@ def export_policy(
 
     Args:
         store: The artifact store.
-        spec: A run ref (``runs/film-s0``), ``ref@N``, or checkpoint id.
+        spec: A run ref (``runs/film-cpu-s0``), ``ref@N``, or checkpoint id.
         cfg: What to export.
         out: Also write the model and ``policy.json`` into this directory.
         trained: The checkpoint already loaded (else loaded from ``spec``).

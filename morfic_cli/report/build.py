@@ -92,7 +92,7 @@ class ReportCfg:
     """What a report contains.
 
     Attributes:
-        runs: Run specs (``runs/film-s0``); empty = every run in the store.
+        runs: Run specs (``runs/film-cpu-s0``); empty = every run in the store.
         latex: Write ``report.tex`` (and ``report.pdf`` where pdflatex is installed).
         markdown: Write ``report.md``.
         figures: Draw the figures.

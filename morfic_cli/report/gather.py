@@ -26,8 +26,8 @@ class RunInfo:
     """A training run as the store records it (the checkpoint manifest's meta and config).
 
     Attributes:
-        spec: How it was named (``runs/film-s0``, or an id).
-        name: Run name (``film-s0``).
+        spec: How it was named (``runs/film-cpu-s0``, or an id).
+        name: Run name (``film-cpu-s0``).
         checkpoint: Checkpoint manifest id.
         variant: Conditioning variant.
         seed: Training seed.
@@ -103,7 +103,7 @@ def run_info(store: Store, spec: str) -> RunInfo:
     manifest = store.read_manifest(spec)
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training run; pass run refs such as "
-                          "runs/film-s0 (see `morfic store ls --kind checkpoint`).")
+                          "runs/film-cpu-s0 (see `morfic store ls --kind checkpoint`).")
     meta, cfg = manifest.meta, manifest.config
     name = run_of(spec, meta)
     return RunInfo(

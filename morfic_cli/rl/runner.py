@@ -141,7 +141,7 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
     manifest = store.read_manifest(spec)
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training checkpoint; "
-                          "pass a run ref such as runs/film-s0 (see `morfic store ls --kind checkpoint`).")
+                          "pass a run ref such as runs/film-cpu-s0 (see `morfic store ls --kind checkpoint`).")
     check_weights(store, spec, manifest)
     cfg = train_cfg_from_dict(manifest.config)
     actor, critic = build_models(cfg)
@@ -564,7 +564,7 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
         else:
             raise
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
-        raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-s0.")
+        raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-cpu-s0.")
     name = run_of(spec, manifest.meta)
     check_weights(store, spec, manifest)
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)

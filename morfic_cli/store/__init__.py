@@ -15,8 +15,8 @@ Example::
     with store.writing():
         ckpt = store.put_manifest("checkpoint", files={"model.pt": Path("model.pt")})
         run = store.put_manifest("run", config={"variant": "film"}, inputs={"checkpoint": ckpt})
-        store.set_ref("runs/film-s0", run)
-    store.read_manifest("runs/film-s0@1").inputs["checkpoint"]
+        store.set_ref("runs/film-cpu-s0", run)
+    store.read_manifest("runs/film-cpu-s0@1").inputs["checkpoint"]
 """
 
 from __future__ import annotations

@@ -65,7 +65,7 @@ def publish(store: Store, kind: str, ref: str | None = None, *, config: dict[str
     Args:
         store: The artifact store.
         kind: Manifest kind (``eval``, ``diagnosis``, ``table``, ...).
-        ref: Ref to advance (``evals/film-s0``), or None for an artifact reached through its inputs only.
+        ref: Ref to advance (``evals/film-cpu-s0``), or None for an artifact reached through its inputs only.
         config: The resolved configuration (JSON object).
         inputs: Role -> id (or ref) of each input artifact.
         files: Name -> bytes or Path, or a function returning them (called only when a manifest is written).

@@ -1,4 +1,4 @@
-"""Refs: human names for manifests (``runs/film-s0``) with an append-only history.
+"""Refs: human names for manifests (``runs/film-cpu-s0``) with an append-only history.
 
 Each ref is one file ``refs/<name>`` holding its whole history as JSON lines, oldest first::
 
@@ -76,7 +76,7 @@ def check_ref_name(name: str) -> str:
     """
     if not is_ref_name(name):
         raise StoreError(f"invalid ref name '{name}': use segments of letters, digits, '.', '_' and '-' "
-                         "separated by '/', e.g. 'runs/film-s0' (no '..', no '@', at most "
+                         "separated by '/', e.g. 'runs/film-cpu-s0' (no '..', no '@', at most "
                          f"{MAX_REF_LENGTH} characters).")
     return name
 

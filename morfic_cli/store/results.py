@@ -41,7 +41,7 @@ RUN_FILE = "model.pt"
 def _not_a_run(name: str, manifest: Manifest) -> StoreError:
     return StoreError(f"--results-only exports runs, and '{name}' is not one (it is a {manifest.kind} artifact): "
                       "name the runs (runs/NAME, see `morfic store ls --kind checkpoint`) and the export finds the "
-                      "evals and diagnoses made from them, e.g. `morfic store export runs/film-s0 --results-only "
+                      "evals and diagnoses made from them, e.g. `morfic store export runs/film-cpu-s0 --results-only "
                       "--out bundles/`.")
 
 

@@ -137,8 +137,8 @@ def bundle_name(refs: list[str]) -> str:
     """The file name ``morfic store export --out DIR`` gives the tar of ``refs`` when no ``--name`` is given.
 
     One ref: its last part (``runs/film-cpu-s0`` -> ``film-cpu-s0.tar``). Several: the last parts of the sorted
-    refs joined by ``+`` (``runs/film-s0 runs/film-s1`` -> ``film-s0+film-s1.tar``); more than
-    :data:`MAX_NAMED_REFS`: the first one and how many more (``film-s0+4-more.tar``).
+    refs joined by ``+`` (``runs/film-cpu-s0 runs/film-cpu-s1`` -> ``film-cpu-s0+film-cpu-s1.tar``); more than
+    :data:`MAX_NAMED_REFS`: the first one and how many more (``film-cpu-s0+4-more.tar``).
     """
     parts = [name.rsplit("/", 1)[-1] for name in sorted(set(refs))]
     if len(parts) > MAX_NAMED_REFS:
@@ -205,7 +205,7 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
                 raise StoreError(f"{out}: {parent} is a file, so the tar cannot be written there.")
             break
     if not names:
-        raise StoreError("name at least one ref to export, e.g. `morfic store export runs/film-s0 --out bundles/`.")
+        raise StoreError("name at least one ref to export, e.g. `morfic store export runs/film-cpu-s0 --out bundles/`.")
     for name in names:
         if not store.refs.exists(check_ref_name(name)):
             raise ArtifactNotFoundError(f"no ref '{name}' in store {store.root}; try `morfic store ls`.")

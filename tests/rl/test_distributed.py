@@ -55,8 +55,8 @@ def test_torchrun_world_size_1_trains_and_rank_0_writes_the_checkpoint(tmp_path)
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     result = json.loads(proc.stdout)
-    assert result["iteration"] == 1 and result["ref"] == "runs/film-s0@1"
-    assert Store(store).read_manifest("runs/film-s0").meta["iteration"] == 1
+    assert result["iteration"] == 1 and result["ref"] == "runs/film-smoke-s0@1"
+    assert Store(store).read_manifest("runs/film-smoke-s0").meta["iteration"] == 1
 
 
 def test_a_gpu_trained_run_evaluates_on_the_cpu_backend():

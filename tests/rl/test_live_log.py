@@ -25,7 +25,7 @@ def test_train_writes_tensorboard_curves_into_the_run_folder(run_cli, tmp_path):
     logs = Path(os.environ["MORFIC_LOG_DIR"])
     code, out, err = run_cli("train", "--preset", "smoke", "--set", "max_iterations=3", "-f", "json")
     assert code == 0, err
-    folder = logs / "film-s0"
+    folder = logs / "film-smoke-s0"
     assert f"live curves (tensorboard) in {folder}" in err  # printed at start
     assert "it 3/3" in err and "nan" not in err and "  ep -  " in err and "reward -" in err  # no episode ended yet
     acc = _scalars(folder)
@@ -34,7 +34,7 @@ def test_train_writes_tensorboard_curves_into_the_run_folder(run_cli, tmp_path):
             "Loss/adaptation_error", "Policy/mean_std", "Perf/total_fps", "Perf/collection_time",
             "Perf/learning_time", "curriculum/vx_max"} <= tags
     # the event file holds the store's curve: same learning rate and action std at each iteration
-    rows = read_curve_csv(Store(os.environ["MORFIC_STORE"]).read_file("runs/film-s0", "curve.csv"))
+    rows = read_curve_csv(Store(os.environ["MORFIC_STORE"]).read_file("runs/film-smoke-s0", "curve.csv"))
     lr = acc.Scalars("Loss/learning_rate")
     assert [e.step for e in lr] == [0, 1, 2]
     assert [e.value for e in lr] == pytest.approx([r["learning_rate"] for r in rows], rel=1e-6)
@@ -44,7 +44,7 @@ def test_train_writes_tensorboard_curves_into_the_run_folder(run_cli, tmp_path):
     assert [e.value for e in ev] == pytest.approx([r["explained_variance"] for r in rows], rel=1e-5, abs=1e-6)
 
     # a resumed run continues the same folder at the next step
-    code, _, err = run_cli("train", "--resume", "runs/film-s0", "--set", "max_iterations=4", "-q")
+    code, _, err = run_cli("train", "--resume", "runs/film-smoke-s0", "--set", "max_iterations=4", "-q")
     assert code == 0, err
     assert [e.step for e in _scalars(folder).Scalars("Loss/learning_rate")] == [0, 1, 2, 3]
     assert json.loads(out)["iteration"] == 3
@@ -53,7 +53,7 @@ def test_train_writes_tensorboard_curves_into_the_run_folder(run_cli, tmp_path):
 def test_logger_none_writes_no_folder(run_cli):
     code, _, err = run_cli("train", "--preset", "smoke", "--set", "max_iterations=1", "--logger", "none", "-q")
     assert code == 0, err
-    assert not (Path(os.environ["MORFIC_LOG_DIR"]) / "film-s0").exists()
+    assert not (Path(os.environ["MORFIC_LOG_DIR"]) / "film-smoke-s0").exists()
 
 
 def test_bad_logger_input_is_an_error_line(run_cli, tmp_path):
@@ -62,4 +62,4 @@ def test_bad_logger_input_is_an_error_line(run_cli, tmp_path):
     (tmp_path / "afile").write_text("x")
     code, _, err = run_cli("train", "--preset", "smoke", "--log-dir", str(tmp_path / "afile"))
     assert code == 1 and err.startswith("Error: ") and "is a file" in err
-    assert not Store(os.environ["MORFIC_STORE"]).has_ref("runs/film-s0")
+    assert not Store(os.environ["MORFIC_STORE"]).has_ref("runs/film-smoke-s0")

@@ -39,20 +39,20 @@ def test_smoke_training_of_every_variant_through_the_cli(run_cli, variant):
     code, out, err = run_cli("train", "--variant", variant, "--preset", "smoke", "--format", "json", "--quiet")
     assert code == 0, err
     result = json.loads(out)
-    assert result["ref"] == f"runs/{variant}-s0@2"  # save_interval 1: one checkpoint per iteration
+    assert result["ref"] == f"runs/{variant}-smoke-s0@2"  # save_interval 1: one checkpoint per iteration
     assert result["iteration"] == 2 and result["env_steps"] == 2 * 8 * 8
     store = _store()
-    manifest = store.read_manifest(f"runs/{variant}-s0")
+    manifest = store.read_manifest(f"runs/{variant}-smoke-s0")
     assert manifest.kind == "checkpoint"
     assert manifest.meta["variant"] == variant and manifest.meta["iteration"] == 2 and manifest.meta["finished"]
     assert manifest.config["variant"] == variant and manifest.config["preset"] == "smoke"
-    assert [e.id for e in store.ref_history(f"runs/{variant}-s0")][-1] == manifest.id
-    assert len(store.ref_history(f"runs/{variant}-s0")) == 2
+    assert [e.id for e in store.ref_history(f"runs/{variant}-smoke-s0")][-1] == manifest.id
+    assert len(store.ref_history(f"runs/{variant}-smoke-s0")) == 2
     rows = read_curve_csv(store.read_file(manifest.id, "curve.csv"))
     assert [r["iteration"] for r in rows] == [1, 2]
     assert {"explained_variance", "value_loss", "kl", "clip_fraction", "adaptation_error"} <= set(rows[0])
     assert store.read_file(manifest.id, "curve.png")[:8] == b"\x89PNG\r\n\x1a\n"
-    trained = load_trained(store, f"runs/{variant}-s0")
+    trained = load_trained(store, f"runs/{variant}-smoke-s0")
     with torch.no_grad():
         assert trained.actor(dummy_observations(trained.cfg, 3)).shape == (3, 12)
         assert trained.critic(dummy_observations(trained.cfg, 3)).shape == (3, 1)
@@ -88,10 +88,11 @@ def test_resume_after_interruption_equals_an_uninterrupted_run():
 
 def test_resume_extends_a_finished_run_with_set(run_cli):
     assert run_cli("train", "--preset", "smoke", "--set", "max_iterations=1", "-q")[0] == 0
-    code, out, err = run_cli("train", "--resume", "runs/film-s0", "--set", "max_iterations=2", "-f", "json", "-q")
+    code, out, err = run_cli("train", "--resume", "runs/film-smoke-s0", "--set", "max_iterations=2", "-f", "json", "-q")
     assert code == 0, err
     assert json.loads(out)["iteration"] == 2
-    assert _store().read_manifest("runs/film-s0").meta["parent"] == _store().ref_history("runs/film-s0")[0].id
+    history = _store().ref_history("runs/film-smoke-s0")
+    assert _store().read_manifest("runs/film-smoke-s0").meta["parent"] == history[0].id
 
 
 @pytest.mark.parametrize(
@@ -120,10 +121,10 @@ def test_device_cuda_without_cuda_is_an_error(run_cli):
 
 def test_an_existing_run_name_is_not_overwritten(run_cli):
     assert run_cli("train", "--preset", "smoke", "--set", "max_iterations=1", "-q")[0] == 0
-    before = _store().ref_history("runs/film-s0")
+    before = _store().ref_history("runs/film-smoke-s0")
     code, _, err = run_cli("train", "--preset", "smoke", "-q")
-    assert code == 1 and "already exists" in err and "--resume runs/film-s0" in err
-    assert _store().ref_history("runs/film-s0") == before
+    assert code == 1 and "already exists" in err and "--resume runs/film-smoke-s0" in err
+    assert _store().ref_history("runs/film-smoke-s0") == before
 
 
 def test_a_policy_bundle_without_trainer_state_cannot_be_resumed(run_cli, tmp_path):
@@ -155,5 +156,5 @@ def test_sigint_writes_a_checkpoint_and_exits_cleanly(tmp_path):
     assert result["interrupted"] is True and 1 <= result["iteration"] < 500
     store = Store(store_dir)
     assert store.verify().ok
-    assert store.read_manifest("runs/film-s0").meta["interrupted"] is True
-    assert "--resume runs/film-s0" in err
+    assert store.read_manifest("runs/film-smoke-s0").meta["interrupted"] is True
+    assert "--resume runs/film-smoke-s0" in err

@@ -19,7 +19,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 VARIANT = "gated_lab:GatedCritic"
-RUN = "runs/gated_lab.GatedCritic-s0"
+RUN = "runs/gated_lab.GatedCritic-smoke-s0"
 
 
 def morfic(tmp: Path, *args: str, pythonpath: Path | None) -> subprocess.CompletedProcess:
@@ -102,4 +102,4 @@ def test_a_module_without_the_class_is_an_error(trained):
     tmp, mods, _ = trained
     proc = morfic(tmp, "train", "--variant", "gated_lab:NoSuchCritic", "--preset", "smoke", pythonpath=mods)
     assert proc.returncode == 1 and "has no 'NoSuchCritic'" in proc.stderr
-    assert not (tmp / "store" / "refs" / "runs" / "gated_lab.NoSuchCritic-s0").exists()
+    assert not (tmp / "store" / "refs" / "runs" / "gated_lab.NoSuchCritic-smoke-s0").exists()

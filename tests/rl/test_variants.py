@@ -20,10 +20,10 @@ def test_the_registry_holds_the_papers_seven_in_table_order():
 
 
 def test_run_names_follow_one_rule():
-    assert run_name("film", 0) == "film-s0"
+    assert run_name("film", 0, "smoke") == "film-smoke-s0"
     assert run_name("film", 2, "cpu") == "film-cpu-s2"
-    assert run_name("my_lab.critics:GatedCritic", 1) == "my_lab.critics.GatedCritic-s1"
-    assert run_of("runs/film-s0@3") == run_of("film-s0") == "film-s0"
+    assert run_name("my_lab.critics:GatedCritic", 1, "smoke") == "my_lab.critics.GatedCritic-smoke-s1"
+    assert run_of("runs/film-s0@3") == run_of("film-s0") == "film-s0"  # names of an earlier morfic still read
     assert run_of("abcdef12", {"run": "ppo-s1"}) == "ppo-s1"
 
 
