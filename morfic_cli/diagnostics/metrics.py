@@ -30,16 +30,23 @@ SIGMA_EPS = 1e-8
 def explained_variance(G: torch.Tensor, V: torch.Tensor) -> float:
     """EV = 1 - Var(G - V) / Var(G) (the paper's Metrics paragraph); NaN when Var(G) = 0.
 
-    The same function as the training-time EV of :func:`morfic_cli.rl.ppo.explained_variance`, here on Monte-Carlo
-    returns instead of GAE returns.
+    1 is a perfect critic, 0 is no better than predicting the mean of G, below 0 is worse than that. The one EV of
+    morfic: the diagnostics use it on Monte-Carlo returns, training (:mod:`morfic_cli.rl.ppo`) on the rollout's raw
+    GAE returns.
 
     Args:
-        G: Returns. Shape: (n,).
-        V: Values of the same samples. Shape: (n,).
-    """
-    from morfic_cli.rl.ppo import explained_variance as ev
+        G: Returns. Shape: (n,) (any shape is flattened, e.g. (T, N, 1)).
+        V: Values of the same samples. Same shape.
 
-    return ev(G, V)
+    Returns:
+        EV as a float (in float64); NaN when Var(G) = 0 (undefined).
+    """
+    g = G.detach().flatten().double()
+    v = V.detach().flatten().double()
+    var_g = torch.var(g, correction=0)
+    if var_g == 0:
+        return float("nan")
+    return float(1.0 - torch.var(g - v, correction=0) / var_g)
 
 
 def _sigma(G: torch.Tensor) -> torch.Tensor:

@@ -42,6 +42,8 @@ from foxglove_schemas_protobuf.SpherePrimitive_pb2 import SpherePrimitive
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
 
+from morfic_cli.quaternion import quat_conj_mul, quat_rotate_inverse
+
 ROOT_FRAME = "world"
 """The frame every env's tree hangs from (Foxglove's display frame)."""
 
@@ -70,21 +72,6 @@ def env_frame(env: int, body: str) -> str:
 def timestamp(ns: int) -> Timestamp:
     """A protobuf Timestamp of ``ns`` nanoseconds."""
     return Timestamp(seconds=ns // 1_000_000_000, nanos=ns % 1_000_000_000)
-
-
-def quat_conj_mul(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
-    """conj(qa) * qb for (w, x, y, z) quaternions. Shapes: (..., 4) -> (..., 4)."""
-    aw, ax, ay, az = qa[..., 0], -qa[..., 1], -qa[..., 2], -qa[..., 3]
-    bw, bx, by, bz = qb[..., 0], qb[..., 1], qb[..., 2], qb[..., 3]
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                    aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
-
-
-def rotate_inverse(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """R(q)^T v for (w, x, y, z) quaternions. Shapes: (..., 4), (..., 3) -> (..., 3)."""
-    w, u = q[..., :1], -q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
 
 
 def _name(model: mujoco.MjModel, obj: mujoco.mjtObj, i: int, prefix: str) -> str:
@@ -162,7 +149,7 @@ class RolloutScene:
     def _transforms(self, bodies: np.ndarray, xpos: np.ndarray, xquat: np.ndarray, stamp: Timestamp) -> list:
         """Parent-relative FrameTransforms of ``bodies`` of every scene env."""
         p = self.parent[bodies]
-        rel_pos = rotate_inverse(xquat[:, p], xpos[:, bodies] - xpos[:, p])  # (E, B, 3)
+        rel_pos = quat_rotate_inverse(xquat[:, p], xpos[:, bodies] - xpos[:, p])  # (E, B, 3)
         rel_quat = quat_conj_mul(xquat[:, p], xquat[:, bodies])  # (E, B, 4)
         key = tuple(bodies.tolist())
         if key not in self._names:  # (parent, child) frame ids per env

@@ -33,6 +33,7 @@ from rsl_rl.storage import RolloutStorage
 from rsl_rl.utils import reduce_gradients_in_buckets, resolve_optimizer
 from tensordict import TensorDict
 
+from morfic_cli.diagnostics.metrics import explained_variance  # the one EV; imported here for the training loss
 from morfic_cli.rl.models import MorficActor, MorficCritic, link_morphology_encoder
 from morfic_cli.rl.precision import bf16_matmul, cpu_bf16_kernels, matmul_region
 from morfic_cli.rl.rsl_rl_patches import raw_models, tapped_mini_batches
@@ -67,27 +68,6 @@ def algorithm_cfg() -> dict:
         "adaptation_loss_coef": 1.0,
         "adaptation_learning_rate": None,
     }
-
-
-def explained_variance(returns: torch.Tensor, values: torch.Tensor) -> float:
-    """Explained variance of the value predictions, ``EV = 1 - Var(R - V) / Var(R)``.
-
-    1 is a perfect critic, 0 is no better than predicting the batch mean of R, below 0 is worse than that. Uses the
-    raw (un-normalised) returns; ``R - V`` is the raw GAE advantage.
-
-    Args:
-        returns: GAE returns R. Any shape, e.g. (T, N, 1).
-        values: Value predictions V for the same samples. Same shape.
-
-    Returns:
-        EV as a float; NaN when Var(R) = 0 (undefined).
-    """
-    r = returns.detach().flatten().double()
-    v = values.detach().flatten().double()
-    var_r = torch.var(r, correction=0)
-    if var_r == 0:
-        return float("nan")
-    return float(1.0 - torch.var(r - v, correction=0) / var_r)
 
 
 class _UpdateStats:
