@@ -55,7 +55,7 @@ class Column:
 
 #: Keys of columns a user copies into the next command; never cut (``Column.whole``).
 WHOLE_KEYS = frozenset({"ref", "id", "run", "name", "robot", "mode", "variant", "critic", "preset", "kind",
-                        "file", "path", "version"})
+                        "file", "path", "version", "bundle"})
 
 
 def _cell(value: Any, col: Column) -> str:

@@ -11,7 +11,7 @@ from rich.markup import escape
 
 from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, StoreOpt
 from morfic_cli.cli._render import Column, emit_object, emit_rows, err_console, info
-from morfic_cli.errors import StoreError
+from morfic_cli.errors import MorficError, StoreError
 from morfic_cli.store import MANIFEST_KINDS, Store
 from morfic_cli.store.transfer import export_path
 from morfic_cli.validation import check_args
@@ -239,19 +239,43 @@ def export(
 
 @app.command("import")
 def import_(
-    path: Annotated[Path, typer.Argument(help="Tar file made by `morfic store export`.")],
+    paths: Annotated[list[Path], typer.Argument(help="Tar files made by `morfic store export`, one or more.")],
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Import an export tar (rehashes every object; safe to run twice).
+    """Import export tars, one after the other (rehashes every object; safe to run twice).
 
-    Example: morfic store import film.tar --store artifacts
+    Prints a row per ref of each tar (bundle, ref, status) and, on stderr, a line per tar. A tar that cannot be
+    imported gets its own `Error:` line and leaves the store as it was; the others are imported all the same,
+    and the command exits 1 at the end.
+
+    Example: morfic store import artifacts/bundles/*.tar --store artifacts
     """
-    report = Store(store).import_tar(path)
-    rows = [{"ref": name, "status": status} for name, status in report.refs.items()]
-    _emit(rows, fmt, [Column("ref"), Column("status")], title=f"refs imported from {path.name}")
-    repaired = f", {report.objects_repaired} corrupt here and repaired" if report.objects_repaired else ""
-    left_out = f"; {_left_out(report.omitted, report.omitted_files)}" if report.omitted or report.omitted_files else ""
-    filled = f"; {len(report.filled)} left-out object(s) filled in" if report.filled else ""
-    info(f"imported {report.objects_added} new object(s) ({report.objects_present} already present{repaired}), "
-         f"{len(rows)} ref(s) into {escape(str(store))}{left_out}{filled}")
+    import os
+
+    st = Store(store)
+    rows: list[dict[str, Any]] = []
+    failed: list[str] = []
+    for path in paths:
+        try:
+            report = st.import_tar(path)
+        except MorficError as exc:
+            if len(paths) == 1 or os.environ.get("MORFIC_DEBUG", "") not in ("", "0"):
+                raise
+            err_console.print(f"Error: {exc}", markup=False, highlight=False, soft_wrap=True)
+            failed.append(path.name)
+            continue
+        rows += [{"bundle": path.name, "ref": name, "status": status} for name, status in report.refs.items()]
+        repaired = f", {report.objects_repaired} corrupt here and repaired" if report.objects_repaired else ""
+        left_out = (f"; {_left_out(report.omitted, report.omitted_files)}"
+                    if report.omitted or report.omitted_files else "")
+        filled = f"; {len(report.filled)} left-out object(s) filled in" if report.filled else ""
+        info(f"{escape(path.name)}: imported {report.objects_added} new object(s) ({report.objects_present} already "
+             f"present{repaired}), {len(report.refs)} ref(s) into {escape(str(store))}{left_out}{filled}")
+    if rows or not failed:
+        title = f"refs imported from {paths[0].name}" if len(paths) == 1 else f"refs imported from {len(paths)} tars"
+        _emit(rows, fmt, [Column("bundle"), Column("ref"), Column("status")], title=title)
+    if failed:
+        done = f"; the other {len(paths) - len(failed)} were imported" if len(failed) < len(paths) else ""
+        raise StoreError(f"{len(failed)} of {len(paths)} tar(s) not imported ({', '.join(failed)}; why above){done}. "
+                         "Fix or replace those and import them again (importing a tar twice is safe).")

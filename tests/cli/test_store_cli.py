@@ -119,9 +119,9 @@ def test_export_import_round_trip(filled, tmp_path):
                                          "omitted_files": []} and len(objects) == 6
     dst = tmp_path / "dst"
     rows = json.loads(_invoke("import", str(tar), "--store", str(dst), "-f", "json").stdout)
-    assert rows == [{"ref": "runs/film-s0", "status": "created"}]
+    assert rows == [{"bundle": "film-s0.tar", "ref": "runs/film-s0", "status": "created"}]
     rows = json.loads(_invoke("import", str(tar), "--store", str(dst), "-f", "json").stdout)
-    assert rows == [{"ref": "runs/film-s0", "status": "unchanged"}]
+    assert rows == [{"bundle": "film-s0.tar", "ref": "runs/film-s0", "status": "unchanged"}]
     assert Store(dst).resolve("runs/film-s0@1") == filled["old"]
 
 
@@ -208,6 +208,33 @@ def test_disk_full_during_import_is_error_and_store_consistent(run_cli, filled, 
     assert Store(dst).list_refs() == [] and Store(dst).verify().ok
     assert run_cli("store", "import", str(out), "--store", str(dst))[0] == 0
     assert Store(dst).resolve("runs/film-s0") == filled["new"]
+
+
+def test_import_of_several_tars_imports_each_and_names_the_bad_one(run_cli, filled, store, tmp_path):
+    out = tmp_path / "tars"
+    for ref in ("runs/film-s0", "runs/film-s1"):
+        if ref == "runs/film-s1":
+            store.set_ref(ref, filled["ckpt"])
+        assert run_cli("store", "export", ref, "--out", str(out))[0] == 0
+    bad = out / "bad.tar"
+    bad.write_bytes((out / "film-s1.tar").read_bytes()[:700])  # truncated
+    dst = tmp_path / "dst"
+    code, stdout, err = run_cli("store", "import", str(out / "film-s0.tar"), str(bad), str(out / "film-s1.tar"),
+                                "--store", str(dst), "-f", "json")
+    assert code == 1
+    assert json.loads(stdout) == [{"bundle": "film-s0.tar", "ref": "runs/film-s0", "status": "created"},
+                                  {"bundle": "film-s1.tar", "ref": "runs/film-s1", "status": "created"}]
+    lines = err.splitlines()
+    assert lines[0].startswith("film-s0.tar: imported ") and "1 ref(s)" in lines[0]
+    assert lines[1].startswith("Error: ") and "bad.tar" in lines[1] and "nothing was imported" in lines[1]
+    assert lines[2].startswith("film-s1.tar: imported ")
+    assert lines[3].startswith("Error: 1 of 3 tar(s) not imported (bad.tar; why above); the other 2 were imported")
+    dst_store = Store(dst)
+    assert dst_store.resolve("runs/film-s0") == filled["new"] and dst_store.resolve("runs/film-s1") == filled["ckpt"]
+    assert sorted(dst_store.list_refs()) == ["runs/film-s0", "runs/film-s1"] and dst_store.verify().ok
+    code, stdout, err = run_cli("store", "import", str(out / "film-s0.tar"), str(out / "film-s1.tar"),
+                                "--store", str(dst), "-f", "json")  # again: nothing new, exit 0
+    assert code == 0 and [r["status"] for r in json.loads(stdout)] == ["unchanged", "unchanged"]
 
 
 def test_import_of_a_non_export_is_error(run_cli, tmp_path):
