@@ -249,10 +249,13 @@ class CurveLogger(Logger):
 
             extras = {key: sum(float(e[key]) for e in self.ep_extras if key in e)
                       / sum(1 for e in self.ep_extras if key in e) for key in keys}
+            # before the first episode ends: the mean return and length so far of the episodes under way
+            reward = (sum(self.rewbuffer) / len(self.rewbuffer) if self.rewbuffer
+                      else float(self.cur_reward_sum.float().mean()))
+            length = (sum(self.lenbuffer) / len(self.lenbuffer) if self.lenbuffer
+                      else float(self.cur_episode_length.float().mean()))
             write_iteration(self.live, it, size, collect_time, learn_time, {k: float(v) for k, v in loss_dict.items()},
-                            learning_rate, float(action_std.detach().mean()), extras,
-                            sum(self.rewbuffer) / len(self.rewbuffer) if self.rewbuffer else None,
-                            sum(self.lenbuffer) / len(self.lenbuffer) if self.lenbuffer else None)
+                            learning_rate, float(action_std.detach().mean()), extras, reward, length)
         self.ep_extras.clear()
         self.on_iteration(row)
 
