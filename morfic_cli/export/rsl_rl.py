@@ -6,10 +6,11 @@ the algorithm's ``load``. morfic's store keeps ``model.pt`` as ``{"actor": ..., 
 optimiser in the trainer state (:mod:`morfic_cli.rl.trainer_state`), so this module joins them into rsl-rl's
 layout. The files of the export:
 
-- ``model_<iteration>.pt``: rsl-rl's checkpoint dict (plus ``adaptation_optimizer_state_dict``, which
-  :class:`~morfic_cli.rl.ppo.MorficPPO` loads). A checkpoint without a trainer state (a weights-only policy
+- ``model_<iteration>.pt``: rsl-rl's checkpoint dict (plus, from a trainer state, ``adaptation_optimizer_state_dict``,
+  which :class:`~morfic_cli.rl.ppo.MorficPPO` loads). A checkpoint without a trainer state (a weights-only policy
   bundle, old or made by ``store export --without-trainer-state``) gets the state of a fresh, never-stepped
-  optimiser of the config's type and learning rate, and ``infos["optimizer"] == "fresh"``; otherwise ``"trained"``.
+  optimiser of the config's type and learning rate, no ``adaptation_optimizer_state_dict``, and
+  ``infos["optimizer"] == "fresh"``; otherwise ``"trained"``.
 - ``agent.json``: the runner config ``OnPolicyRunner(env, train_cfg)`` takes (:func:`~morfic_cli.rl.runner.rsl_rl_cfg`);
   its ``class_name`` entries name morfic's classes, so morfic must be installed to load it.
 - ``train.json``: morfic's full :class:`~morfic_cli.rl.config.TrainCfg` (env config included), to rebuild the env.

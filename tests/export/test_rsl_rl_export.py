@@ -60,6 +60,9 @@ def test_rsl_rl_loads_a_trained_checkpoint_with_its_optimizer(run_cli, smoke_sto
     result = json.loads(stdout)
     assert result["ref"] == "exports/film-s0/rsl-rl@1" and result["optimizer"] == "trained"
     assert sorted(p.name for p in out.iterdir()) == ["agent.json", "model_2.pt", "train.json"]
+    assert sorted(torch.load(out / "model_2.pt", weights_only=False)) == [
+        "actor_state_dict", "adaptation_optimizer_state_dict", "critic_state_dict", "infos", "iter",
+        "optimizer_state_dict"]  # with a trainer state: the adaptation module's optimiser too (docs/deploy.md)
     runner, env, infos = _rsl_rl_runner(out)
     assert runner.current_learning_iteration == 2
     assert infos["morfic_checkpoint"] == load_trained(smoke_store, "runs/film-s0").checkpoint_id
@@ -82,6 +85,10 @@ def test_rsl_rl_loads_the_shipped_weights_only_bundle(run_cli, tmp_path):
                                 str(other), "-f", "json")
     assert code == 0, err
     assert json.loads(stdout)["optimizer"] == "fresh" and "optimizer state: fresh" in err
+    (model,) = out.glob("model_*.pt")
+    assert sorted(torch.load(model, weights_only=False)) == [
+        "actor_state_dict", "critic_state_dict", "infos", "iter", "optimizer_state_dict"]  # weights only: no
+    # adaptation_optimizer_state_dict (docs/deploy.md)
     runner, env, infos = _rsl_rl_runner(out)
     assert infos["optimizer"] == "fresh" and runner.current_learning_iteration == 1000
     _same_actions(runner, env, Store(other), "runs/film-cpu")
