@@ -108,8 +108,8 @@ def test_a_smoke_run_under_its_training_conditions_reproduces_its_training_episo
     code, _, err = run_cli("train", "--variant", variant, "--preset", "smoke", "--set", "env.episode_length_s=0.2",
                            "--set", "init_at_random_ep_len=false", "--quiet")
     assert code == 0, err
-    code, out, err = run_cli("eval", f"runs/{variant}-s0", "--training-conditions", "--envs", "8", "--format", "json",
-                             "--quiet")
+    code, out, err = run_cli("eval", f"runs/{variant}-smoke-s0", "--training-conditions", "--envs", "8",
+                             "--format", "json", "--quiet")
     assert code == 0, err
     rows = json.loads(out)
     assert [r["conditions"] for r in rows] == [c.name for c in ladder("go2", 1.0)]
@@ -122,8 +122,8 @@ def test_a_smoke_run_under_its_training_conditions_reproduces_its_training_episo
     from morfic_cli.store import Store
 
     store = Store(os.environ["MORFIC_STORE"])
-    manifest = store.read_manifest(f"checks/training-conditions/{variant}-s0")
-    assert manifest.inputs == {"checkpoint": store.read_manifest(f"runs/{variant}-s0").id}
+    manifest = store.read_manifest(f"checks/training-conditions/{variant}-smoke-s0")
+    assert manifest.inputs == {"checkpoint": store.read_manifest(f"runs/{variant}-smoke-s0").id}
 
 
 def test_training_conditions_bad_input(run_cli):
