@@ -5,6 +5,11 @@ carries its own morphology: in ``train`` mode an 11-D descriptor is sampled from
 training support at every reset and applied to the Go2 template; in ``descriptor`` mode every env
 is the Go2 template with one target's descriptor (the paper's zero-shot protocol); in ``full``
 mode every env is the target's own generated model. See docs/concepts.md ("The environment").
+
+Every buffer, random draw and log value lives on the backend's device (``backend.device``: the CPU for the CPU
+backend, the GPU or warp's CPU device for the warp backend), so a step on the GPU keeps its tensors there. The step
+reads device data back only through :mod:`morfic_cli.sim.sync` (how many envs reset, resample or re-randomise);
+log values are 0-d tensors that the runner reads once per iteration (docs/gpu.md, "Device-resident step").
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from morfic_cli.errors import MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.morphology.descriptor import TRAIN_MAX, TRAIN_MIN, as_descriptor
 from morfic_cli.morphology.robots import RobotSpec, load_robot
+from morfic_cli.sim import sync
 from morfic_cli.sim.args import NUM_JOINTS
 from morfic_cli.sim.backend import SimFrame, SimParams
 from morfic_cli.sim.factory import make_backend
@@ -85,13 +91,13 @@ class LocomotionEnv(VecEnv):
         self.spec: RobotSpec = self.target if mode == "full" else load_robot(TEMPLATE)
         self.num_envs = cfg.num_envs
         self.num_actions = NUM_JOINTS
-        self.device = torch.device(cfg.sim.device)
         self.dt = cfg.sim.physics_dt * cfg.decimation
         self.max_episode_length = int(math.ceil(cfg.episode_length_s / self.dt))
-        self.gen = torch.Generator().manual_seed(seed)
         self.backend = make_backend(cfg.sim, self.spec, self.num_envs, template=mode != "full")
-        self._support_lo = torch.as_tensor(TRAIN_MIN, dtype=torch.float32)
-        self._support_hi = torch.as_tensor(TRAIN_MAX, dtype=torch.float32)
+        self.device = torch.device(self.backend.device)
+        self.gen = torch.Generator(device=self.device).manual_seed(seed)
+        self._support_lo = torch.as_tensor(TRAIN_MIN, dtype=torch.float32, device=self.device)
+        self._support_hi = torch.as_tensor(TRAIN_MAX, dtype=torch.float32, device=self.device)
         self._alloc_buffers()
         if mode == "descriptor" and per_env is None:
             desc = torch.as_tensor(as_descriptor(self.target.descriptor), dtype=torch.float64)
@@ -107,17 +113,18 @@ class LocomotionEnv(VecEnv):
 
     # ------------------------------------------------------------------ buffers
     def _alloc_buffers(self) -> None:
-        n, h = self.num_envs, O.history_frames(self.cfg.obs)
-        f32 = {"dtype": torch.float32}
-        self._all_ids = torch.arange(n)
-        self.episode_length_buf = torch.zeros(n, dtype=torch.long)
+        n, h, dev = self.num_envs, O.history_frames(self.cfg.obs), self.device
+        f32 = {"dtype": torch.float32, "device": dev}
+        self._all_ids = torch.arange(n, device=dev)
+        self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=dev)
         self.common_step_counter = 0
         self.actions = torch.zeros(n, NUM_JOINTS, **f32)
         self.action_prev = torch.zeros(n, NUM_JOINTS, **f32)
         self.action_buffer = torch.zeros(n, self.cfg.rand.max_latency_steps + 1, NUM_JOINTS, **f32)
-        self.latency = torch.zeros(n, dtype=torch.long)
+        self.latency = torch.zeros(n, dtype=torch.long, device=dev)
         self.commands = torch.zeros(n, 3, **f32)
         self.command_ranges = CommandRanges.initial(self.cfg.commands)
+        self.command_ranges.vx = torch.tensor(self.command_ranges.vx, dtype=torch.float64, device=dev)
         self.gait_phase = torch.zeros(n, **f32)
         self.gait_frequency = torch.full((n,), self.cfg.gait.frequency, **f32)
         self.joint_vel_prev = torch.zeros(n, NUM_JOINTS, **f32)
@@ -127,13 +134,19 @@ class LocomotionEnv(VecEnv):
         self.obs_buf = torch.zeros(n, O.POLICY_DIM, **f32)
         self.episode_sums: dict[str, torch.Tensor] = {}
         self.episode_lin_tracking = torch.zeros(n, **f32)
-        self.nonfinite_resets = 0
-        self._tracking_sum, self._tracking_count = 0.0, 0
+        self._nonfinite = torch.zeros((), dtype=torch.long, device=dev)
+        self._tracking_sum = torch.zeros((), dtype=torch.float64, device=dev)
+        self._tracking_count = 0
         self.last_state: EnvState | None = None
         self.last_reward_terms: dict[str, torch.Tensor] = {}
         hip_xy = torch.as_tensor(self.spec.hip_pos[:, :2] + self.spec.thigh_offset[:, :2], **f32)
         self.nominal_foot_pos_b = hip_xy.expand(n, 4, 2).clone()
-        self._obs = TensorDict({}, batch_size=[n])
+        self._obs = TensorDict({}, batch_size=[n], device=dev)
+
+    @property
+    def nonfinite_resets(self) -> int:
+        """Envs reset because their state became non-finite, since the start (a host read; not in the step)."""
+        return int(self._nonfinite)
 
     # ------------------------------------------------------------------ VecEnv
     def get_observations(self) -> TensorDict:
@@ -147,9 +160,11 @@ class LocomotionEnv(VecEnv):
             actions: a_t. Shape: (N, 12).
 
         Returns:
-            observations, rewards (N,), dones (N,), extras with ``time_outs`` (N,) and ``log``.
+            observations, rewards (N,), dones (N,), extras with ``time_outs`` (N,) and ``log`` (name -> 0-d tensor
+            on the env's device), all on the env's device.
         """
-        a = torch.clamp(actions.detach().to(torch.float32).cpu(), -self.cfg.action_clip, self.cfg.action_clip)
+        a = torch.clamp(actions.detach().to(device=self.device, dtype=torch.float32), -self.cfg.action_clip,
+                        self.cfg.action_clip)
         self.action_prev = self.actions
         self.actions = a
         self.action_buffer = torch.cat([a[:, None], self.action_buffer[:, :-1]], dim=1)
@@ -165,26 +180,25 @@ class LocomotionEnv(VecEnv):
         self.last_state, self.last_reward_terms = state, terms  # pre-reset view of this step (evaluation logs)
         reward = reward * self.dt
         terminated, term_masks = compute_terminations(state, self.cfg.terminations)
-        bad = frame.bad.cpu()
-        if bad.any():
-            self.nonfinite_resets += int(bad.sum())
-            reward = torch.where(bad, torch.zeros_like(reward), reward)
-            terminated = terminated | bad
+        bad = frame.bad
+        self._nonfinite += bad.sum()
+        reward = torch.where(bad, torch.zeros_like(reward), reward)
+        terminated = terminated | bad
         reward = torch.nan_to_num(reward, nan=0.0, posinf=0.0, neginf=0.0)
         time_outs = (self.episode_length_buf >= self.max_episode_length) & ~terminated
         dones = terminated | time_outs
 
         for name, value in terms.items():
             value = torch.nan_to_num(value) * self.dt
-            self.episode_sums.setdefault(name, torch.zeros(self.num_envs))
+            self.episode_sums.setdefault(name, torch.zeros(self.num_envs, device=self.device))
             self.episode_sums[name] += value
         self.episode_lin_tracking += torch.nan_to_num(raw[TRACKING_TERM])  # unweighted: --set w_lin=0 keeps it
 
-        log: dict[str, float] = {f"/reward/{k}": m * self.dt for k, m in _term_means(terms).items()}
+        log: dict[str, torch.Tensor] = {f"/reward/{k}": m * self.dt for k, m in _term_means(terms).items()}
         log.update({f"/reward_raw/{k}": m for k, m in _term_means(raw).items()})
         vx_err = torch.nan_to_num(state.command[:, 0] - state.base_lin_vel_b[:, 0]).abs()
-        log["/tracking/vx_error"] = float(vx_err.mean())
-        reset_ids = dones.nonzero(as_tuple=False).flatten()
+        log["/tracking/vx_error"] = vx_err.mean()
+        reset_ids = sync.nonzero_ids(dones)
         if len(reset_ids):
             log.update(self._episode_log(reset_ids, time_outs, term_masks, bad))
         self._update_curriculum(log)
@@ -193,17 +207,17 @@ class LocomotionEnv(VecEnv):
             self._reset_envs(reset_ids)
             frame = self.backend.frame()
         self._refresh_observations(frame, reset_ids=reset_ids)
-        self.joint_vel_prev = frame.joint_vel.cpu().float().clone()
-        self.foot_vel_prev = frame.foot_vel_w.cpu().float().clone()
-        log["/env/nonfinite_resets"] = float(self.nonfinite_resets)
-        log["/curriculum/vx_max"] = float(self.command_ranges.vx[1])
+        self.joint_vel_prev = frame.joint_vel.float().clone()
+        self.foot_vel_prev = frame.foot_vel_w.float().clone()
+        log["/env/nonfinite_resets"] = self._nonfinite.double()
+        log["/curriculum/vx_max"] = self.command_ranges.vx[1].clone()
         extras = {"time_outs": time_outs, "log": log}
         return self._obs, reward, dones.to(torch.long), extras
 
     # ------------------------------------------------------------------ internals
     def _state(self, frame: SimFrame) -> EnvState:
         p = self.params
-        f = {k: getattr(frame, k).cpu().float() for k in (
+        f = {k: getattr(frame, k).float() for k in (
             "base_pos_w", "base_quat_w", "base_lin_vel_b", "base_ang_vel_b", "joint_pos", "joint_vel",
             "joint_torque", "foot_pos_w", "foot_vel_w", "foot_force_w", "body_contact_force")}
         phases = foot_phases(self.gait_phase, self.cfg.gait)
@@ -241,7 +255,7 @@ class LocomotionEnv(VecEnv):
     def _reset_envs(self, ids: torch.Tensor) -> None:
         k = len(ids)
         if self.mode == "train":
-            u = torch.rand((k, DESCRIPTOR_DIM), generator=self.gen, dtype=torch.float64)
+            u = torch.rand((k, DESCRIPTOR_DIM), generator=self.gen, dtype=torch.float64, device=self.device)
             lo, hi = self._support_lo.double(), self._support_hi.double()
             self.backend.set_morphology(ids, lo + (hi - lo) * u)
         dyn = sample_dynamics(k, self.cfg.rand, self.gen)
@@ -251,16 +265,18 @@ class LocomotionEnv(VecEnv):
         q = sample_reset_joint_pos(
             p.default_joint_pos[ids].float(), p.joint_range[ids].float(), self.cfg.rand, self.gen
         )
-        yaw = (torch.rand(k, generator=self.gen) * 2.0 - 1.0) * math.pi
-        base_pos = torch.zeros(k, 3)
+        dev = self.device
+        yaw = (torch.rand(k, generator=self.gen, device=dev) * 2.0 - 1.0) * math.pi
+        base_pos = torch.zeros(k, 3, device=dev)
         base_pos[:, 2] = self.spec.init_height
-        self.backend.reset_envs(ids, base_pos, yaw_quat(yaw), torch.zeros(k, 6), q, torch.zeros(k, NUM_JOINTS))
+        self.backend.reset_envs(ids, base_pos, yaw_quat(yaw), torch.zeros(k, 6, device=dev), q,
+                                torch.zeros(k, NUM_JOINTS, device=dev))
         self.latency[ids] = sample_latency(k, self.cfg.rand, self.gen)
         self.action_buffer[ids] = 0.0
         self.actions[ids] = 0.0
         self.action_prev[ids] = 0.0
         self.commands[ids] = sample_commands(k, self.command_ranges, self.cfg.commands, self.gen)
-        self.gait_phase[ids] = torch.rand(k, generator=self.gen)
+        self.gait_phase[ids] = torch.rand(k, generator=self.gen, device=dev)
         self.episode_length_buf[ids] = 0
         self.episode_lin_tracking[ids] = 0.0
         for v in self.episode_sums.values():
@@ -290,6 +306,7 @@ class LocomotionEnv(VecEnv):
                 "morphology": O.morphology_obs(p.descriptor.float(), self._support_lo, self._support_hi),
             },
             batch_size=[self.num_envs],
+            device=self.device,
         )
 
     def _push_and_resample(self) -> None:
@@ -299,7 +316,7 @@ class LocomotionEnv(VecEnv):
             self.backend.push(self._all_ids, sample_push(self.num_envs, rand, self.gen))
         self._rerandomize()
         every = max(1, int(round(self.cfg.commands.resample_time_s / self.dt)))
-        ids = ((self.episode_length_buf % every) == 0).nonzero(as_tuple=False).flatten()
+        ids = sync.nonzero_ids((self.episode_length_buf % every) == 0)
         if len(ids):
             self.commands[ids] = sample_commands(len(ids), self.command_ranges, self.cfg.commands, self.gen)
 
@@ -313,7 +330,7 @@ class LocomotionEnv(VecEnv):
         if not rand.enabled or rand.rerandomize_interval_s <= 0:
             return
         every = max(1, int(round(rand.rerandomize_interval_s / self.dt)))
-        ids = ((self.episode_length_buf % every) == 0).nonzero(as_tuple=False).flatten()
+        ids = sync.nonzero_ids((self.episode_length_buf % every) == 0)
         if len(ids):
             dyn = sample_dynamics(len(ids), rand, self.gen)
             self.backend.set_dynamics(ids, dyn.friction, dyn.restitution, dyn.com_offset, dyn.joint_friction)
@@ -321,30 +338,37 @@ class LocomotionEnv(VecEnv):
 
     def _episode_log(
         self, ids: torch.Tensor, time_outs: torch.Tensor, masks: dict[str, torch.Tensor], bad: torch.Tensor
-    ) -> dict[str, float]:
+    ) -> dict[str, torch.Tensor]:
+        """The log of the episodes that ended this step (0-d tensors on the device; no host read)."""
         length_s = self.episode_length_buf[ids].float().clamp(min=1) * self.dt
-        log = {f"/episode_reward/{k}": float((v[ids] / length_s).mean()) for k, v in self.episode_sums.items()}
-        log["/episode/length_s"] = float(length_s.mean())
+        log = {f"/episode_reward/{k}": (v[ids] / length_s).mean() for k, v in self.episode_sums.items()}
+        log["/episode/length_s"] = length_s.mean()
         for name, mask in masks.items():
-            log[f"/termination/{name}"] = float(mask[ids].float().mean())
-        log["/termination/time_out"] = float(time_outs[ids].float().mean())
-        log["/termination/nonfinite"] = float(bad[ids].float().mean())
+            log[f"/termination/{name}"] = mask[ids].float().mean()
+        log["/termination/time_out"] = time_outs[ids].float().mean()
+        log["/termination/nonfinite"] = bad[ids].float().mean()
         # legged_gym's rule: r_lin summed over the episode / the *maximum* episode length, over every finished
         # episode, so a fall counts as poor tracking. (Averaging over time-outs only let the envs with easy commands,
         # the ones that survive, widen the range long before the policy walked.)
         # Decided once per max episode length (as legged_gym) on every episode that ended in that window.
-        self._tracking_sum += float(self.episode_lin_tracking[ids].sum()) / (4.0 * self.max_episode_length)
+        # float64 on the device: the same arithmetic as a Python float sum of the float32 episode sums
+        self._tracking_sum = (self._tracking_sum
+                              + self.episode_lin_tracking[ids].sum().double() / (4.0 * self.max_episode_length))
         self._tracking_count += len(ids)
         return log
 
-    def _update_curriculum(self, log: dict[str, float]) -> None:
-        """Once per max episode length: widen the vx range if the finished episodes tracked well enough."""
+    def _update_curriculum(self, log: dict[str, torch.Tensor]) -> None:
+        """Once per max episode length: widen the vx range if the finished episodes tracked well enough.
+
+        Decided on the device (:func:`widen_vx` on the tensor range), so no host read.
+        """
         if self.common_step_counter % self.max_episode_length != 0 or self._tracking_count == 0:
             return
         tracking = self._tracking_sum / self._tracking_count
         log["/curriculum/lin_tracking"] = tracking
         widen_vx(self.command_ranges, tracking, self.cfg.commands)
-        self._tracking_sum, self._tracking_count = 0.0, 0
+        self._tracking_sum = torch.zeros_like(self._tracking_sum)
+        self._tracking_count = 0
 
     # ------------------------------------------------------------------ checkpoints
     _TENSORS = (
@@ -356,27 +380,28 @@ class LocomotionEnv(VecEnv):
     def state_dict(self) -> dict:
         """Everything the env needs to continue exactly where it is: buffers, curriculum, generator, physics.
 
-        Per-env morphology and dynamics are stored as parameters and re-applied on load.
+        Per-env morphology and dynamics are stored as parameters and re-applied on load. Tensors are CPU copies
+        whatever the env's device, so a checkpoint loads on a machine without a GPU.
         """
         p = self.params
         return {
             "num_envs": self.num_envs,
             "mode": self.mode,
-            "tensors": {k: getattr(self, k).clone() for k in self._TENSORS},
-            "episode_sums": {k: v.clone() for k, v in self.episode_sums.items()},
-            "obs": {k: v.clone() for k, v in self._obs.items()},
+            "tensors": {k: getattr(self, k).cpu().clone() for k in self._TENSORS},
+            "episode_sums": {k: v.cpu().clone() for k, v in self.episode_sums.items()},
+            "obs": {k: v.cpu().clone() for k, v in self._obs.items()},
             "counters": {
                 "common_step_counter": self.common_step_counter,
                 "nonfinite_resets": self.nonfinite_resets,
-                "tracking_sum": self._tracking_sum,
+                "tracking_sum": float(self._tracking_sum),
                 "tracking_count": self._tracking_count,
             },
-            "command_vx": tuple(self.command_ranges.vx),
+            "command_vx": tuple(float(v) for v in self.command_ranges.vx),
             "generator": self.gen.get_state(),
             "params": {
-                "descriptor": p.descriptor.clone(), "friction": p.friction.clone(),
-                "restitution": p.restitution.clone(), "com_offset": p.com_offset.clone(),
-                "joint_friction": p.joint_friction.clone(),
+                "descriptor": p.descriptor.cpu().clone(), "friction": p.friction.cpu().clone(),
+                "restitution": p.restitution.cpu().clone(), "com_offset": p.com_offset.cpu().clone(),
+                "joint_friction": p.joint_friction.cpu().clone(),
             },
             "backend": self.backend.state_dict(),
         }
@@ -402,27 +427,50 @@ class LocomotionEnv(VecEnv):
         self.backend.load_state_dict(state["backend"])
         for k in self._TENSORS:
             getattr(self, k).copy_(state["tensors"][k])
-        self.episode_sums = {k: v.clone() for k, v in state["episode_sums"].items()}
-        self._obs = TensorDict({k: v.clone() for k, v in state["obs"].items()}, batch_size=[self.num_envs])
+        dev = self.device
+        self.episode_sums = {k: v.to(dev).clone() for k, v in state["episode_sums"].items()}
+        self._obs = TensorDict({k: v.to(dev).clone() for k, v in state["obs"].items()}, batch_size=[self.num_envs],
+                               device=dev)
         c = state["counters"]
-        self.common_step_counter, self.nonfinite_resets = c["common_step_counter"], c["nonfinite_resets"]
-        self._tracking_sum, self._tracking_count = c["tracking_sum"], c["tracking_count"]
-        self.command_ranges.vx = tuple(state["command_vx"])
-        self.gen.set_state(state["generator"])
+        self.common_step_counter = c["common_step_counter"]
+        self._nonfinite = torch.tensor(int(c["nonfinite_resets"]), dtype=torch.long, device=dev)
+        self._tracking_sum = torch.tensor(float(c["tracking_sum"]), dtype=torch.float64, device=dev)
+        self._tracking_count = c["tracking_count"]
+        self.command_ranges.vx = torch.tensor(tuple(state["command_vx"]), dtype=torch.float64, device=dev)
+        _restore_generator(self.gen, state["generator"])
 
     def close(self) -> None:
         """Release the backend."""
         self.backend.close()
 
 
-def _term_means(terms: dict[str, torch.Tensor]) -> dict[str, float]:
-    """Mean over envs of each term (non-finite values as 0), read back to Python in one transfer, not one per term.
+def _term_means(terms: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Mean over envs of each term (non-finite values as 0), as 0-d float64 tensors on the terms' device (no host read).
 
-    Shape: each value (num_envs,).
+    The means are computed in float32 (as they always were) and widened to float64, so that a log value times dt is
+    the same number as the Python float arithmetic gave. Shape: each value (num_envs,) -> ().
     """
     names = list(terms)
     if not names:
         return {}
-    means = torch.nan_to_num(torch.stack([terms[k] for k in names])).mean(dim=1).tolist()
-    return dict(zip(names, means, strict=True))
+    means = torch.nan_to_num(torch.stack([terms[k] for k in names])).mean(dim=1).double()
+    return dict(zip(names, means.unbind(), strict=True))
+
+
+def _restore_generator(gen: torch.Generator, saved: torch.Tensor) -> None:
+    """Restore a generator's state; a state saved on another kind of device reseeds it from that state instead.
+
+    A checkpoint written on the CPU and resumed on a GPU (or the other way) cannot continue the same random stream:
+    the generator is then seeded, deterministically, with a number drawn from the saved one.
+    """
+    try:
+        gen.set_state(saved)
+    except RuntimeError:
+        other = torch.Generator()
+        try:
+            other.set_state(saved)
+        except RuntimeError:
+            other = torch.Generator(device="cuda")
+            other.set_state(saved)
+        gen.manual_seed(int(torch.randint(0, 2**62, (1,), generator=other, device=other.device)))
 

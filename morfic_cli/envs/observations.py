@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import torch
 
 from morfic_cli.config import ObsCfg
@@ -84,15 +86,28 @@ def policy_obs(state: EnvState, cfg: ObsCfg) -> torch.Tensor:
         ],
         dim=1,
     )
-    return torch.clamp(raw * obs_scales(cfg).to(raw), -cfg.clip, cfg.clip)
+    return torch.clamp(raw * _on(obs_scales, cfg, raw), -cfg.clip, cfg.clip)
 
 
 def add_noise(obs: torch.Tensor, cfg: ObsCfg, gen: torch.Generator) -> torch.Tensor:
     """o_t with uniform sensor noise U[-n, n] per element. Shape: (N, 48)."""
     if not cfg.noise:
         return obs
-    u = torch.rand(obs.shape, generator=gen).to(obs) * 2.0 - 1.0
-    return obs + u * noise_scales(cfg).to(obs)
+    u = torch.rand(obs.shape, generator=gen, device=gen.device).to(obs) * 2.0 - 1.0
+    return obs + u * _on(noise_scales, cfg, obs)
+
+
+def _on(make, cfg: ObsCfg, like: torch.Tensor) -> torch.Tensor:
+    """``make(cfg)`` (a per-element scale of o_t) with ``like``'s dtype and device, made once per config and device.
+
+    Shape: (48,).
+    """
+    return _cached(make, cfg, like.dtype, like.device)
+
+
+@lru_cache(maxsize=64)
+def _cached(make, cfg: ObsCfg, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    return make(cfg).to(dtype=dtype, device=device)
 
 
 def privileged_obs(

@@ -1,4 +1,7 @@
-"""Domain randomisation samplers (docs/concepts.md): pure functions of a generator and a config."""
+"""Domain randomisation samplers (docs/concepts.md): pure functions of a generator and a config.
+
+Every sample is drawn on the generator's device (the env's: the CPU, or the GPU the warp backend runs on).
+"""
 
 from __future__ import annotations
 
@@ -26,18 +29,19 @@ class DynamicsSample:
 
 
 def _uniform(shape: tuple[int, ...], lo: float, hi: float, gen: torch.Generator) -> torch.Tensor:
-    return lo + (hi - lo) * torch.rand(shape, generator=gen)
+    return lo + (hi - lo) * torch.rand(shape, generator=gen, device=gen.device)
 
 
-def nominal_dynamics(k: int) -> DynamicsSample:
-    """No randomisation: friction 1, restitution 0, no COM offset, no joint friction."""
-    return DynamicsSample(torch.ones(k), torch.zeros(k), torch.zeros(k, 3), torch.zeros(k, NUM_JOINTS))
+def nominal_dynamics(k: int, device: torch.device | str = "cpu") -> DynamicsSample:
+    """No randomisation: friction 1, restitution 0, no COM offset, no joint friction (on ``device``)."""
+    return DynamicsSample(torch.ones(k, device=device), torch.zeros(k, device=device),
+                          torch.zeros(k, 3, device=device), torch.zeros(k, NUM_JOINTS, device=device))
 
 
 def sample_dynamics(k: int, cfg: DomainRandCfg, gen: torch.Generator) -> DynamicsSample:
     """Sample friction U[0.5, 1.25], restitution, COM offset and joint friction for k envs."""
     if not cfg.enabled:
-        return nominal_dynamics(k)
+        return nominal_dynamics(k, gen.device)
     return DynamicsSample(
         friction=_uniform((k,), *cfg.friction, gen),
         restitution=_uniform((k,), *cfg.restitution, gen),
@@ -49,8 +53,8 @@ def sample_dynamics(k: int, cfg: DomainRandCfg, gen: torch.Generator) -> Dynamic
 def sample_latency(k: int, cfg: DomainRandCfg, gen: torch.Generator) -> torch.Tensor:
     """Action latency per env, uniform in 0..max_latency_steps policy steps. Shape: (k,), int64."""
     if not cfg.enabled or cfg.max_latency_steps <= 0:
-        return torch.zeros(k, dtype=torch.long)
-    return torch.randint(0, cfg.max_latency_steps + 1, (k,), generator=gen)
+        return torch.zeros(k, dtype=torch.long, device=gen.device)
+    return torch.randint(0, cfg.max_latency_steps + 1, (k,), generator=gen, device=gen.device)
 
 
 def sample_push(k: int, cfg: DomainRandCfg, gen: torch.Generator) -> torch.Tensor:

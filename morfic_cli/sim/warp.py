@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import math
 import os
 import sys
 import time
@@ -61,21 +62,20 @@ import numpy as np
 import torch
 
 from morfic_cli.config import SimCfg
-from morfic_cli.errors import MorficError
+from morfic_cli.errors import DescriptorError, MorficError
 from morfic_cli.morphology.apply import (
+    DESCRIPTOR_MASS_INDEX,
     TemplateInfo,
     apply_descriptor,
-    descriptor_fields,
     model_joint_ranges,
-    standing_height,
     summarize,
 )
 from morfic_cli.morphology.builder import build_model
-from morfic_cli.morphology.descriptor import as_descriptor
-from morfic_cli.morphology.robots import LEGS, RobotSpec
-from morfic_cli.sim.args import dynamics_rows, env_index, env_rows
+from morfic_cli.morphology.descriptor import LIMIT_PAIRS, SANE_MAX, SANE_MIN, as_descriptor
+from morfic_cli.morphology.robots import LEGS, LINKS, RobotSpec
+from morfic_cli.sim import sync
 from morfic_cli.sim.backend import CONTACT_BODIES, SimFrame, SimParams
-from morfic_cli.sim.cpu import NUM_JOINTS, SensorLayout, restitution_to_dampratio
+from morfic_cli.sim.cpu import NUM_JOINTS, SensorLayout
 from morfic_cli.sim.floor import STATE_SPEC
 
 PER_WORLD_FIELDS: tuple[str, ...] = (
@@ -191,6 +191,71 @@ def quat_rotate_inverse(quat: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:
     return vec - 2.0 * w * uv + 2.0 * torch.cross(u, uv, dim=1)
 
 
+def _axis_angle(axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
+    """Rotation matrices about unit axes (Rodrigues). Shapes: axis (L, 3), angle (k, L) -> (k, L, 3, 3)."""
+    x, y, z = axis.unbind(-1)
+    zero = torch.zeros_like(x)
+    cross = torch.stack([torch.stack([zero, -z, y], -1), torch.stack([z, zero, -x], -1),
+                         torch.stack([-y, x, zero], -1)], -2)  # (L, 3, 3)
+    s, c = torch.sin(angle)[..., None, None], torch.cos(angle)[..., None, None]
+    eye = torch.eye(3, dtype=axis.dtype, device=axis.device)
+    return eye + s * cross + (1.0 - c) * (cross @ cross)
+
+
+def _leg_chains(model: mujoco.MjModel, info: TemplateInfo, device: torch.device) -> dict[str, Any]:
+    """The four legs' kinematic chains below the base, as float64 device tensors (for ``_standing_height``).
+
+    Returns:
+        ``links``: one entry per depth (every leg has the same depth): ``pos`` (4, 3), ``rot`` (4, 3, 3) of each
+        leg's body at that depth in its parent, and ``joint`` = (axis (4, 3), anchor (4, 3), joint column in the
+        12-joint order (4,), qpos0 (4,)) of its hinge, or None; ``site_pos`` (4, 3), each foot site in its body.
+
+    Raises:
+        MorficError: a leg has another joint type than hinges, a body with two joints, or the legs differ in depth.
+    """
+    def f64(arr: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(np.array(arr, dtype=np.float64), device=device)
+
+    column = {int(adr): i for i, adr in enumerate(info.qpos_adr)}
+    chains = []
+    for site in info.foot_sites:
+        body, chain = int(model.site_bodyid[site]), []
+        while body != info.base_body:
+            chain.append(body)
+            body = int(model.body_parentid[body])
+        chains.append(chain[::-1])
+    if len({len(c) for c in chains}) != 1:
+        raise MorficError("the warp backend needs legs of equal depth below the base.")
+    links = []
+    for depth in range(len(chains[0])):
+        bodies = [c[depth] for c in chains]
+        rots = []
+        for b in bodies:
+            mat = np.zeros(9)
+            mujoco.mju_quat2Mat(mat, model.body_quat[b])
+            rots.append(mat.reshape(3, 3))
+        nj = {int(model.body_jntnum[b]) for b in bodies}
+        joint = None
+        if nj == {1}:
+            js = [int(model.body_jntadr[b]) for b in bodies]
+            if any(model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE for j in js):
+                raise MorficError("the warp backend's leg kinematics supports hinge joints only.")
+            adr = [int(model.jnt_qposadr[j]) for j in js]
+            joint = (f64(model.jnt_axis[js]), f64(model.jnt_pos[js]),
+                     torch.as_tensor([column[a] for a in adr], device=device), f64(model.qpos0[adr]))
+        elif nj != {0}:
+            raise MorficError("the warp backend's leg kinematics supports one hinge per leg body.")
+        links.append({"pos": f64(model.body_pos[bodies]), "rot": f64(np.stack(rots)), "joint": joint})
+    return {"links": links, "site_pos": f64(model.site_pos[info.foot_sites])}
+
+
+def restitution_to_dampratio(e: torch.Tensor) -> torch.Tensor:
+    """:func:`morfic_cli.sim.cpu.restitution_to_dampratio` on tensors (any device). Shape: any -> like ``e``."""
+    safe = torch.where(e > 0, e, torch.ones_like(e))
+    log_e = torch.log(safe)
+    return torch.where(e > 0, -log_e / torch.sqrt(math.pi**2 + log_e**2), torch.ones_like(e))
+
+
 class WarpBackend:
     """Batched quadruped physics on MuJoCo Warp (implements :class:`morfic_cli.sim.backend.SimBackend`).
 
@@ -229,11 +294,10 @@ class WarpBackend:
         if template:
             apply_descriptor(first, self._scratch, robot.descriptor, self.info)
         self.host_model = first
-        self._nominal_ipos = nominal.body_ipos[self.info.base_body].copy()
+        self._nominal_ipos = torch.as_tensor(nominal.body_ipos[self.info.base_body], device=self.device)
         self._nstate = mujoco.mj_stateSize(first, STATE_SPEC)
         if self._nstate != 1 + first.nq + first.nv or first.na:
             raise MorficError("the warp backend supports models whose state is time, qpos and qvel only.")
-        self._height_cache: dict[bytes, float] = {}
         self._init_params(first)
 
         n = self.num_envs
@@ -247,42 +311,73 @@ class WarpBackend:
                 data = mujoco.MjData(first)
                 mujoco.mj_resetDataKeyframe(first, data, first.key("home").id)
                 self.data = mjw.put_data(first, data, nworld=n, nconmax=NCONMAX, njmax=NJMAX)
-        self._views()
-        self._key_qpos = torch.as_tensor(first.key_qpos[first.key("home").id], dtype=torch.float32,
-                                         device=self.device)
         self._qpos_adr = torch.tensor(self.info.qpos_adr, device=self.device)
         self._dof_adr = torch.tensor(self.info.dof_adr, device=self.device)
         self._act_ids = torch.tensor(self.info.actuator_ids, device=self.device)
+        self._key_qpos = torch.as_tensor(first.key_qpos[first.key("home").id], dtype=torch.float32,
+                                         device=self.device)
+        self._views()
+        self._init_template_tensors(nominal)
         self._const_dirty = False
         self._graphs: dict[str, Any] = {}
         self._use_graphs = self.device.type == "cuda" and _graphs_supported(wp, self._wp_device)
         self._bad = torch.zeros(n, dtype=torch.bool, device=self.device)
-        self.bad_states: dict[int, np.ndarray] = {}
+        self._step_bad = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self._before: torch.Tensor | None = None
         self.warnings: list[str] = []
-        all_ids = torch.arange(n, device=self.device)
         with self._on_stream():
-            self._write_home(all_ids)
-            self._refresh(all_ids)
+            everyone = torch.ones(n, dtype=torch.bool, device=self.device)
+            self._write_home(everyone)
+            self._refresh(everyone)
 
     # ------------------------------------------------------------------------------------------
     # set-up
     # ------------------------------------------------------------------------------------------
 
     def _init_params(self, model: mujoco.MjModel) -> None:
-        """Per-env parameters in effect, float64 on the host (the CPU backend's bookkeeping)."""
+        """Per-env parameters in effect, float64 tensors on the device (the CPU backend's bookkeeping, as numbers)."""
         n = self.num_envs
         summary = summarize(model, self._scratch, self.info, self.robot.default_qpos, self.robot.foot_radius)
-        self._descriptor = np.tile(self.robot.descriptor, (n, 1))
-        self._joint_range = np.tile(model_joint_ranges(model, self.info), (n, 1, 1))
-        self._default_qpos = np.tile(summary.default_joint_pos, (n, 1))
-        self._nominal_height = np.full(n, summary.nominal_height)
-        self._total_mass = np.full(n, summary.total_mass)
-        self._base_mass = np.full(n, summary.base_mass)
-        self._torque_limit = np.tile(model.actuator_forcerange[self.info.actuator_ids, 1], (n, 1))
-        self._friction = np.full(n, model.geom_friction[model.geom("floor").id, 0])
-        self._restitution = np.zeros(n)
-        self._com_offset = np.zeros((n, 3))
-        self._joint_friction = np.tile(model.dof_frictionloss[self.info.dof_adr], (n, 1))
+
+        def rows(value: np.ndarray | float, *shape: int) -> torch.Tensor:
+            row = torch.as_tensor(np.asarray(value, dtype=np.float64), device=self.device)
+            return row.expand(n, *shape).clone()
+
+        self._descriptor = rows(self.robot.descriptor, 11)
+        self._joint_range = rows(model_joint_ranges(model, self.info), NUM_JOINTS, 2)
+        self._default_qpos = rows(summary.default_joint_pos, NUM_JOINTS)
+        self._nominal_height = rows(summary.nominal_height)
+        self._total_mass = rows(summary.total_mass)
+        self._base_mass = rows(summary.base_mass)
+        self._torque_limit = rows(model.actuator_forcerange[self.info.actuator_ids, 1], NUM_JOINTS)
+        self._friction = rows(model.geom_friction[model.geom("floor").id, 0])
+        self._restitution = rows(0.0)
+        self._com_offset = rows(np.zeros(3), 3)
+        self._joint_friction = rows(model.dof_frictionloss[self.info.dof_adr], NUM_JOINTS)
+
+    def _init_template_tensors(self, nominal: mujoco.MjModel) -> None:
+        """The template's nominal values and ids as device tensors (what :meth:`set_morphology` computes from)."""
+        info, dev = self.info, self.device
+
+        def t(arr: np.ndarray, dtype: torch.dtype = torch.float64) -> torch.Tensor:
+            return torch.as_tensor(np.array(arr), dtype=dtype, device=dev)
+
+        self._t_body_mass, self._t_body_inertia = t(info.body_mass), t(info.body_inertia)
+        self._t_jnt_range, self._t_ctrlrange = t(info.jnt_range), t(info.ctrlrange)
+        self._t_link_bodies = t(info.link_bodies, torch.long)
+        self._t_changed = t(np.append(info.link_bodies.reshape(-1), info.base_body), torch.long)
+        self._t_joint_ids = t(info.joint_ids.reshape(-1), torch.long)
+        self._t_limit_cols = t(np.array(LIMIT_PAIRS), torch.long)
+        self._t_sane = (t(SANE_MIN), t(SANE_MAX))
+        self._t_robot_q0 = t(self.robot.default_qpos)
+        self._fk = _leg_chains(nominal, info, dev)
+        home = self._key_qpos.expand(self.num_envs, -1).clone()
+        home[:, self._qpos_adr] = self._d_default_qpos
+        self._home_qpos = home
+        """The home state's qpos of every world (default pose, clamped into its limits, at the init height)."""
+        lay = self.layout
+        self._cols = {name: t(getattr(lay, name).reshape(-1), torch.long)
+                      for name in ("torque", "foot_pos", "foot_vel", "foot_force", "body_force")}
 
     def _views(self) -> None:
         """Zero-copy torch views of the warp arrays this backend reads and writes."""
@@ -293,11 +388,8 @@ class WarpBackend:
         self._sensordata = to_torch(d.sensordata)
         self.fields: dict[str, torch.Tensor] = {name: to_torch(getattr(m, name)) for name in PER_WORLD_FIELDS}
         """Per-world model fields as torch views, shape (N, ...) each (read them; change them through this class)."""
-        self._d_default_qpos = self._device_f32(self._default_qpos)
-        self._d_joint_range = self._device_f32(self._joint_range)
-
-    def _device_f32(self, arr: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(np.ascontiguousarray(arr), dtype=torch.float32, device=self.device)
+        self._d_default_qpos = self._default_qpos.float()
+        self._d_joint_range = self._joint_range.float()
 
     @contextlib.contextmanager
     def _on_stream(self) -> Iterator[None]:
@@ -360,25 +452,26 @@ class WarpBackend:
     # per-env bookkeeping
     # ------------------------------------------------------------------------------------------
 
-    def _write_home(self, ids: torch.Tensor) -> None:
-        """Home state (default pose, clamped into the limits, at the init height, at rest, time 0) of some envs."""
-        qpos = self._key_qpos.expand(len(ids), -1).clone()
-        qpos[:, self._qpos_adr] = self._d_default_qpos[ids]
-        self._qpos[ids] = qpos
-        self._qvel[ids] = 0.0
-        self._time[ids] = 0.0
+    def _write_home(self, mask: torch.Tensor) -> None:
+        """Home state (default pose, clamped into the limits, at the init height, at rest, time 0) where ``mask``.
 
-    def _refresh(self, ids: torch.Tensor) -> None:
-        """Recompute the sensors of some envs at their current state with ctrl = default pose (all others kept)."""
-        if len(ids) == 0:
-            return
+        Masked writes over every world: no host read of which worlds, so the call queues the same work whatever
+        the mask holds. Shape of ``mask``: (N,), bool.
+        """
+        self._qpos.copy_(torch.where(mask[:, None], self._home_qpos, self._qpos))
+        self._qvel.masked_fill_(mask[:, None], 0.0)
+        self._time.masked_fill_(mask, 0.0)
+
+    def _refresh(self, mask: torch.Tensor) -> None:
+        """Recompute the sensors where ``mask`` at the current state with ctrl = default pose (all others kept).
+
+        One forward pass of every world; the sensor values are kept only where ``mask``. Shape: (N,), bool.
+        """
         self._set_const()
         keep = self._sensordata.clone()
         ctrl = self._ctrl.clone()
-        self._ctrl[ids[:, None], self._act_ids] = self._d_default_qpos[ids]
+        self._ctrl[:, self._act_ids] = torch.where(mask[:, None], self._d_default_qpos, ctrl[:, self._act_ids])
         self._forward()
-        mask = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        mask[ids] = True
         self._sensordata.copy_(torch.where(mask[:, None], self._sensordata, keep))
         self._ctrl.copy_(ctrl)
 
@@ -386,27 +479,92 @@ class WarpBackend:
         """``mjSTATE_FULLPHYSICS`` of every env: [time, qpos, qvel]. Shape: (N, nstate), float64."""
         return torch.cat([self._time[:, None], self._qpos, self._qvel], dim=1).double()
 
-    def _ids(self, env_ids: torch.Tensor | np.ndarray) -> np.ndarray:
-        return env_index(env_ids, self.num_envs)
+    def _check(self, ok: torch.Tensor, exc: type[Exception], msg: str) -> None:
+        """Raise ``exc(msg)`` unless ``ok`` (a 0-d bool tensor) is true, without a host read on a GPU.
 
-    _rows = staticmethod(env_rows)
+        On the CPU the value is in host memory and checked now. On CUDA the check is queued on the device
+        (``torch._assert_async``): a failure stops the process at a later launch. Only morfic's own callers reach
+        these checks (a user's input is checked in the CLI and the configs), so a failure there is a bug.
+        """
+        if ok.device.type != "cpu":
+            torch._assert_async(ok)
+            return
+        try:
+            torch._assert_async(ok)
+        except RuntimeError:
+            raise exc(msg) from None
 
-    def _device_rows(self, value: torch.Tensor, k: int, shape: tuple[int, ...], what: str) -> torch.Tensor:
+    def _ids(self, env_ids: torch.Tensor | np.ndarray) -> torch.Tensor:
+        """Env ids as an int64 device tensor, checked to be in [0, N). Shape: (k,)."""
+        ids = torch.as_tensor(env_ids, device=self.device).reshape(-1).long()
+        n = self.num_envs
+        self._check(((ids >= 0) & (ids < n)).all(), ValueError, f"env ids must be in [0, {n}).")
+        return ids
+
+    def _device_rows(self, value: torch.Tensor, k: int, shape: tuple[int, ...], what: str,
+                     dtype: torch.dtype = torch.float32, exc: type[Exception] = MorficError) -> torch.Tensor:
+        """``value`` as (k, *shape) rows of ``dtype`` on the device; ``exc`` naming ``what`` for another shape."""
         if tuple(value.shape) != (k, *shape):
-            raise MorficError(f"{what}: expected shape {(k, *shape)}, got {tuple(value.shape)}.")
-        return torch.as_tensor(value, device=self.device).to(torch.float32)
+            raise exc(f"{what}: expected shape {(k, *shape)}, got {tuple(value.shape)}.")
+        return torch.as_tensor(value, device=self.device).to(dtype)
 
-    def _tensor(self, arr: np.ndarray, dtype: torch.dtype = torch.float64) -> torch.Tensor:
-        """A host tensor (the CPU backend's convention): the env computes with :meth:`params` on the CPU."""
-        return torch.as_tensor(np.ascontiguousarray(arr)).to(dtype=dtype)
+    def _rows64(self, value: torch.Tensor, k: int, shape: tuple[int, ...], what: str) -> torch.Tensor:
+        return self._device_rows(torch.as_tensor(value), k, shape, what, torch.float64, ValueError)
 
-    def _nominal_height_of(self, q0: np.ndarray) -> float:
-        """Base height above the feet at pose q0 (kinematics only: geometry is the same in every world)."""
-        key = q0.tobytes()
-        if key not in self._height_cache:
-            self._height_cache[key] = standing_height(self.host_model, self._scratch, self.info, q0,
-                                                      self.robot.foot_radius)
-        return self._height_cache[key]
+    def _standing_height(self, joint_pos: torch.Tensor) -> torch.Tensor:
+        """Base height above the lowest foot bottom, base upright at the origin (m), in float64 on the device.
+
+        :func:`morfic_cli.morphology.apply.standing_height` (``mj_kinematics`` of the legs) as batched forward
+        kinematics of the four leg chains (geometry is the same in every world; only the pose differs).
+
+        Args:
+            joint_pos: Joint angles (rad), model order. Shape: (k, 12).
+
+        Returns:
+            Heights, float64. Shape: (k,).
+        """
+        q = joint_pos.double()
+        k = q.shape[0]
+        rot = torch.eye(3, dtype=torch.float64, device=self.device).expand(k, len(LEGS), 3, 3)
+        pos = torch.zeros(k, len(LEGS), 3, dtype=torch.float64, device=self.device)
+        for link in self._fk["links"]:
+            pos = pos + (rot @ link["pos"][..., None])[..., 0]
+            rot = rot @ link["rot"]
+            if link["joint"] is not None:
+                axis, anchor, col, q0 = link["joint"]
+                turn = _axis_angle(axis, q[:, col] - q0)  # (k, 4, 3, 3)
+                new = rot @ turn
+                pos = pos + (rot @ anchor[..., None])[..., 0] - (new @ anchor[..., None])[..., 0]
+                rot = new
+        feet_z = (pos + (rot @ self._fk["site_pos"][..., None])[..., 0])[..., 2]
+        return -(feet_z.min(dim=1).values - self.robot.foot_radius)
+
+    def _descriptor_fields(self, m: torch.Tensor) -> dict[str, torch.Tensor]:
+        """:func:`morfic_cli.morphology.apply.descriptor_fields` on the device (the same float64 arithmetic).
+
+        Args:
+            m: Validated raw descriptors (kg, rad), float64. Shape: (k, 11).
+
+        Returns:
+            ``body_mass`` (k, nbody), ``body_inertia`` (k, nbody, 3), ``jnt_range`` (k, njnt, 2) and
+            ``actuator_ctrlrange`` (k, nu, 2), float64.
+        """
+        k = m.shape[0]
+        mass = self._t_body_mass.expand(k, -1).clone()
+        for li, link in enumerate(LINKS):
+            mass[:, self._t_link_bodies[:, li]] = m[:, DESCRIPTOR_MASS_INDEX[link], None].expand(-1, len(LEGS))
+        mass[:, self.info.base_body] = m[:, DESCRIPTOR_MASS_INDEX["base"]]
+        changed = self._t_changed
+        nominal = self._t_body_mass[changed]
+        scale = torch.ones_like(mass)
+        scale[:, changed] = torch.where(nominal > 0, mass[:, changed] / nominal, torch.zeros_like(nominal))
+        ranges = m[:, self._t_limit_cols].repeat(1, len(LEGS), 1)  # (k, 12, 2)
+        jnt_range = self._t_jnt_range.expand(k, -1, -1).clone()
+        jnt_range[:, self._t_joint_ids] = ranges
+        ctrlrange = self._t_ctrlrange.expand(k, -1, -1).clone()
+        ctrlrange[:, self._act_ids] = ranges
+        return {"body_mass": mass, "body_inertia": self._t_body_inertia[None] * scale[..., None],
+                "jnt_range": jnt_range, "actuator_ctrlrange": ctrlrange}
 
     # ------------------------------------------------------------------------------------------
     # SimBackend
@@ -414,6 +572,9 @@ class WarpBackend:
 
     def step(self, joint_targets: torch.Tensor, nsteps: int) -> SimFrame:
         """Hold position targets for ``nsteps`` physics steps in every env and return the new frame.
+
+        Everything stays on the device; one flag is read back (:func:`morfic_cli.sim.sync.any_true`: did a
+        world diverge?), so that the forward pass that recomputes the sensors of restored worlds runs only then.
 
         Args:
             joint_targets: Position-actuator targets (rad), clipped to each env's joint range;
@@ -434,21 +595,28 @@ class WarpBackend:
             targets = torch.clamp(targets, self._d_joint_range[..., 0], self._d_joint_range[..., 1])
             before = self._state_rows()
             bad = ~torch.isfinite(before).all(dim=1) | ~finite_targets
-            if bool(bad.any()):  # MuJoCo Warp never sees a non-finite state
-                self._write_home(bad.nonzero().flatten())
+            self._write_home(bad)  # MuJoCo Warp never sees a non-finite state
             self._ctrl[:, self._act_ids] = targets
             self._set_const()
             self._physics(nsteps)
             bad |= self._diverged()
-            self._bad = bad
-            self.bad_states = {}
-            if bool(bad.any()):
-                ids = bad.nonzero().flatten()
-                rows = before[ids].cpu().numpy()
-                self.bad_states = {int(env): row for env, row in zip(ids.tolist(), rows, strict=True)}
-                self._write_home(ids)
-                self._refresh(ids)
+            self._before, self._step_bad, self._bad = before, bad, bad.clone()
+            if sync.any_true(bad):
+                self._write_home(bad)
+                self._refresh(bad)
             return self._frame()
+
+    @property
+    def bad_states(self) -> dict[int, np.ndarray]:
+        """Pre-step states (``mjSTATE_FULLPHYSICS``, float64) of the envs flagged ``bad`` by the last step.
+
+        Read back from the device when asked (not part of the step).
+        """
+        if self._before is None:
+            return {}
+        ids = self._step_bad.nonzero().flatten().cpu()
+        rows = self._before[ids.to(self.device)].cpu().numpy()
+        return {int(env): row for env, row in zip(ids.tolist(), rows, strict=True)}
 
     def _diverged(self) -> torch.Tensor:
         """Envs whose state or sensors are non-finite or beyond mjMAXVAL after a step. Shape: (N,), bool."""
@@ -463,12 +631,12 @@ class WarpBackend:
             return self._frame()
 
     def _frame(self) -> SimFrame:
-        qpos, qvel, sd, lay = self._qpos, self._qvel, self._sensordata, self.layout
+        qpos, qvel, sd = self._qpos, self._qvel, self._sensordata
         n = self.num_envs
         quat, lin_vel_w = qpos[:, 3:7].clone(), qvel[:, 0:3].clone()
 
-        def cols(idx: np.ndarray, *shape: int) -> torch.Tensor:
-            return sd[:, torch.as_tensor(idx.reshape(-1), device=self.device)].reshape(n, *shape)
+        def cols(name: str, *shape: int) -> torch.Tensor:
+            return sd[:, self._cols[name]].reshape(n, *shape)
 
         return SimFrame(
             base_pos_w=qpos[:, 0:3].clone(),
@@ -478,32 +646,32 @@ class WarpBackend:
             base_ang_vel_b=qvel[:, 3:6].clone(),
             joint_pos=qpos[:, self._qpos_adr],
             joint_vel=qvel[:, self._dof_adr],
-            joint_torque=cols(lay.torque, NUM_JOINTS),
-            foot_pos_w=cols(lay.foot_pos, len(LEGS), 3),
-            foot_vel_w=cols(lay.foot_vel, len(LEGS), 3),
-            foot_force_w=cols(lay.foot_force, len(LEGS), 3),
-            body_contact_force=torch.linalg.norm(cols(lay.body_force, len(CONTACT_BODIES), 3), dim=-1),
+            joint_torque=cols("torque", NUM_JOINTS),
+            foot_pos_w=cols("foot_pos", len(LEGS), 3),
+            foot_vel_w=cols("foot_vel", len(LEGS), 3),
+            foot_force_w=cols("foot_force", len(LEGS), 3),
+            body_contact_force=torch.linalg.norm(cols("body_force", len(CONTACT_BODIES), 3), dim=-1),
             bad=self._bad.clone(),
         )
 
     def params(self) -> SimParams:
-        """The per-env physical parameters now in effect, as exact float64 tensors (frames are float32).
+        """The per-env physical parameters now in effect, as exact float64 tensors on the device (frames are float32).
 
-        On the host whatever the device, as the CPU backend's: ``LocomotionEnv`` computes on CPU tensors
-        (it moves each frame to the CPU), and device parameters would meet host buffers in its step.
+        The backend's own bookkeeping, not copies: they change when :meth:`set_morphology` or
+        :meth:`set_dynamics` next writes the same envs.
         """
         return SimParams(
-            joint_range=self._tensor(self._joint_range),
-            default_joint_pos=self._tensor(self._default_qpos),
-            torque_limit=self._tensor(self._torque_limit),
-            base_mass=self._tensor(self._base_mass),
-            total_mass=self._tensor(self._total_mass),
-            nominal_height=self._tensor(self._nominal_height),
-            friction=self._tensor(self._friction),
-            restitution=self._tensor(self._restitution),
-            com_offset=self._tensor(self._com_offset),
-            joint_friction=self._tensor(self._joint_friction),
-            descriptor=self._tensor(self._descriptor),
+            joint_range=self._joint_range,
+            default_joint_pos=self._default_qpos,
+            torque_limit=self._torque_limit,
+            base_mass=self._base_mass,
+            total_mass=self._total_mass,
+            nominal_height=self._nominal_height,
+            friction=self._friction,
+            restitution=self._restitution,
+            com_offset=self._com_offset,
+            joint_friction=self._joint_friction,
+            descriptor=self._descriptor,
         )
 
     def reset_envs(self, env_ids: torch.Tensor, base_pos: torch.Tensor, base_quat: torch.Tensor,
@@ -518,10 +686,9 @@ class WarpBackend:
             joint_pos: Joint positions (rad), written as given. Shape: (k, 12).
             joint_vel: Joint velocities (rad/s). Shape: (k, 12).
         """
-        ids_np = self._ids(env_ids)
-        k = ids_np.size
         with self._on_stream():
-            ids = torch.as_tensor(ids_np, device=self.device)
+            ids = self._ids(env_ids)
+            k = len(ids)
             qpos = torch.zeros(k, self.host_model.nq, device=self.device)
             qpos[:, 0:3] = self._device_rows(base_pos, k, (3,), "base_pos")
             qpos[:, 3:7] = self._device_rows(base_quat, k, (4,), "base_quat")
@@ -531,10 +698,33 @@ class WarpBackend:
             qvel[:, self._dof_adr] = self._device_rows(joint_vel, k, (NUM_JOINTS,), "joint_vel")
             self._qpos[ids], self._qvel[ids], self._time[ids] = qpos, qvel, 0.0
             self._bad[ids] = False
-            self._refresh(ids)
+            if k:
+                mask = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+                mask[ids] = True
+                self._refresh(mask)
+
+    def _check_descriptors(self, m: torch.Tensor) -> None:
+        """:func:`morfic_cli.morphology.descriptor.as_descriptor`'s checks on every row, without a host read on a GPU.
+
+        Raises:
+            DescriptorError: (on the CPU) a row is non-finite, outside the sane ranges or has a min limit above its
+                max; the message is as_descriptor's for the first such row.
+        """
+        lo, hi = self._t_sane
+        ok = (torch.isfinite(m) & (m >= lo) & (m <= hi)).all()
+        ok &= (m[:, self._t_limit_cols[:, 0]] <= m[:, self._t_limit_cols[:, 1]]).all()
+        try:
+            self._check(ok, DescriptorError, "descriptors: invalid")
+        except DescriptorError:
+            for row in m.cpu().numpy():  # the failure path only: as_descriptor's precise message
+                as_descriptor(row)
+            raise
 
     def set_morphology(self, env_ids: torch.Tensor, descriptors: torch.Tensor) -> None:
-        """Apply 11-D descriptors (raw units) to some worlds' model fields (docs/robots.md).
+        """Apply 11-D descriptors (raw units) to some worlds' model fields (docs/robots.md), on the device.
+
+        The fields are :func:`morfic_cli.morphology.apply.descriptor_fields`' arithmetic, computed on the device
+        (:meth:`_descriptor_fields`); the standing height of the new default pose is MuJoCo Warp's kinematics.
 
         Args:
             env_ids: Envs to change. Shape: (k,).
@@ -546,27 +736,25 @@ class WarpBackend:
         if not self.morphology_mutable:
             raise MorficError(f"set_morphology needs the template backend; this one simulates "
                               f"'{self.robot.name}' in full mode with its own morphology.")
-        ids = self._ids(env_ids)
-        rows = self._rows(descriptors, ids.size, (11,), "descriptors")
-        m = np.stack([as_descriptor(row) for row in rows]) if ids.size else rows
-        fields = descriptor_fields(m, self.info)
         with self._on_stream():
-            d_ids = torch.as_tensor(ids, device=self.device)
-            for name, value in (("body_mass", fields.body_mass), ("body_inertia", fields.body_inertia),
-                                ("jnt_range", fields.jnt_range), ("actuator_ctrlrange", fields.ctrlrange)):
-                self.fields[name][d_ids] = self._device_f32(value)
+            ids = self._ids(env_ids)
+            m = self._rows64(descriptors, len(ids), (11,), "descriptors")
+            self._check_descriptors(m)
+            fields = self._descriptor_fields(m)
+            for name, value in fields.items():
+                self.fields[name][ids] = value.float()
+            joint_range = fields["jnt_range"][:, self._t_joint_ids]
+            default = torch.clamp(self._t_robot_q0, joint_range[..., 0], joint_range[..., 1])
+            self._descriptor[ids] = m
+            self._joint_range[ids] = joint_range
+            self._default_qpos[ids] = default
+            self._nominal_height[ids] = self._standing_height(default)
+            self._total_mass[ids] = fields["body_mass"].sum(dim=1)
+            self._base_mass[ids] = fields["body_mass"][:, self.info.base_body]
+            self._d_default_qpos[ids] = default.float()
+            self._d_joint_range[ids] = joint_range.float()
+            self._home_qpos[ids[:, None], self._qpos_adr] = default.float()
         self._const_dirty = True
-        joint_range = fields.jnt_range[:, self.info.joint_ids.reshape(-1)]
-        default = np.clip(self.robot.default_qpos, joint_range[..., 0], joint_range[..., 1])
-        self._descriptor[ids] = m
-        self._joint_range[ids] = joint_range
-        self._default_qpos[ids] = default
-        self._nominal_height[ids] = [self._nominal_height_of(q0) for q0 in default]
-        self._total_mass[ids] = fields.body_mass.sum(axis=1)
-        self._base_mass[ids] = fields.body_mass[:, self.info.base_body]
-        with self._on_stream():
-            self._d_default_qpos[d_ids] = self._device_f32(default)
-            self._d_joint_range[d_ids] = self._device_f32(joint_range)
 
     def set_dynamics(self, env_ids: torch.Tensor, friction: torch.Tensor, restitution: torch.Tensor,
                      com_offset: torch.Tensor, joint_friction: torch.Tensor) -> None:
@@ -580,21 +768,26 @@ class WarpBackend:
             joint_friction: Joint dry friction (frictionloss, N m). Shape: (k, 12).
 
         Raises:
-            MorficError: wrong shapes, negative friction or restitution outside [0, 1).
+            ValueError: wrong shapes, negative friction or restitution outside [0, 1).
         """
-        ids = self._ids(env_ids)
-        k = ids.size
-        mu, e, com, jf = dynamics_rows(k, friction, restitution, com_offset, joint_friction)
         with self._on_stream():
-            d_ids = torch.as_tensor(ids, device=self.device)
+            ids = self._ids(env_ids)
+            k = len(ids)
+            mu, e = self._rows64(friction, k, (), "friction"), self._rows64(restitution, k, (), "restitution")
+            com = self._rows64(com_offset, k, (3,), "com_offset")
+            jf = self._rows64(joint_friction, k, (NUM_JOINTS,), "joint_friction")
+            self._check((torch.isfinite(mu) & (mu >= 0)).all() & (torch.isfinite(jf) & (jf >= 0)).all(),
+                        ValueError, "friction and joint_friction must be finite and >= 0.")
+            self._check((torch.isfinite(e) & (e >= 0) & (e < 1)).all() & torch.isfinite(com).all(),
+                        ValueError, "restitution must be in [0, 1) and com_offset finite.")
             f = self.fields
-            f["geom_friction"][d_ids, :, 0] = self._device_f32(mu)[:, None]
-            f["geom_solref"][d_ids, :, 1] = self._device_f32(restitution_to_dampratio(e))[:, None]
-            f["body_ipos"][d_ids, self.info.base_body] = self._device_f32(self._nominal_ipos + com)
-            f["dof_frictionloss"][d_ids[:, None], self._dof_adr] = self._device_f32(jf)
+            f["geom_friction"][ids, :, 0] = mu.float()[:, None]
+            f["geom_solref"][ids, :, 1] = restitution_to_dampratio(e).float()[:, None]
+            f["body_ipos"][ids, self.info.base_body] = (self._nominal_ipos + com).float()
+            f["dof_frictionloss"][ids[:, None], self._dof_adr] = jf.float()
+            self._friction[ids], self._restitution[ids] = mu, e
+            self._com_offset[ids], self._joint_friction[ids] = com, jf
         self._const_dirty = True  # the COM moved: inverse weights change
-        self._friction[ids], self._restitution[ids] = mu, e
-        self._com_offset[ids], self._joint_friction[ids] = com, jf
 
     def state_dict(self) -> dict[str, torch.Tensor]:
         """Physics state (N, nstate) and the last sensor readings (N, nsensordata), float64 CPU copies.
@@ -621,10 +814,10 @@ class WarpBackend:
 
     def push(self, env_ids: torch.Tensor, delta_vel_xy: torch.Tensor) -> None:
         """Add a planar velocity kick to some envs' bases (world frame). Shapes: (k,), (k, 2) in m/s."""
-        ids = self._ids(env_ids)
         with self._on_stream():
-            kick = self._device_rows(torch.as_tensor(delta_vel_xy), ids.size, (2,), "delta_vel_xy")
-            self._qvel[torch.as_tensor(ids, device=self.device), 0:2] += kick
+            ids = self._ids(env_ids)
+            kick = self._device_rows(torch.as_tensor(delta_vel_xy), len(ids), (2,), "delta_vel_xy")
+            self._qvel[ids, 0:2] += kick
 
     def close(self) -> None:
         """Drop the graphs and device arrays."""
