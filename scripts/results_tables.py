@@ -364,17 +364,35 @@ def bundle_table(bundles: Path) -> list[str]:
 
 
 # ----------------------------------------------------------------------------------------------- claims
+#: The extra eval files the claims read beside ``<run>-eval.csv``: ``<run>-eval-<vx>.csv``, a run evaluated at another
+#: command (same columns, ``command_vx`` = vx; the trained regime at 1.0 m/s).
+EXTRA_EVALS: tuple[str, ...] = ("eval-1.0",)
+
+
+def load_evals(results: Path) -> pd.DataFrame:
+    """Every run's eval rows: ``<run>-eval.csv`` and each of :data:`EXTRA_EVALS` (``<run>-eval-1.0.csv``)."""
+    frames = [f for f in (load(results, kind) for kind in ("eval", *EXTRA_EVALS)) if not f.empty]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
 def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
-    """The eval, calibration and fixed-rollout rows as ``check_claims`` reads them, each with its ``artifact`` id."""
+    """The eval, calibration and fixed-rollout rows as ``check_claims`` reads them, each with its ``artifact`` id.
+
+    The eval rows are :func:`load_evals`'s (2.0 / 2.5 m/s and, where a run has it, 1.0 m/s); a 1.0 m/s row's id is
+    the ``eval-1.0`` entry of the run's ``<run>-artifacts.json``, else the file it came from.
+    """
     ids = load_artifacts(results)
-    ev, cal, fixed = load(results, "eval"), load(results, "calibration"), load_fixed(results)
+    ev, cal, fixed = load_evals(results), load(results, "calibration"), load_fixed(results)
 
     def records(frame: pd.DataFrame, key: str) -> list[dict]:
         if frame.empty:
             return []
         out = frame.to_dict("records")
         for r in out:
-            r["artifact"] = ids.get(r["run"], {}).get(key) or f"{r['run']}-{key}.csv"
+            k = key
+            if key == "eval" and abs(float(r.get("command_vx", 2.0)) - 1.0) < 1e-9:
+                k = "eval-1.0"
+            r["artifact"] = ids.get(r["run"], {}).get(k) or f"{r['run']}-{k}.csv"
         return out
 
     fixed_rows = []
@@ -392,15 +410,35 @@ def _short(artifact: str) -> str:
     return artifact[:12] if re.fullmatch(r"[0-9a-f]{12,}", artifact) else artifact
 
 
-def render_claims(results: Path) -> str:
-    """The claims (a)-(e) as markdown: the paper's numbers, ours, the verdict and why, the artifact ids."""
-    from morfic_cli.report.claims import check_claims
+#: The title of each command's block of claims.
+COMMAND_TITLES = {2.0: "At 2.0 m/s (the paper's command)", 1.0: "At 1.0 m/s (the trained regime, where every run but "
+                  "adaln walks on Go2; the paper reports no numbers there)"}
 
-    lines = []
-    for claim in check_claims(*claim_rows(results)):
-        lines += [f"**({claim.key}) {claim.claim}** Verdict: **{claim.verdict}**.", "",
-                  f"- Paper: {claim.paper}", f"- Ours: {claim.ours or '-'}", f"- Why: {claim.reason}",
-                  "- From: " + (", ".join(f"`{_short(i)}`" for i in claim.artifacts) or "-"), ""]
+
+def render_claims(results: Path) -> str:
+    """The claims (a)-(e) as markdown: a verdict table (claims x commands), then one block per command.
+
+    Each claim gives the paper's numbers, ours (every effect with its 95 % interval), the verdict and why, and the
+    artifact ids; the commands are ``check_claims``' (2.0 m/s, and 1.0 m/s where a run has ``<run>-eval-1.0.csv``).
+    """
+    from morfic_cli.report.claims import SHORT, check_claims
+
+    claims = check_claims(*claim_rows(results))
+    commands = list(dict.fromkeys(c.command_vx for c in claims))
+    verdicts = {(c.key, c.command_vx): c.verdict for c in claims}
+    titles = {c.key: SHORT.get(c.key, c.claim) for c in claims}
+    lines = ["| claim | " + " | ".join(f"{vx:.1f} m/s" for vx in commands) + " |",
+             "|---|" + "---|" * len(commands)]
+    for key, title in titles.items():
+        lines.append(f"| ({key}) {title} | " + " | ".join(f"**{verdicts.get((key, vx), '-')}**"
+                                                         for vx in commands) + " |")
+    lines.append("")
+    for vx in commands:
+        lines += [f"### {COMMAND_TITLES.get(vx, f'At {vx:.1f} m/s')}", ""]
+        for claim in (c for c in claims if c.command_vx == vx):
+            lines += [f"**({claim.key}) {claim.claim}** Verdict: **{claim.verdict}**.", "",
+                      f"- Paper: {claim.paper}", f"- Ours: {claim.ours or '-'}", f"- Why: {claim.reason}",
+                      "- From: " + (", ".join(f"`{_short(i)}`" for i in claim.artifacts) or "-"), ""]
     return "\n".join(lines).rstrip() + "\n"
 
 

@@ -43,9 +43,11 @@ FIGURES: dict[str, str] = {
 }
 
 #: The text above the claims (docs/results.md reads them with the reasons behind each).
-CLAIMS_INTRO = ("Each of the paper's five claims checked against the results below (morfic_cli/report/claims.py): "
-                "holds (on every robot the claim names), holds partly, does not hold, or cannot tell (results "
-                "missing, or differences within the seeds' spread).")
+CLAIMS_INTRO = ("Each of the paper's five claims checked against the results below (morfic_cli/report/claims.py), "
+                "at 2.0 m/s and, where the store has evaluations there, at 1.0 m/s: every comparison is an effect "
+                "with a 95 % bootstrap interval over seeds, and the verdict is read from the interval: holds (on "
+                "every robot the claim names), holds partly, does not hold, or cannot tell (results missing, one "
+                "seed, or the interval contains the bound; docs/report.md \"How a verdict is read\").")
 
 SPEED_PREFIX = "speed-"
 """Figure names ``speed-<run>-<robot>``: the eval figure of that run on that robot (descriptor mode, 2.0 m/s)."""

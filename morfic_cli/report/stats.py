@@ -181,6 +181,32 @@ def spearman(xs: Sequence[float], ys: Sequence[float]) -> float:
     return float(np.corrcoef(rx, ry)[0, 1])
 
 
+def spearman_p(xs: Sequence[float], ys: Sequence[float], *, seed: int = BOOT_SEED,
+               max_exact: int = MAX_EXACT) -> float:
+    """Two-sided permutation p-value of Spearman's rho: the share of orderings of ``ys`` with |rho| >= observed.
+
+    Every ordering is enumerated when there are at most ``max_exact`` (7 robots: 5,040, the observed one included);
+    otherwise ``max_exact`` random ones plus the observed. It asks whether the rank correlation over these units
+    could come from pairing them at random, a question the bootstrap over seeds (:func:`bootstrap_statistic`)
+    does not ask. NaN where rho is NaN.
+    """
+    x, y = np.asarray(xs, dtype=np.float64), np.asarray(ys, dtype=np.float64)
+    observed = spearman(x, y)
+    if math.isnan(observed):
+        return math.nan
+    rx, ry = _ranks(x), _ranks(y)
+    rx = (rx - rx.mean()) / rx.std()
+    if math.factorial(y.size) <= max_exact:
+        orders = np.array(list(itertools.permutations(range(y.size))))
+    else:
+        rng = np.random.default_rng(seed)
+        orders = np.concatenate([np.arange(y.size)[None], [rng.permutation(y.size) for _ in range(max_exact)]])
+    ryp = ry[orders]  # (P, n)
+    rhos = ((ryp - ry.mean()) / ry.std() * rx).mean(axis=1)
+    tol = 1e-12
+    return float(np.mean(np.abs(rhos) >= abs(observed) - tol))
+
+
 def _ranks(x: np.ndarray) -> np.ndarray:
     """1-based ranks, ties averaged. Shape: (n,) -> (n,)."""
     order = np.argsort(x, kind="stable")

@@ -80,3 +80,15 @@ def test_bootstrap_statistic_of_seed_means():
     assert (est, lo, hi) == (pytest.approx(1.0), pytest.approx(1.0), pytest.approx(1.0))
     est, lo, hi = stats.bootstrap_statistic([[1.0], [2.0, 2.0], [3.0, 3.0]], lambda m: float(m.mean()))
     assert est == pytest.approx(2.0) and math.isnan(lo)
+
+
+def test_spearman_p_over_orderings_by_hand():
+    # 3 pairs: the 6 orderings give rho 1, .5, .5, -.5, -.5, -1; |rho| >= 1 for 2 of them
+    assert stats.spearman_p([1, 2, 3], [1, 2, 3]) == pytest.approx(2 / 6)
+    assert stats.spearman_p([1, 2, 3], [1, 3, 2]) == pytest.approx(1.0)  # every ordering reaches |rho| >= 0.5
+    # 4 pairs: only the identity and its reverse of the 24 reach |rho| = 1
+    assert stats.spearman_p([1, 2, 3, 4], [8, 6, 4, 2]) == pytest.approx(2 / 24)
+    assert math.isnan(stats.spearman_p([1, 2, 3], [5, 5, 5]))
+    # above max_exact the orderings are drawn at random: still about 2/24, and reproducible
+    p = stats.spearman_p([1, 2, 3, 4], [8, 6, 4, 2], max_exact=2000)
+    assert p == stats.spearman_p([1, 2, 3, 4], [8, 6, 4, 2], max_exact=2000) and abs(p - 2 / 24) < 0.03

@@ -49,10 +49,40 @@ def test_claims_are_computed_from_the_csvs_with_their_artifact_ids(tmp_path):
     _runs(tmp_path)
     (tmp_path / "film-cpu-s0-artifacts.json").write_text(json.dumps({"eval": "e" * 64}))
     text = rt.render_claims(tmp_path)
-    # (b) on AlienGo: film 1.6449 x 0.0 = 0.00 against ppo 1.2 x 0.421875 = 0.51: film loses
-    assert "**(b) MorFiC-F transfers better" in text and "Verdict: **does not hold**" in text
-    assert "film 0.00 (v_x 1.64, S 0.00), ppo 0.51 (v_x 1.20, S 0.42)" in text
+    # (b) on AlienGo: film 1.6449 x 0.0 = 0.00 against ppo 1.2 x 0.421875 = 0.51, one seed each: no interval
+    assert "**(b) MorFiC-F transfers better" in text and "Verdict: **does not hold**" not in text
+    assert "film - ppo -0.51 (n 1 vs 1: no interval)" in text
+    assert "film 0.00 (v_x 1.64, S 0.00), ppo 0.51 (v_x 1.20, S 0.42)" in text  # one seed: no n
     assert "`eeeeeeeeeeee`" in text and "`ppo-cpu-s0-eval.csv`" in text  # an id, else the file it came from
+
+
+def test_claims_are_judged_at_2_and_at_1_m_s_from_the_eval_1_0_files(tmp_path):
+    """Seeds 0-1 alike (a point interval): film loses at 2.0 m/s on AlienGo and wins at 1.0 m/s."""
+    _runs(tmp_path)
+    for seed in (0, 1):
+        if seed:
+            for run in ("film", "ppo"):
+                src = (tmp_path / f"{run}-cpu-s0-eval.csv").read_text()
+                (tmp_path / f"{run}-cpu-s1-eval.csv").write_text(src)
+        (tmp_path / f"film-cpu-s{seed}-eval-1.0.csv").write_text(
+            EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.9,0.1,1.0,walks\n")
+        (tmp_path / f"ppo-cpu-s{seed}-eval-1.0.csv").write_text(
+            EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.5,0.1,0.8,walks\n")
+    (tmp_path / "film-cpu-s0-artifacts.json").write_text(json.dumps({"eval": "e" * 64, "eval-1.0": "f" * 64}))
+    # the tables read <run>-eval.csv only; the claims both
+    assert set(rt.load(tmp_path, "eval")["command_vx"]) == {2.0}
+    assert sorted(set(rt.load_evals(tmp_path)["command_vx"])) == [1.0, 2.0]
+    text = rt.render_claims(tmp_path)
+    assert text.startswith("| claim | 2.0 m/s | 1.0 m/s |\n|---|---|---|\n")
+    # 2.0 m/s: 0.00 - 0.51 on AlienGo refutes "film beats every baseline" -> does not hold; 1.0 m/s: 0.90 - 0.40
+    # beats ppo, but actor-only and concat were not evaluated -> cannot tell on AlienGo, and on the rest
+    assert ("| (b) MorFiC-F transfers better than ppo, actor-only, concat | **does not hold** | **cannot tell** |"
+            in text)
+    at2, at1 = text.split("### At 2.0 m/s")[1].split("### At 1.0 m/s")
+    assert "film - ppo -0.51 [-0.51, -0.51] (n 2 vs 2, p 0.33)" in at2 and "`eeeeeeeeeeee`" in at2
+    assert "**(b) MorFiC-F transfers better than PPO, actor-only and concat (v_x x S at 1.0 m/s" in at1
+    assert "film - ppo +0.50 [+0.50, +0.50] (n 2 vs 2, p 0.33); actor-only not evaluated" in at1
+    assert "`ffffffffffff`" in at1 and "`film-cpu-s1-eval-1.0.csv`" in at1 and "eeeeeeeeeeee" not in at1
 
 
 def test_calibration_table_and_the_marked_block(tmp_path):
