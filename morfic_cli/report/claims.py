@@ -3,9 +3,9 @@
 Pure functions over the rows :func:`~morfic_cli.report.gather.gather` reads (eval.csv, calibration.csv and
 fixed_rollout.csv rows, each with ``variant``, ``seed``, ``command_vx`` and ``artifact``). Every comparison is an
 effect over seeds with a 95 % bootstrap interval from :mod:`morfic_cli.report.stats` (the method is stated there
-and in docs/report.md, "How a verdict is read"): the verdict on a robot is read from the interval alone, never from
-a fixed tolerance, and the permutation p-value stands beside it. A variant with one seed has no interval, so a
-comparison that needs it cannot tell.
+and in docs/report.md, "How a verdict is read"): the verdict on a robot is read from the interval (for (e) with
+the p over the robots' orderings too), never from a fixed tolerance, and the permutation p-value stands beside it.
+A variant with one seed has no interval, so a comparison that needs it cannot tell.
 
 On one robot (one variant for (e)) a comparison gives ``holds``, ``does not hold`` or ``cannot tell``. A claim that
 needs several comparisons on a robot ("film beats every baseline") holds there when every one holds, does not hold
