@@ -124,6 +124,48 @@ class TransferMetrics:
     """"ok", or the most common failure: "falls", "stands still", "lies down", "drags feet"."""
 
 
+FAILURES = ("falls", "stands still", "lies down", "drags feet")
+"""Failure classes of an env, in the order they are checked (an env gets the first that applies)."""
+
+
+def env_outcomes(
+    vx: np.ndarray,
+    terminated: np.ndarray,
+    command_vx: float,
+    *,
+    tilt: np.ndarray,
+    height_ratio: np.ndarray,
+    foot_slip: np.ndarray,
+    cfg: ValidityCfg = ValidityCfg(),  # noqa: B008 - frozen dataclass
+) -> np.ndarray:
+    """Each env's validity: ``"ok"`` (survived with a valid gait) or its failure, the first of :data:`FAILURES`.
+
+    Args:
+        vx: Forward base velocity (body x, m/s) after each step. Shape: (T, N).
+        terminated: Env terminated on that step (falls; not time-outs). Shape: (T, N) bool.
+        command_vx: The commanded forward velocity (m/s).
+        tilt: Base tilt from upright (rad). Shape: (T, N).
+        height_ratio: Base height / nominal height. Shape: (T, N).
+        foot_slip: Mean horizontal speed of the feet in contact (m/s; 0 when none is). Shape: (T, N).
+        cfg: Validity thresholds.
+
+    Returns:
+        Shape: (N,), str objects.
+    """
+    alive = alive_mask(terminated)
+    survived = alive[-1]
+    moving = per_env_mean(vx, alive) >= cfg.min_speed_ratio * command_vx
+    upright_up = (tilt < cfg.max_tilt_rad) & (height_ratio > cfg.min_height_ratio)
+    lying = per_env_mean(upright_up.astype(np.float64), alive) < cfg.min_valid_fraction
+    dragging = per_env_mean(foot_slip, alive) > cfg.max_foot_slip
+    out = np.full(survived.shape, "ok", dtype=object)
+    out[survived & moving & ~lying & dragging] = "drags feet"
+    out[survived & moving & lying] = "lies down"
+    out[survived & ~moving] = "stands still"
+    out[~survived] = "falls"
+    return out
+
+
 def transfer_metrics(
     vx: np.ndarray,
     terminated: np.ndarray,
@@ -151,23 +193,13 @@ def transfer_metrics(
     env_vx = per_env_mean(vx, alive)
     env_peak = per_env_max_moving_average(vx, alive, max(1, round(1.0 / dt)))
     survived = alive[-1]
-    upright_up = (tilt < cfg.max_tilt_rad) & (height_ratio > cfg.min_height_ratio)
-    up_fraction = per_env_mean(upright_up.astype(np.float64), alive)
-    slip = per_env_mean(foot_slip, alive)
-    moving = env_vx >= cfg.min_speed_ratio * command_vx
-    lying = up_fraction < cfg.min_valid_fraction
-    dragging = slip > cfg.max_foot_slip
-    valid_env = survived & moving & ~lying & ~dragging
+    outcomes = env_outcomes(vx, terminated, command_vx, tilt=tilt, height_ratio=height_ratio, foot_slip=foot_slip,
+                            cfg=cfg)
     vx_mean, vx_env_std = mean_std(env_vx)
     step_mean, step_std, n_alive = alive_step_stats(vx, alive)
     peak_mean, peak_std = mean_std(env_peak)
-    valid_fraction = float(valid_env.mean())
-    failures = {
-        "falls": int((~survived).sum()),
-        "stands still": int((survived & ~moving).sum()),
-        "lies down": int((survived & moving & lying).sum()),
-        "drags feet": int((survived & moving & ~lying & dragging).sum()),
-    }
+    valid_fraction = float((outcomes == "ok").mean())
+    failures = {k: int((outcomes == k).sum()) for k in FAILURES}
     verdict = "ok" if valid_fraction >= 0.5 else max(failures, key=lambda k: failures[k])
     return TransferMetrics(
         vx_mean=vx_mean, vx_std=step_std, vx_env_std=vx_env_std, vx_step_mean=step_mean, n_alive=n_alive,

@@ -180,7 +180,9 @@ def evaluate(
                     path = Path(tmp) / f"{robot}-{mode}-vx{vx:g}.mcap"
                     write_rollout_log(path, rollout, meta, cfg.scene_envs)
                     png, pdf = rollout_figure(rollout.arrays["base_lin_vel"][..., 0], rollout.terminated,
-                                              rollout.dt, vx, f"{robot}, {mode} mode, command {vx:g} m/s")
+                                              rollout.dt, vx, f"{robot}, {mode} mode, command {vx:g} m/s",
+                                              foot_slip=rollout.arrays["foot_slip"], outcomes=rollout.outcomes(),
+                                              verdict=rows[-1]["verdict"])
                     config = {"robot": robot, "mode": mode, "command_vx": vx, "num_envs": cfg.num_envs,
                               "steps": cfg.steps, "seed": cfg.seed}
                     if batched(cfg, mode):

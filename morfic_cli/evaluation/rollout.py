@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from morfic_cli.config import EnvCfg, eval_env_cfg
-from morfic_cli.evaluation.metrics import TransferMetrics, transfer_metrics
+from morfic_cli.evaluation.metrics import TransferMetrics, env_outcomes, transfer_metrics
 
 #: Arrays a rollout records per step for all envs, with their per-env shapes (K = reward terms).
 RECORDED: dict[str, tuple[int, ...]] = {
@@ -78,6 +78,12 @@ class Rollout:
         a = self.arrays
         return transfer_metrics(a["base_lin_vel"][..., 0], self.terminated, self.command_vx, self.dt,
                                 tilt=a["tilt"], height_ratio=a["height_ratio"], foot_slip=a["foot_slip"])
+
+    def outcomes(self) -> np.ndarray:
+        """Each env's validity, ``"ok"`` or its failure (:func:`~morfic_cli.evaluation.metrics.env_outcomes`)."""
+        a = self.arrays
+        return env_outcomes(a["base_lin_vel"][..., 0], self.terminated, self.command_vx, tilt=a["tilt"],
+                            height_ratio=a["height_ratio"], foot_slip=a["foot_slip"])
 
 
 def step_record(env, action: torch.Tensor, value: torch.Tensor, reward: torch.Tensor, done: torch.Tensor,

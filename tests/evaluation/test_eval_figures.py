@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from morfic_cli.evaluation.figures import rollout_figure, speed_survival
+from morfic_cli.evaluation.figures import rollout_figure, running_mean, speed_survival, verdict_line
+from morfic_cli.evaluation.metrics import env_outcomes, transfer_metrics
 
 
 def test_speed_survival_curves_by_hand():
@@ -31,4 +32,32 @@ def test_no_env_alive_leaves_the_speed_undefined_and_the_figure_draws():
     c = speed_survival(vx, terminated, dt=0.02)
     assert np.isnan(c["mean"]).all() and c["survival"].tolist() == [0.0, 0.0, 0.0]
     png, pdf = rollout_figure(vx, terminated, 0.02, 2.0, "b1, descriptor mode, command 2 m/s")
+    assert png.startswith(b"\x89PNG") and pdf.startswith(b"%PDF")
+
+
+def test_each_envs_running_mean_ends_at_the_mean_the_verdict_uses():
+    slip = np.array([[0.1, 0.4], [0.3, 0.4], [0.5, 0.1]])
+    alive = np.array([[True, True], [True, True], [True, False]])  # env 1 fell at step 2
+    r = running_mean(slip, alive)
+    np.testing.assert_allclose(r[:, 0], [0.1, 0.2, 0.3])
+    np.testing.assert_allclose(r[:, 1], [0.4, 0.4, 0.4])  # frozen after its fall
+    assert np.isnan(running_mean(slip, np.zeros_like(alive))).all()
+
+
+def test_the_verdict_line_is_the_tables_verdict_with_each_failure_counted():
+    # 4 envs, 3 steps at 1 m/s: env 0 fine, env 1 drags its feet, env 2 stands still, env 3 falls
+    vx = np.array([[1.0, 1.0, 0.0, 1.0]] * 3)
+    terminated = np.zeros((3, 4), bool)
+    terminated[1, 3] = True
+    slip = np.array([[0.1, 0.5, 0.0, 0.1]] * 3)
+    kw = {"tilt": np.zeros((3, 4)), "height_ratio": np.ones((3, 4)), "foot_slip": slip}
+    outcomes = env_outcomes(vx, terminated, 1.0, **kw)
+    assert outcomes.tolist() == ["ok", "drags feet", "stands still", "falls"]
+    m = transfer_metrics(vx, terminated, 1.0, 0.02, **kw)
+    assert m.valid_fraction == 0.25 and m.verdict == "falls"  # a tie: the first failure class in order
+    assert verdict_line(outcomes, m.verdict) == (
+        "verdict: falls \u2013 valid 1/4 (falls 1, stands still 1, drags feet 1)", False)
+    assert verdict_line(outcomes) == verdict_line(outcomes, m.verdict)
+    assert verdict_line(np.array(["ok", "ok", "drags feet"])) == ("verdict: ok \u2013 valid 2/3 (drags feet 1)", True)
+    png, pdf = rollout_figure(vx, terminated, 0.02, 1.0, "t", foot_slip=slip, outcomes=outcomes, verdict=m.verdict)
     assert png.startswith(b"\x89PNG") and pdf.startswith(b"%PDF")
