@@ -15,6 +15,9 @@ from morfic_cli.validation import check_args
 def report(
     runs: Annotated[list[str] | None, typer.Argument(help="Run refs or checkpoint ids to report on; none: every "
                                                     "run in the store.")] = None,
+    preset: Annotated[str | None, typer.Option("--preset", help="Only the runs trained with this preset (smoke, "
+                                               "cpu, paper; comma-separated for several), so smoke runs do not sit "
+                                               "beside cpu runs.")] = None,
     latex: Annotated[bool, typer.Option("--latex", help="Write a standalone report.tex (booktabs), and report.pdf "
                                         "where pdflatex is installed.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="Write report.md (the default when neither --latex "
@@ -38,14 +41,15 @@ def report(
     store content and options find the stored report again instead of rebuilding it. Prints the report's ref,
     id and files on stdout.
 
-    Example: morfic report --latex --markdown --figures --out report/
+    Example: morfic report --preset cpu --latex --markdown --figures --out report/
     """
     check_args(store=store, out_dir=out, report_name=name, specs=runs)
     from morfic_cli.report.build import ReportCfg, build_report
     from morfic_cli.store import Store
 
-    cfg = ReportCfg(runs=tuple(runs or ()), latex=latex, markdown=markdown or not latex, figures=figures,
-                    with_paper=with_paper, name=name)
+    presets = tuple(p.strip() for p in (preset or "").split(",") if p.strip())
+    cfg = ReportCfg(runs=tuple(runs or ()), presets=presets, latex=latex, markdown=markdown or not latex,
+                    figures=figures, with_paper=with_paper, name=name)
     st = Store(store)
     result = build_report(st, cfg, out=out, on_stage=None if quiet else (lambda s: info(f"report: {s} ...")))
     if not quiet:
@@ -56,6 +60,13 @@ def report(
             info(f"note: no PDF: {result.pdf_error.splitlines()[0]}")
         if out is not None:
             info(f"wrote {len(result.out_files)} files to {out}")
+        if not presets:
+            from morfic_cli.report.gather import resolve_runs
+
+            mixed = sorted({r.preset for r in resolve_runs(st, cfg.runs)})
+            if len(mixed) > 1:
+                info(f"note: the report mixes runs of presets {', '.join(mixed)}; --preset {mixed[0]} (or another) "
+                     "reports one")
     emit_object({"ref": f"{result.ref}@{result.version}", "id": result.id, "reused": result.reused,
                  "files": result.files, "out": str(out) if out is not None else None,
                  "provenance": len(result.provenance)}, fmt)

@@ -25,7 +25,7 @@ from morfic_cli.report import paper
 from morfic_cli.report import tables as T
 from morfic_cli.report.claims import Claim, check_claims
 from morfic_cli.report.compare import COMPARE_REF, compare_tables, store_comparison
-from morfic_cli.report.gather import Provenance, StoreData, gather, read_csv_rows, resolve_runs
+from morfic_cli.report.gather import Provenance, StoreData, filter_presets, gather, read_csv_rows, resolve_runs
 from morfic_cli.report.model import Table
 from morfic_cli.rl.variants import STOCK
 from morfic_cli.store import Store
@@ -95,6 +95,7 @@ class ReportCfg:
 
     Attributes:
         runs: Run specs (``runs/film-cpu-s0``); empty = every run in the store.
+        presets: Keep only the runs trained with one of these presets (``cpu``); empty = every preset.
         latex: Write ``report.tex`` (and ``report.pdf`` where pdflatex is installed).
         markdown: Write ``report.md``.
         figures: Draw the figures.
@@ -104,6 +105,7 @@ class ReportCfg:
     """
 
     runs: tuple[str, ...] = ()
+    presets: tuple[str, ...] = ()
     latex: bool = False
     markdown: bool = True
     figures: bool = False
@@ -291,15 +293,18 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
     return files
 
 
-REPORT_LAYOUT = 2
+REPORT_LAYOUT = 3
 """The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
-shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor."""
+shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor. 3: training curves as the mean
+and min-max band over seeds, legends off the data."""
 
 
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:
     """The config of a stored report: options, runs (not the name of its ref) and :data:`REPORT_LAYOUT`."""
     doc = asdict(cfg)
     doc.pop("name")
+    if not doc["presets"]:  # the runs list says which runs; an unfiltered report keeps its earlier config
+        doc.pop("presets")
     doc["runs"] = sorted(r.spec for r in data.runs)
     doc["layout"] = REPORT_LAYOUT
     return json.loads(json.dumps({"report": "morfic", **doc}))
@@ -315,7 +320,7 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
     from morfic_cli.report.support import SUPPORT_REF, ensure_support_table
 
     stage = on_stage or (lambda _s: None)
-    runs = resolve_runs(store, cfg.runs)  # bad specs fail before any message
+    runs = filter_presets(resolve_runs(store, cfg.runs), cfg.presets)  # bad specs fail before any message
     stage(f"reading the results of {len(runs)} runs")
     data = gather(store, runs)
     support_id, _ = ensure_support_table(store)
@@ -340,7 +345,8 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
                 "ev": F.ev_figure(tables.get("calibration", [])),
                 "distance": F.distance_figure(tables.get("transfer", []), with_paper=cfg.with_paper),
                 "compute": F.compute_figure(tables.get("compute", []), with_paper=cfg.with_paper),
-                "curves": F.curves_figure(data.curves, {r.name: r.variant for r in runs}),
+                "curves": F.curves_figure(data.curves, {r.name: r.variant for r in runs},
+                                          {r.name: r.preset for r in runs}),
                 **eval_figures(store, data.evals),
             }
         stage("writing the report")

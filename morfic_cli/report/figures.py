@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import math
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -62,7 +63,7 @@ def distance_plot(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0
     sel = [r for r in transfer if r["mode"] == "descriptor" and abs(r["command_vx"] - command_vx) < 1e-9
            and r.get("d") is not None]
     multi = len({r["preset"] for r in sel}) > 1
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(8.4, 4.0), constrained_layout=True)
     groups = sorted({(r["preset"], r["variant"]) for r in sel}, key=lambda p: (p[0], variant_order(p[1])))
     span = max([float(r["d"]) for r in sel] + [0.1])
     step = 0.012 * span
@@ -95,7 +96,7 @@ def distance_plot(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0
     ax.set_ylim(bottom=min(0.0, ax.get_ylim()[0]), top=max(ax.get_ylim()[1], 1.2 * command_vx))
     ax.set_title(f"Transfer against morphology distance (command {command_vx:g} m/s, descriptor mode)", fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # off the data
     return fig
 
 
@@ -165,28 +166,88 @@ CURVE_PANELS: tuple[tuple[str, str], ...] = (
 """The training-curve panels: curve column and title (``recording/curves.py`` names the columns)."""
 
 
-def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, str]):
-    """:data:`CURVE_PANELS` against env steps, one line per run, coloured by variant (a Figure; two panels a row).
+def seed_band(runs: Sequence[Sequence[dict[str, float]]], key: str) -> dict[str, list[float]]:
+    """Mean and min-max band over seeds of one curve column, on the union of the runs' env steps.
 
-    A panel whose series are all missing (NaN) is not drawn.
+    Each run is interpolated linearly onto the common steps inside its own range (NaN outside it, so a run that
+    stopped early stops counting); ``n`` is how many runs count at each step.
+
+    Args:
+        runs: Each seed's curve rows (``env_steps`` and ``key``).
+        key: The curve column.
+
+    Returns:
+        ``x`` (env steps), ``mean``, ``low``, ``high`` (min and max over seeds) and ``n``, lists of one length.
+    """
+    import numpy as np
+
+    series = []
+    for rows in runs:
+        pts = sorted((float(r["env_steps"]), float(r[key])) for r in rows
+                     if r.get("env_steps") is not None and _has_values([r.get(key, math.nan)])
+                     and math.isfinite(float(r["env_steps"])))
+        series.append(pts)
+    x = np.array(sorted({p[0] for pts in series for p in pts}))
+    ys = np.full((len(series), len(x)), np.nan)
+    for i, pts in enumerate(series):
+        if pts:
+            px, py = np.array(pts).T
+            inside = (x >= px[0]) & (x <= px[-1])
+            ys[i, inside] = np.interp(x[inside], px, py)
+    n = np.isfinite(ys).sum(axis=0)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: a step no run reached
+        mean, low, high = np.nanmean(ys, axis=0), np.nanmin(ys, axis=0), np.nanmax(ys, axis=0)
+    return {"x": x.tolist(), "mean": mean.tolist(), "low": low.tolist(), "high": high.tolist(), "n": n.tolist()}
+
+
+def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, str],
+                presets: dict[str, str] | None = None):
+    """:data:`CURVE_PANELS` against env steps, one line per variant and preset (a Figure; two panels a row).
+
+    The seeds of a variant and preset are drawn as their mean with a band from the lowest to the highest seed
+    (:func:`seed_band`), not as one line per seed; a lone run is its own line. The legend sits below the panels,
+    off the data. A panel whose series are all missing (NaN) is not drawn.
+
+    Args:
+        curves: Run name -> training-curve rows.
+        variants: Run name -> its variant.
+        presets: Run name -> its preset (None: all one preset); groups of different presets are labelled apart.
     """
     plt = _plt()
-    ordered = sorted(curves, key=lambda n: (variant_order(variants.get(n, "")), n))
-    colours = {v: f"C{i}" for i, v in enumerate(sorted(set(variants.values()), key=variant_order))}
+    presets = presets or {}
+    groups: dict[tuple[str, str], list[str]] = {}
+    for name in sorted(curves):
+        groups.setdefault((presets.get(name, ""), variants.get(name, "")), []).append(name)
+    order = sorted(groups, key=lambda g: (variant_order(g[1]), g[0]))
+    colours = {v: f"C{i}" for i, v in enumerate(sorted({g[1] for g in groups}, key=variant_order))}
+    multi = len({g[0] for g in groups}) > 1
+    styles = {p: ("-", "--", ":", "-.")[i % 4] for i, p in enumerate(sorted({g[0] for g in groups}))}
     panels = [(key, title) for key, title in CURVE_PANELS
-              if any(_has_values([r.get(key, math.nan) for r in curves[n]]) for n in ordered)]
+              if any(_has_values([r.get(key, math.nan) for r in curves[n]]) for n in curves)]
     cols = min(max(len(panels), 1), 2)
     rows_n = max(math.ceil(len(panels) / 2), 1)
     fig, axes = plt.subplots(rows_n, cols, figsize=(4.5 * cols, 3.4 * rows_n), constrained_layout=True,
                              squeeze=False)
     flat = list(axes.flat)
+    handles: dict[str, Any] = {}
     for ax, (key, title) in zip(flat, panels, strict=False):
-        for name in ordered:
-            rows = curves[name]
-            variant = variants.get(name, "")
-            ax.plot([r.get("env_steps", math.nan) for r in rows], [r.get(key, math.nan) for r in rows], lw=1.0,
-                    color=colours.get(variant), label=f"{paper.METHOD_LABELS.get(variant, variant)} ({name})",
-                    marker="." if len(rows) < 5 else None)
+        for preset, variant in order:
+            names = groups[(preset, variant)]
+            label = _label(preset, variant, multi) if preset else paper.METHOD_LABELS.get(variant, variant)
+            colour, style = colours.get(variant), styles.get(preset, "-")
+            if len(names) == 1:
+                rows = curves[names[0]]
+                (line,) = ax.plot([r.get("env_steps", math.nan) for r in rows], [r.get(key, math.nan) for r in rows],
+                                  lw=1.0, color=colour, ls=style, marker="." if len(rows) < 5 else None)
+                handles.setdefault(f"{label} ({names[0]})", line)
+                continue
+            band = seed_band([curves[n] for n in names], key)
+            if not band["x"]:
+                continue
+            (line,) = ax.plot(band["x"], band["mean"], lw=1.2, color=colour, ls=style)
+            ax.fill_between(band["x"], band["low"], band["high"], color=colour, alpha=0.2, lw=0)
+            handles.setdefault(f"{label}: mean of {len(names)} seeds, band min\u2013max", line)
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("env steps", fontsize=9)
         ax.grid(alpha=0.3)
@@ -194,16 +255,19 @@ def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, s
         fig.delaxes(ax)
     if not panels:
         flat[0].text(0.5, 0.5, "no training curves", ha="center", va="center", transform=flat[0].transAxes)
-    elif ordered:
-        flat[0].legend(fontsize=8)
+    elif handles:
+        fig.legend(list(handles.values()), list(handles), loc="outside lower center", fontsize=8,
+                   ncol=min(len(handles), 2 if cols == 2 else 1), frameon=False)
     return fig
 
 
-def curves_figure(curves: dict[str, list[dict[str, float]]], variants: dict[str, str]) -> tuple[bytes, bytes]:
+def curves_figure(curves: dict[str, list[dict[str, float]]], variants: dict[str, str],
+                  presets: dict[str, str] | None = None) -> tuple[bytes, bytes]:
     """:func:`curves_plot` as ``(png, pdf)`` bytes.
 
     Args:
         curves: Run name -> training-curve rows.
         variants: Run name -> its variant.
+        presets: Run name -> its preset.
     """
-    return _save(curves_plot(curves, variants))
+    return _save(curves_plot(curves, variants, presets))

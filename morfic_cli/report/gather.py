@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -144,6 +145,23 @@ def resolve_runs(store: Store, specs: Sequence[str] | None) -> list[RunInfo]:
             seen.add(info.checkpoint)
             runs.append(info)
     return runs
+
+
+def filter_presets(runs: Sequence[RunInfo], presets: Sequence[str]) -> list[RunInfo]:
+    """The runs trained with one of ``presets`` (the preset in each checkpoint's meta / config); none: all.
+
+    Raises:
+        MorficError: No run has any of the presets (the message lists the presets the runs have).
+    """
+    if not presets:
+        return list(runs)
+    kept = [r for r in runs if r.preset in presets]
+    if not kept:
+        have = ", ".join(f"{p} ({n} run{'s' if n != 1 else ''})"
+                         for p, n in sorted(Counter(r.preset for r in runs).items()))
+        raise MorficError(f"no run has preset {' or '.join(presets)}; the runs here have: {have}. Pass one of "
+                          "those to --preset, or leave --preset out for every run.")
+    return kept
 
 
 def read_csv_rows(data: bytes) -> list[dict[str, Any]]:

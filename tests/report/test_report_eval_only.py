@@ -34,3 +34,13 @@ def test_report_with_an_eval_and_no_diagnosis_builds_with_figures(run_cli, tmp_p
     assert "a reduced protocol: 2 envs x 20 steps; the paper's is 64 x 500" in text
     assert "(the paper protocol)" not in text
     assert any(p.suffix == ".png" for p in out.rglob("*"))
+
+
+def test_report_preset_keeps_that_presets_runs_and_names_the_presets_there(run_cli, tmp_path):
+    assert run_cli("store", "import", str(BUNDLE))[0] == 0  # runs/film-cpu, preset cpu
+    code, stdout, err = run_cli("report", "--preset", "paper", "-f", "json")
+    assert code == 1 and stdout == ""
+    assert "Error: no run has preset paper; the runs here have: cpu (1 run)" in err
+    code, stdout, err = run_cli("report", "--preset", "cpu", "-f", "json")
+    assert code == 0, err
+    assert json.loads(stdout)["ref"].startswith("reports/latest@")

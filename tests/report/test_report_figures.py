@@ -68,3 +68,54 @@ def test_curves_draw_the_noise_and_the_curriculum_two_panels_a_row():
     assert list(line.get_ydata()) == [1.0, 1.5, 2.0]
     three = curves_plot({"a": [{k: v for k, v in r.items() if k != "curriculum.vx_max"} for r in rows]}, {"a": "ppo"})
     assert len(three.axes) == 3  # the empty fourth cell is removed
+
+
+def test_seeds_are_a_mean_and_a_min_max_band_on_the_union_of_their_steps():
+    from morfic_cli.report.figures import seed_band
+
+    s0 = [{"env_steps": 0, "r": 0.0}, {"env_steps": 10, "r": 10.0}, {"env_steps": 20, "r": 20.0}]
+    s1 = [{"env_steps": 0, "r": 2.0}, {"env_steps": 5, "r": 4.0}, {"env_steps": 10, "r": 6.0}]  # stopped early
+    band = seed_band([s0, s1], "r")
+    assert band["x"] == [0.0, 5.0, 10.0, 20.0]
+    assert band["n"] == [2, 2, 2, 1]
+    assert band["mean"] == pytest.approx([1.0, 4.5, 8.0, 20.0])  # s0 at 5 interpolated: 5.0
+    assert band["low"] == pytest.approx([0.0, 4.0, 6.0, 20.0]) and band["high"] == pytest.approx([2.0, 5.0, 10.0, 20.0])
+
+
+def test_curves_draw_one_mean_line_per_variant_and_preset_with_the_legend_off_the_axes():
+    def run(offset):
+        return [{"env_steps": s, "mean_reward": s + offset} for s in (0, 1, 2)]
+
+    curves = {"film-cpu-s0": run(0.0), "film-cpu-s1": run(2.0), "film-cpu-s2": run(4.0), "ppo-cpu-s0": run(1.0),
+              "film-smoke-s0": run(9.0)}
+    variants = {n: n.split("-")[0] for n in curves}
+    presets = {n: n.split("-")[1] for n in curves}
+    fig = curves_plot(curves, variants, presets)
+    (ax,) = fig.axes
+    assert len(ax.get_lines()) == 3  # film cpu (mean of 3), ppo cpu, film smoke: never one line per seed
+    film = [line for line in ax.get_lines() if list(line.get_ydata()) == [2.0, 3.0, 4.0]]
+    assert len(film) == 1 and len(ax.collections) == 1  # the mean, and one band
+    assert ax.get_legend() is None and len(fig.legends) == 1  # the legend is the figure's, below the panels
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert labels == ["PPO (cpu) (ppo-cpu-s0)", "MorFiC-F (cpu): mean of 3 seeds, band min\u2013max",
+                      "MorFiC-F (smoke) (film-smoke-s0)"]  # the variants' order, presets apart
+    assert distance_plot([{"mode": "descriptor", "command_vx": 2.0, "d": 0.0, "preset": "cpu", "variant": "film",
+                           "robot": "go2", "vx": 1.9, "vx_std": 0.1}]).axes[0].get_legend().get_bbox_to_anchor()
+
+
+def test_filter_presets_keeps_one_preset_and_names_the_others_when_none_match():
+    from morfic_cli.errors import MorficError
+    from morfic_cli.report.gather import RunInfo, filter_presets
+
+    def info(name, preset):
+        return RunInfo(spec=f"runs/{name}", name=name, checkpoint=name, variant="film", seed=0, preset=preset,
+                       iteration=1, max_iterations=1, env_steps=1, wall_time_s=1.0, device="cpu", finished=True,
+                       created="")
+
+    runs = [info("film-cpu-s0", "cpu"), info("film-smoke-s0", "smoke"), info("film-cpu-s1", "cpu")]
+    assert [r.name for r in filter_presets(runs, ("cpu",))] == ["film-cpu-s0", "film-cpu-s1"]
+    assert filter_presets(runs, ()) == runs
+    assert [r.name for r in filter_presets(runs, ("smoke", "cpu"))] == ["film-cpu-s0", "film-smoke-s0", "film-cpu-s1"]
+    with pytest.raises(MorficError, match=r"no run has preset paper; the runs here have: cpu \(2 runs\), "
+                                          r"smoke \(1 run\)"):
+        filter_presets(runs, ("paper",))
