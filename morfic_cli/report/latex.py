@@ -4,6 +4,11 @@ A result cell is set as the paper sets it, in math mode with bold parts: ``$\mat
 The document needs only packages of a basic TeX Live (``texlive-latex-base`` + ``texlive-latex-recommended``):
 geometry, booktabs, graphicx, longtable, array, float. Tables and figures are placed where they are written
 (``[H]``), so every table sits under its section heading.
+
+The provenance list is pandas' ``Styler.to_latex`` (:func:`longtable_latex`). The result tables
+(:func:`table_latex`) are written here: they need four things ``Styler.to_latex`` does not write (a
+``\cmidrule`` under each column group, section rows spanning the table, notes inside the float after the
+``tabular``, and the shrink-to-fit wrapper), so it would only be a skeleton edited as text in four places.
 """
 
 from __future__ import annotations
@@ -159,12 +164,18 @@ def figure_grid_latex(paths: Sequence[str], caption: str, per_row: int = 3) -> s
 
 
 def longtable_latex(header: Sequence[str], rows: Sequence[Sequence[str]], spec: str) -> str:
-    """A ``longtable`` (breaks across pages) of plain-text cells, e.g. the provenance list."""
-    head = " & ".join(rf"\textbf{{{escape(h)}}}" for h in header) + r" \\"
-    lines = [rf"{{\scriptsize\begin{{longtable}}{{{spec}}}", r"\toprule", head, r"\midrule", r"\endhead"]
-    lines += [" & ".join(escape(str(c)) for c in row) + r" \\" for row in rows]
-    lines += [r"\bottomrule", r"\end{longtable}}"]
-    return "\n".join(lines)
+    """A booktabs ``longtable`` (breaks across pages, the header again on each) of plain-text cells.
+
+    pandas' ``Styler.to_latex(environment="longtable")`` writes it (header on every page, "Continued on next page"
+    at each break); the cells are escaped here first (:func:`escape`), as Styler leaves them as they are. E.g. the
+    provenance list.
+    """
+    import pandas as pd
+
+    frame = pd.DataFrame([[escape(str(c)) for c in row] for row in rows] or [["-"] * len(header)],  # never empty
+                         columns=[rf"\textbf{{{escape(h)}}}" for h in header])
+    body = frame.style.hide(axis="index").to_latex(environment="longtable", hrules=True, column_format=spec)
+    return "{\\scriptsize\n" + body.rstrip("\n") + "}"
 
 
 def pdflatex() -> str | None:

@@ -1,4 +1,9 @@
-"""Markdown output: GitHub-flavoured tables (bold with ``**``) and a document for a README or an issue."""
+"""Markdown output: GitHub-flavoured tables (bold with ``**``) and a document for a README or an issue.
+
+Tables are written here, not with ``DataFrame.to_markdown``: that needs ``tabulate`` (a dependency morfic does not
+otherwise have), pads every cell to its column's width (each generated table in docs/ and every report would change
+whitespace only and grow wider), and escapes no ``|`` in cells, which :func:`table_markdown` must do anyway.
+"""
 
 from __future__ import annotations
 

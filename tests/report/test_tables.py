@@ -217,3 +217,14 @@ def test_the_report_adds_an_every_variant_table_when_runs_leave_the_main_tables_
     assert [c[0].value for c in row.cells] == pytest.approx([1.1, 1.2, 1.3, 1.0])
     assert [c[0].bold for c in row.cells] == [False, False, True, False]
     assert list(keys(["hyper"])) == []  # one variant, outside the main four: no table of one column
+
+
+def test_longtable_is_pandas_styler_with_escaped_cells_and_the_header_on_every_page():
+    from morfic_cli.report.latex import longtable_latex
+
+    tex = longtable_latex(("kind", "ref"), [("eval", "evals/film_cpu"), ("table", "`x` & y")], "lp{0.5\\linewidth}")
+    assert tex.startswith("{\\scriptsize\n\\begin{longtable}{lp{0.5\\linewidth}}") and tex.endswith("\\end{longtable}}")
+    assert tex.count("\\textbf{kind} & \\textbf{ref} \\\\") == 2  # first page and every later page
+    assert "\\endfirsthead" in tex and "\\endhead" in tex and "\\bottomrule" in tex
+    assert "eval & evals/film\\_cpu \\\\" in tex and "table & \\texttt{x} \\& y \\\\" in tex
+    assert "- & - \\\\" in longtable_latex(("kind", "ref"), [], "ll")  # an empty list still has a row
