@@ -48,6 +48,7 @@ from morfic_cli.errors import MorficError
 from morfic_cli.morphology.apply import TemplateInfo, apply_descriptor, clamp_to_limits, model_joint_ranges, summarize
 from morfic_cli.morphology.builder import build_model
 from morfic_cli.morphology.robots import JOINTS, LEGS, RobotSpec
+from morfic_cli.quaternion import quat_rotate_inverse
 from morfic_cli.sim.args import NUM_JOINTS, dynamics_rows, env_index, env_rows
 from morfic_cli.sim.backend import CONTACT_BODIES, SimFrame, SimParams
 from morfic_cli.sim.floor import STATE_SPEC, BatchStepper
@@ -68,21 +69,6 @@ def restitution_to_dampratio(e: np.ndarray) -> np.ndarray:
     safe = np.where(e > 0, e, 1.0)
     log_e = np.log(safe)
     return np.where(e > 0, -log_e / np.sqrt(math.pi**2 + log_e**2), 1.0)
-
-
-def quat_rotate_inverse(quat: np.ndarray, vec: np.ndarray) -> np.ndarray:
-    """Rotate world vectors into the frame of unit quaternions (w, x, y, z): v_b = R(q)^T v_w.
-
-    Args:
-        quat: Unit quaternions. Shape: (N, 4).
-        vec: World vectors. Shape: (N, 3).
-
-    Returns:
-        Shape: (N, 3).
-    """
-    w, u = quat[:, :1], quat[:, 1:]
-    uv = np.cross(u, vec)
-    return vec - 2.0 * w * uv + 2.0 * np.cross(u, uv)
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,7 @@ import numpy as np
 import torch
 
 from morfic_cli.config import SimCfg
+from morfic_cli.envs.math import quat_rotate_inverse
 from morfic_cli.errors import DescriptorError, MorficError
 from morfic_cli.morphology.apply import (
     DESCRIPTOR_MASS_INDEX,
@@ -182,13 +183,6 @@ def _graphs_supported(wp: Any, device: str) -> bool:
     driver = wp.get_cuda_driver_version()
     return (os.environ.get("MORFIC_WARP_GRAPHS", "1") != "0" and wp.is_mempool_enabled(device)
             and driver is not None and tuple(driver) >= GRAPH_MIN_DRIVER)
-
-
-def quat_rotate_inverse(quat: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:
-    """Rotate world vectors into the frame of unit quaternions (w, x, y, z). Shapes: (N, 4), (N, 3) -> (N, 3)."""
-    w, u = quat[:, :1], quat[:, 1:]
-    uv = torch.cross(u, vec, dim=1)
-    return vec - 2.0 * w * uv + 2.0 * torch.cross(u, uv, dim=1)
 
 
 def _axis_angle(axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
