@@ -60,6 +60,10 @@ class ReproduceCfg:
             preset's batches of 2-8 envs run several times faster on one thread than on two that contend.
         bundles: Folder of run bundles (``<run name>.tar``); when set, runs are imported from it instead of
             trained (the ``shipped`` preset).
+        critic_study: The critic study's settings (:class:`~morfic_cli.diagnostics.critic_study.StudyCfg` fields
+            that differ from its defaults), run on the fixed-rollout actor after the fixed-rollout analysis; None: no
+            study step. ``cpu`` and ``paper`` run the default study (~30 fits), ``smoke`` a tiny one; ``shipped``
+            imports the study shipped with the runs (``<bundles>/results/critic-study.tar``) when there is one.
         name: The report's name (``reports/<name>``); default the preset.
     """
 
@@ -81,6 +85,7 @@ class ReproduceCfg:
     device: str = "cpu"
     torch_threads: int | None = None
     bundles: str | None = None
+    critic_study: dict[str, Any] | None = None
     name: str | None = None
 
     @property
@@ -102,6 +107,13 @@ SHIPPED_TRAIN_PRESET = "cpu"
 SHIPPED_PROTOCOL: dict[str, Any] = {"modes": ("descriptor",), "command_vx": (2.0,), "eval_envs": 16,
                                     "eval_steps": 500, "diagnose_envs": 16, "diagnose_steps": 800,
                                     "batch_robots": True}
+
+
+SMOKE_STUDY: dict[str, Any] = {"seeds": 2, "commands": (2.0,), "train_envs": 4, "held_out": 1, "target_envs": 2,
+                               "steps": 80, "trunc_eps": 0.5, "epochs": 1, "minibatch": 64, "stride": 2}
+"""The smoke preset's critic study: every stage in seconds (its numbers are not results)."""
+SHIPPED_STUDY_BUNDLE = "results/critic-study.tar"
+"""Where, under the bundle folder, the shipped preset finds the critic study of the shipped runs."""
 
 
 def default_bundles() -> Path:
@@ -154,8 +166,8 @@ def reproduce_cfg(preset: str, *, seeds: int = 1, variants: tuple[str, ...] | No
     base = ReproduceCfg(preset=preset, seeds=seeds, variants=tuple(variants or VARIANTS), device=device)
     if preset == "smoke":
         return dataclasses.replace(base, eval_envs=2, eval_steps=25, diagnose_envs=2, diagnose_steps=80,
-                                   trunc_eps=0.5, torch_threads=1)
-    return base
+                                   trunc_eps=0.5, torch_threads=1, critic_study=SMOKE_STUDY)
+    return dataclasses.replace(base, critic_study={})
 
 
 def _shipped_cfg(seeds: int, variants: tuple[str, ...] | None, device: str, bundles: Path,
@@ -206,6 +218,8 @@ class _Silent:
 
 #: A step's status when it cannot run (the fixed-rollout analysis without its actor); ``detail`` says why.
 NOT_RUN = "not run"
+STUDY_LABEL = "diagnoses/critic-study"
+"""The critic-study step's label (its ref)."""
 
 
 @dataclass
@@ -308,6 +322,8 @@ class Pipeline:
             steps.append(("diagnose", spec, lambda spec=spec: self.diagnose(spec)))
         for robot in self.cfg.fixed_rollout_robots:
             steps.append(("fixed-rollout", robot, lambda robot=robot: self.fixed_rollout(robot)))
+        if self.cfg.critic_study is not None or self.shipped_study() is not None:
+            steps.append(("critic-study", STUDY_LABEL, self.critic_study))
         steps.append(("compare", "compare-baselines", self.compare))
         steps.append(("report", f"reports/{self.cfg.report_name}", self.report))
         return steps
@@ -574,6 +590,47 @@ class Pipeline:
         models = load_models(self.store, actor, critics, cfg)
         res = fixed_rollout(self.store, robot, models, cfg, on_step=lambda _t: self.progress.step_advance(advance=1))
         return StepResult("fixed-rollout", robot, "done", res.id, f"{res.ref}@{res.version}")
+
+    def study_cfg(self):
+        """The critic study's :class:`~morfic_cli.diagnostics.critic_study.StudyCfg` (None: no study)."""
+        from morfic_cli.diagnostics.critic_study import StudyCfg
+
+        if self.cfg.critic_study is None:
+            return None
+        return StudyCfg(robots=self.cfg.robots, **self.cfg.critic_study)
+
+    def shipped_study(self) -> Path | None:
+        """The shipped critic-study bundle (``shipped`` preset only), when the bundle folder has one."""
+        if not self.cfg.bundles:
+            return None
+        path = Path(self.cfg.bundles) / SHIPPED_STUDY_BUNDLE
+        return path if path.is_file() else None
+
+    def critic_study(self) -> StepResult:
+        """Every critic fitted from scratch on the fixed-rollout actor's data (skip when stored; shipped: import)."""
+        from morfic_cli.diagnostics.critic_study import STUDY_REF, StudyProgress, run_study, study_config
+
+        actor, _ = self.fixed_rollout_models()
+        shipped = self.shipped_study()
+        if shipped is not None:
+            from morfic_cli.store.transfer import import_tar
+
+            self._start("critic-study", STUDY_LABEL, 1, "bundle")
+            import_tar(self.store, shipped)
+            found = self.store.resolve(STUDY_REF) if self.store.has_ref(STUDY_REF) else None
+            return StepResult("critic-study", STUDY_LABEL, "done", found, STUDY_REF, detail=f"imported {shipped.name}")
+        why = self.fixed_rollout_unavailable()
+        if why is not None:
+            return StepResult("critic-study", STUDY_LABEL, NOT_RUN, detail=why)
+        cfg = self.study_cfg()
+        found = find_manifest(self.store, "diagnosis", _json(study_config(actor, cfg)),
+                              inputs_subset={"actor": self.store.resolve(actor)}, files=("critic_study.csv",))
+        if found:
+            return StepResult("critic-study", STUDY_LABEL, "skipped", found)
+        self._start("critic-study", STUDY_LABEL, 1, "study")
+        progress = StudyProgress(phase=lambda label, _total: self.progress.step_advance(detail=label))
+        res = run_study(self.store, actor, cfg, progress=progress)
+        return StepResult("critic-study", STUDY_LABEL, "done", res.id, f"{STUDY_REF}@{res.version}")
 
     def compare(self) -> StepResult:
         """The comparison tables with the paper's columns (skip when the same one is stored)."""

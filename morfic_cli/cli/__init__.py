@@ -27,6 +27,7 @@ from morfic_cli import __version__
 from morfic_cli.cli import (
     bench,
     compare_baselines,
+    critic_study,
     diagnose,
     distance,
     evaluate,
@@ -74,6 +75,7 @@ app.command("train")(train.train)
 app.command("eval")(evaluate.evaluate)
 app.command("play")(play.play)
 app.command("diagnose")(diagnose.diagnose)
+app.command("critic-study")(critic_study.critic_study)
 app.command("compare-baselines")(compare_baselines.compare_baselines)
 app.command("distance")(distance.distance)
 app.command("export")(export.export)

@@ -83,7 +83,7 @@ def _board_class(ray):
 
 
 class RayExecutor:
-    """Run a :class:`Pipeline`'s jobs on Ray; compare and report on the driver.
+    """Run a :class:`Pipeline`'s jobs on Ray; the critic study, compare and report on the driver.
 
     Args:
         pipeline: The pipeline over the user's store.
@@ -123,7 +123,8 @@ class RayExecutor:
                 raise MorficError(f"{len(failed)} job(s) failed; the {finished} that finished are in the store "
                                   f"(run the command again to retry the rest). First: {first.job.key}: "
                                   f"{first.detail}")
-            for fn in (self.pipeline.compare, self.pipeline.report):
+            study = [fn for kind, _, fn in self.pipeline.plan() if kind == "critic-study"]
+            for fn in (*study, self.pipeline.compare, self.pipeline.report):  # the study on the driver, after the jobs
                 t0 = time.perf_counter()
                 step = fn()
                 step.seconds = time.perf_counter() - t0

@@ -60,8 +60,7 @@ STUDY_COLUMNS: tuple[str, ...] = (
     "cos_grad", "cell", "n_samples", "g_mean", "g_std", "v_mean", "fit_loss", "fit_seconds", "actor", "rollout",
 )
 #: Columns of ``fits.csv``.
-FIT_COLUMNS: tuple[str, ...] = ("command_vx", "variant", "fit_seed", "epoch", "loss", "seconds", "parameters",
-                                "n_train")
+FIT_COLUMNS: tuple[str, ...] = ("variant", "fit_seed", "epoch", "loss", "seconds", "parameters", "n_train")
 
 
 @dataclass(frozen=True)
@@ -77,7 +76,7 @@ class StudyCfg:
     robots: tuple[str, ...] = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")
     """Target robots (descriptor mode)."""
     train_envs: int = 128
-    """Envs of the training-distribution rollout, one sampled morphology each (plus one per fall)."""
+    """Envs of the training-distribution rollout per command, one sampled morphology each (plus one per fall)."""
     held_out: int = 16
     """Of those, the last envs, kept out of the fit and scored as ``train`` (in-distribution)."""
     target_envs: int = 32
@@ -86,9 +85,12 @@ class StudyCfg:
     """Policy steps per rollout; the samples are the window t <= steps - H_eps (I_eps)."""
     seed: int = 0
     """Rollout seed (reset poses, sampled morphologies, action noise)."""
-    epochs: int = 8
+    stride: int = 4
+    """Every how many policy steps of the window a training sample is taken (consecutive steps at 50 Hz are nearly
+    the same state)."""
+    epochs: int = 6
     """Passes over the fit set."""
-    minibatch: int = 2048
+    minibatch: int = 256
     """Samples per gradient step."""
     learning_rate: float = 1e-3
     """Adam's learning rate (the PPO preset's)."""
@@ -96,12 +98,16 @@ class StudyCfg:
     """Gradient-norm clip (the PPO preset's)."""
     trunc_eps: float = 0.05
     """eps of I_eps (docs/metrics.md)."""
+    cos_stride: int = 4
+    """CosGrad's actor gradients are taken over every this-many-th step of I_eps (one backward pass through the
+    actor per fit and sample set: the study's dearest part); every other metric uses all of I_eps."""
 
     def diagnose_cfg(self, command_vx: float, train: bool) -> DiagnoseCfg:
         """The :class:`DiagnoseCfg` of the training-distribution rollout (``train``) or of the targets' one."""
-        if train:
+        if train:  # each command's rollout draws other morphologies: the rollout seed advances with the command
             return DiagnoseCfg(robots=("go2",), mode="train", command_vx=command_vx, num_envs=self.train_envs,
-                               steps=self.steps, seed=self.seed, trunc_eps=self.trunc_eps)
+                               steps=self.steps, seed=self.seed + self.commands.index(command_vx),
+                               trunc_eps=self.trunc_eps)
         batch = self.robots if len(self.robots) > 1 else ()
         return DiagnoseCfg(robots=self.robots, mode="descriptor", command_vx=command_vx, num_envs=self.target_envs,
                            steps=self.steps, seed=self.seed, trunc_eps=self.trunc_eps, batch=batch)
@@ -111,7 +117,8 @@ def check_cfg(cfg: StudyCfg) -> None:
     """Refuse settings that cannot give a study.
 
     Raises:
-        MorficError: No variant, robot or command, seeds < 1, held_out outside [1, train_envs), epochs < 1.
+        MorficError: No variant, robot or command, an unknown variant, a command named twice, seeds < 1,
+            held_out outside [1, train_envs), epochs, minibatch or a stride < 1.
     """
     if not cfg.variants:
         raise MorficError("--variants is empty; give 'all' or names such as film,concat.")
@@ -124,8 +131,14 @@ def check_cfg(cfg: StudyCfg) -> None:
     if not 1 <= cfg.held_out < cfg.train_envs:
         raise MorficError(f"--held-out must be between 1 and --train-envs - 1 ({cfg.train_envs - 1}), got "
                           f"{cfg.held_out}.")
-    if cfg.epochs < 1 or cfg.minibatch < 1:
-        raise MorficError("--epochs and --minibatch must be at least 1.")
+    if min(cfg.epochs, cfg.minibatch, cfg.stride, cfg.cos_stride) < 1:
+        raise MorficError("--epochs, --minibatch and the strides must be at least 1.")
+    from morfic_cli.rl.variants import resolve_variant
+
+    for variant in cfg.variants:
+        resolve_variant(variant)  # an unknown name or a user class that cannot be imported fails here
+    if len(set(cfg.commands)) != len(cfg.commands):
+        raise MorficError(f"--command-vx names a speed twice: {cfg.commands}; give each once.")
 
 
 def canonical_variants(variants: Sequence[str]) -> list[str]:
@@ -140,15 +153,38 @@ def canonical_variants(variants: Sequence[str]) -> list[str]:
 
 @dataclass
 class FitData:
-    """The fit set: critic inputs and Monte-Carlo returns of the training rollout's fit envs, in I_eps.
+    """The fit set: critic inputs and Monte-Carlo returns of the training rollouts' fit envs, in I_eps.
+
+    The critics regress the standardised return (G - g_mean) / g_std (the same affine map for every variant), and
+    are scored through :class:`Denormalized`, so their values are in return units.
 
     Attributes:
         obs: Group -> (n, ...) float32 (``critic`` (n, 16, 48), ``privileged`` (n, 18), ``morphology`` (n, 11)).
         G: Returns. Shape: (n,) float32.
+        g_mean: Mean of G.
+        g_std: Population std of G.
     """
 
     obs: TensorDict
     G: torch.Tensor
+    g_mean: float
+    g_std: float
+
+    @property
+    def target(self) -> torch.Tensor:
+        """(G - g_mean) / g_std. Shape: (n,)."""
+        return (self.G - self.g_mean) / self.g_std
+
+
+class Denormalized(torch.nn.Module):
+    """A critic fitted on standardised returns, in return units: V = g_mean + g_std * critic(obs). (N, 1)."""
+
+    def __init__(self, critic: torch.nn.Module, g_mean: float, g_std: float) -> None:
+        super().__init__()
+        self.critic, self.g_mean, self.g_std = critic, g_mean, g_std
+
+    def forward(self, obs: TensorDict) -> torch.Tensor:  # noqa: D102
+        return self.g_mean + self.g_std * self.critic(obs)
 
 
 CRITIC_GROUPS: tuple[str, ...] = ("critic", "privileged", "morphology")
@@ -169,15 +205,33 @@ def split_train(samples: Samples, held_out: int) -> tuple[Samples, Samples]:
     return part(fit), part(out)
 
 
-def fit_data(samples: Samples, gamma: float, cfg: DiagnoseCfg) -> FitData:
-    """The samples of I_eps of ``samples`` with their returns, flattened row-major over (t, env)."""
-    ref = reference(samples, gamma, cfg)
-    mask = ref.mask
-    obs = {k: torch.from_numpy(np.ascontiguousarray(samples.obs[k][mask])) for k in CRITIC_GROUPS}
-    n = int(mask.sum())
-    if n == 0:
+def fit_data(parts: Sequence[Samples], gamma: float, cfg: DiagnoseCfg, stride: int = 1) -> FitData:
+    """The samples of I_eps of every sample set, every ``stride``-th step, with their returns, pooled.
+
+    Args:
+        parts: Training rollouts (one per command), arrays (T, N, ...).
+        gamma: Discount of the returns.
+        cfg: For eps of I_eps.
+        stride: Keep steps t with t % stride == 0.
+
+    Raises:
+        MorficError: No sample in I_eps.
+    """
+    obs: dict[str, list[torch.Tensor]] = {k: [] for k in CRITIC_GROUPS}
+    returns = []
+    for samples in parts:
+        ref = reference(samples, gamma, cfg)
+        mask = ref.mask.copy()
+        mask[np.arange(mask.shape[0]) % stride != 0] = False
+        for k in CRITIC_GROUPS:
+            obs[k].append(torch.from_numpy(np.ascontiguousarray(samples.obs[k][mask])))
+        returns.append(ref.G[torch.from_numpy(mask)].float())
+    G = torch.cat(returns)
+    if G.numel() == 0:
         raise MorficError("the training rollout has no sample in I_eps; raise --steps (see docs/metrics.md).")
-    return FitData(TensorDict(obs, batch_size=[n]), ref.returns.float())
+    std = float(G.std(correction=0))
+    return FitData(TensorDict({k: torch.cat(v) for k, v in obs.items()}, batch_size=[G.numel()]), G,
+                   float(G.mean()), std if std > 0 else 1.0)
 
 
 def build_critic(actor_cfg: Any, variant: str, seed: int) -> torch.nn.Module:
@@ -216,19 +270,20 @@ class Fit:
 
 def fit_critic(critic: torch.nn.Module, data: FitData, cfg: StudyCfg, seed: int,
                on_batch: Callable[[], None] | None = None) -> tuple[list[float], float]:
-    """Regress V_phi on G over the fit set: Adam, mean squared error, ``cfg.epochs`` shuffled passes.
+    """Regress V_phi on the standardised G of the fit set: Adam, mean squared error, ``cfg.epochs`` shuffled passes.
 
     The mini-batch order comes from a generator seeded with ``seed``, so two variants with the same seed see the
     same batches in the same order.
 
     Returns:
-        (mean loss of each epoch, wall seconds).
+        (mean loss of each epoch, in units of Var(G), wall seconds).
     """
     critic.train()
     params = [p for p in critic.parameters() if p.requires_grad]
     optimizer = torch.optim.Adam(params, lr=cfg.learning_rate)
     gen = torch.Generator().manual_seed(seed)
     n = data.G.shape[0]
+    target = data.target
     losses: list[float] = []
     start = time.perf_counter()
     for _ in range(cfg.epochs):
@@ -237,7 +292,7 @@ def fit_critic(critic: torch.nn.Module, data: FitData, cfg: StudyCfg, seed: int,
         for i in range(0, n, cfg.minibatch):
             idx = order[i : i + cfg.minibatch]
             value = critic(data.obs[idx]).reshape(-1)
-            loss = torch.nn.functional.mse_loss(value, data.G[idx])
+            loss = torch.nn.functional.mse_loss(value, target[idx])
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
@@ -257,8 +312,11 @@ def batches_per_fit(n: int, cfg: StudyCfg) -> int:
 
 
 def score_fits(actor: torch.nn.Module, fits: Sequence[Fit], samples: Samples, gamma: float, cfg: DiagnoseCfg,
-               clip_param: float) -> list[dict[str, Any]]:
-    """Every fit's metrics on one sample set, CosGrad on the frozen ``actor`` (one pass for all fits).
+               clip_param: float, cos_stride: int = 1) -> list[dict[str, Any]]:
+    """Every fit's metrics on one sample set, CosGrad on the frozen ``actor`` (one forward pass for all fits).
+
+    CosGrad compares g(A_phi) with g(A_MC) over the samples of I_eps at steps t % cos_stride == 0 (A_MC's mean
+    taken there too); EV, NVB, NVE, ASA and Flip over all of I_eps.
 
     Returns:
         Per fit, in order: ``ev, nvb, abs_nvb, nve, asa, flip, cos_grad, cell, n_samples, g_mean, g_std, v_mean``.
@@ -267,8 +325,13 @@ def score_fits(actor: torch.nn.Module, fits: Sequence[Fit], samples: Samples, ga
     G = ref.returns
     mask_t = torch.from_numpy(ref.mask)
     values = [critic_values(f.critic, samples.obs)[mask_t].double() for f in fits]
-    grads = actor_gradients(actor, samples.obs, samples.action, ref.mask,
-                            [mc_advantage(G), *(critic_advantage(G, v) for v in values)], clip_param=clip_param)
+    cos_mask = ref.mask.copy()
+    cos_mask[np.arange(cos_mask.shape[0]) % cos_stride != 0] = False
+    keep = torch.from_numpy(cos_mask[ref.mask])  # the strided samples among I_eps's, row-major
+    G_cos = G[keep]
+    grads = actor_gradients(actor, samples.obs, samples.action, cos_mask,
+                            [mc_advantage(G_cos), *(critic_advantage(G_cos, v[keep]) for v in values)],
+                            clip_param=clip_param)
     rows = []
     for v, g_phi in zip(values, grads[1:], strict=True):
         m = critic_metrics(G, v, cfg.sigma_eps)
@@ -276,6 +339,12 @@ def score_fits(actor: torch.nn.Module, fits: Sequence[Fit], samples: Samples, ga
                      "cos_grad": cos_grad(g_phi, grads[0]), "cell": paper_cell(m.nvb, m.nve, m.asa),
                      "n_samples": m.n, "g_mean": m.g_mean, "g_std": m.g_std, "v_mean": m.v_mean})
     return rows
+
+
+def study_config(actor_spec: str, cfg: StudyCfg) -> dict[str, Any]:
+    """The config of a stored study: the actor's spec and every setting (variants as fitted, aliases folded)."""
+    doc = {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(cfg).items()}
+    return {"actor": actor_spec, **doc, "variants": canonical_variants(cfg.variants)}
 
 
 @dataclass
@@ -336,51 +405,57 @@ def run_study(store: Store, actor_spec: str, cfg: StudyCfg, *, actor: TrainedMod
     fit_rows: list[dict[str, Any]] = []
     inputs = {"actor": trained.checkpoint_id}
     seconds = {"rollouts": 0.0, "fits": 0.0, "scoring": 0.0}
-    for command in cfg.commands:
-        t0 = time.perf_counter()
+    held: dict[float, Samples] = {}
+    targets: dict[float, dict[str, Samples]] = {}
+    fit_parts: list[Samples] = []
+    t0 = time.perf_counter()
+    for command in cfg.commands:  # 1. the frozen actor's rollouts (reused from the store when there)
         train_cfg, target_cfg = cfg.diagnose_cfg(command, True), cfg.diagnose_cfg(command, False)
         joint = bool(target_cfg.batch)  # every target stepped as one env: one bar pass for all of them
         progress.phase(f"{label}: rollouts at {command:g} m/s", (2 if joint else 1 + len(cfg.robots)) * cfg.steps)
         step = lambda _t: progress.advance()  # noqa: E731
         train = collect_samples(store, trained, "go2", train_cfg, on_step=step)
         inputs[f"rollout/{command:g}/{TRAIN_ROBOT}"] = train.rollout_id
-        targets: dict[str, Samples] = {}
+        fit_part, held[command] = split_train(train, cfg.held_out)
+        fit_parts.append(fit_part)
+        targets[command] = {}
         for k, robot in enumerate(cfg.robots):
-            targets[robot] = collect_samples(store, trained, robot, target_cfg, on_step=step if k == 0 or not joint
-                                             else None)
-            inputs[f"rollout/{command:g}/{robot}"] = targets[robot].rollout_id
-        seconds["rollouts"] += time.perf_counter() - t0
-        fit_part, held = split_train(train, cfg.held_out)
-        data = fit_data(fit_part, gamma, train_cfg)
-        fits: list[Fit] = []
-        progress.phase(f"fitting {len(variants)} x {cfg.seeds} critics at {command:g} m/s",
-                       len(variants) * cfg.seeds * batches_per_fit(data.G.shape[0], cfg))
-        for variant in variants:
-            for seed in range(cfg.seeds):
-                critic = build_critic(trained.cfg, variant, seed)
-                losses, secs = fit_critic(critic, data, cfg, seed, on_batch=progress.advance)
-                fit = Fit(variant, seed, critic, losses, secs)
-                fits.append(fit)
-                seconds["fits"] += secs
-                fit_rows += [{"command_vx": command, "variant": variant, "fit_seed": seed, "epoch": e + 1,
-                              "loss": loss, "seconds": secs, "parameters": fit.parameters,
-                              "n_train": int(data.G.shape[0])} for e, loss in enumerate(losses)]
-        t0 = time.perf_counter()
-        sets = {TRAIN_ROBOT: held, **targets}
+            targets[command][robot] = collect_samples(store, trained, robot, target_cfg,
+                                                      on_step=step if k == 0 or not joint else None)
+            inputs[f"rollout/{command:g}/{robot}"] = targets[command][robot].rollout_id
+    seconds["rollouts"] = time.perf_counter() - t0
+    diag = cfg.diagnose_cfg(cfg.commands[0], True)  # eps and sigma_eps: the same for every command
+    data = fit_data(fit_parts, gamma, diag, cfg.stride)  # 2. one fit set over every command
+    del fit_parts
+    fits: list[Fit] = []
+    progress.phase(f"fitting {len(variants)} x {cfg.seeds} critics on {data.G.shape[0]} samples",
+                   len(variants) * cfg.seeds * batches_per_fit(data.G.shape[0], cfg))
+    for variant in variants:
+        for seed in range(cfg.seeds):
+            critic = build_critic(trained.cfg, variant, seed)
+            losses, secs = fit_critic(critic, data, cfg, seed, on_batch=progress.advance)
+            fit = Fit(variant, seed, Denormalized(critic, data.g_mean, data.g_std).eval(), losses, secs)
+            fits.append(fit)
+            seconds["fits"] += secs
+            fit_rows += [{"variant": variant, "fit_seed": seed, "epoch": e + 1, "loss": loss, "seconds": secs,
+                          "parameters": fit.parameters, "n_train": int(data.G.shape[0])}
+                         for e, loss in enumerate(losses)]
+    t0 = time.perf_counter()
+    for command in cfg.commands:  # 3. every fit scored on every sample set
+        sets = {TRAIN_ROBOT: held[command], **targets[command]}
         progress.phase(f"scoring {len(fits)} critics at {command:g} m/s", len(sets))
         for robot, samples in sets.items():
-            scores = score_fits(trained.actor, fits, samples, gamma, train_cfg, clip)
+            scores = score_fits(trained.actor, fits, samples, gamma, diag, clip, cfg.cos_stride)
             for fit, score in zip(fits, scores, strict=True):
                 rows.append({"command_vx": command, "robot": robot, "variant": fit.variant, "fit_seed": fit.seed,
                              "multiplicative": multiplicative[fit.variant], **score,
                              "fit_loss": fit.losses[-1], "fit_seconds": fit.seconds, "actor": label,
                              "rollout": samples.rollout_id})
             progress.advance()
-        seconds["scoring"] += time.perf_counter() - t0
+    seconds["scoring"] = time.perf_counter() - t0
     summary = cell_summary(rows)
     claims = verdict_rows(study_claims(rows))
-    config = {"actor": actor_spec, **{k: list(v) if isinstance(v, tuple) else v
-                                      for k, v in dataclasses.asdict(cfg).items()}, "variants": variants}
+    config = study_config(actor_spec, cfg)
     files = {
         "critic_study.csv": rows_to_csv(rows, STUDY_COLUMNS),
         "summary.csv": rows_to_csv(summary, SUMMARY_COLUMNS),

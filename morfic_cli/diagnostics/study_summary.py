@@ -18,6 +18,7 @@ reversed on others, else ``cannot tell``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -35,7 +36,8 @@ PARTLY, MIXED = "holds partly", "mixed"
 
 def _values(rows: Sequence[dict[str, Any]], metric: str, **match: Any) -> list[float]:
     """The metric of every row matching ``match`` (one per fit seed)."""
-    return [float(r[metric]) for r in rows if all(r[k] == v for k, v in match.items())]
+    return [math.nan if r[metric] is None else float(r[metric]) for r in rows
+            if all(r[k] == v for k, v in match.items())]
 
 
 def cell_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -188,6 +188,12 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
     out.append(_Section("Fixed-rollout diagnostic", [t for t in [fx] if t] + P(paper.CAUSAL_ADV_ALL),
                         "" if fx else "No fixed-rollout diagnoses with these runs' critics in the store "
                                       "(`morfic diagnose --fixed-rollout aliengo`)."))
+    if data.study:
+        from morfic_cli.report.study import study_tables, study_text
+
+        out.append(_Section("Critic study: the conditioning alone, the actor fixed", study_tables(data.study),
+                            study_text(data.study, str(data.study_meta.get("actor", "?")), data.study[0]["artifact"],
+                                       data.study_meta.get("seconds", {}))))
     comp = T.compute_table(compute)
     out.append(_Section("Training compute", [t for t in [comp] if t] + ([T.paper_compute_table()] if with_paper
                                                                         else [])))
@@ -293,10 +299,10 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
     return files
 
 
-REPORT_LAYOUT = 3
+REPORT_LAYOUT = 4
 """The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
 shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor. 3: training curves as the mean
-and min-max band over seeds, legends off the data."""
+and min-max band over seeds, legends off the data. 4: the critic-study section."""
 
 
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:

@@ -76,6 +76,8 @@ class StoreData:
         evals: eval.csv rows (+ ``run``, ``variant``, ``seed``, ``preset``, ``checkpoint``, ``artifact``).
         calibration: calibration.csv rows (+ the same keys).
         fixed: fixed_rollout.csv rows of critics among the runs and their MC reference rows (+ ``artifact``).
+        study: critic_study.csv rows of the newest critic study whose frozen actor is one of the runs
+            (+ ``artifact``); ``study_meta`` is that manifest's meta (actor, seconds).
         curves: Run name -> training-curve rows of its checkpoint.
         provenance: Every artifact used.
     """
@@ -84,6 +86,8 @@ class StoreData:
     evals: list[dict[str, Any]] = field(default_factory=list)
     calibration: list[dict[str, Any]] = field(default_factory=list)
     fixed: list[dict[str, Any]] = field(default_factory=list)
+    study: list[dict[str, Any]] = field(default_factory=list)
+    study_meta: dict[str, Any] = field(default_factory=dict)
     curves: dict[str, list[dict[str, float]]] = field(default_factory=dict)
     provenance: list[Provenance] = field(default_factory=list)
 
@@ -241,6 +245,11 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                         continue
                     key = (run.checkpoint, row["robot"], row["mode"], float(row["command_vx"]))
                     _keep(calib, key, {**row, **_run_keys(run), "artifact": manifest.id})
+            elif kind == "diagnosis" and "critic_study.csv" in manifest.files:
+                if manifest.inputs.get("actor") in by_ckpt:  # oldest first: the newest study wins
+                    data.study = [{**row, "artifact": manifest.id}
+                                  for row in read_csv_rows(store.read_file(manifest.id, "critic_study.csv"))]
+                    data.study_meta = dict(manifest.meta)
             elif kind == "diagnosis" and "fixed_rollout.csv" in manifest.files:
                 rows = read_csv_rows(store.read_file(manifest.id, "fixed_rollout.csv"))
                 actor = manifest.inputs.get("actor")
@@ -259,6 +268,8 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                              (fixed, "diagnosis", "fixed-rollout")):
         for row in rows.values():
             use(row["artifact"], kind, f"{role}/{row['artifact'][:12]}")
+    if data.study:
+        use(data.study[0]["artifact"], "diagnosis", f"critic-study/{data.study[0]['artifact'][:12]}")
     data.evals = list(evals.values())
     data.calibration = list(calib.values())
     data.fixed = list(fixed.values())

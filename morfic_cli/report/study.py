@@ -1,0 +1,85 @@
+"""The report's critic-study section: the fits' intervals per robot and the verdicts of (a) and (c), actor fixed.
+
+Built from the rows of a stored ``critic_study.csv`` (``morfic critic-study``; :mod:`~morfic_cli.diagnostics.
+critic_study`) with :mod:`~morfic_cli.diagnostics.study_summary`: one table per command, robots x variants, each
+cell the mean over fit seeds with its 95 % bootstrap interval for EV, Flip and CosGrad, and the claims' verdicts
+as text.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from morfic_cli.diagnostics.study_summary import cell_summary, study_claims
+from morfic_cli.report.model import Part, Row, Table
+from morfic_cli.report.tables import robot_label, robot_order
+from morfic_cli.rl.variants import variant_label, variant_order
+
+STUDY_TABLE_METRICS: tuple[tuple[str, str], ...] = (("ev", "EV"), ("flip", "Flip"), ("cos_grad", "Cos."))
+"""The metrics of each variant's column group."""
+
+
+def _cell(c: dict[str, Any] | None) -> tuple[Part, ...]:
+    if c is None or c["mean"] is None or not math.isfinite(c["mean"]):
+        return (Part(None),)
+    if c["lo"] is None or not math.isfinite(c["lo"]):
+        return (Part(c["mean"], None, 2),)
+    return (Part(None, text=f"{c['mean']:.2f} [{c['lo']:.2f}, {c['hi']:.2f}]"),)
+
+
+def study_tables(rows: Sequence[dict[str, Any]]) -> list[Table]:
+    """One table per command: robots (``train`` first) x (variant: EV, Flip, Cos.) with intervals."""
+    if not rows:
+        return []
+    summary = cell_summary(rows)
+    by = {(r["command_vx"], r["robot"], r["variant"], r["metric"]): r for r in summary}
+    variants = sorted({r["variant"] for r in summary}, key=variant_order)
+    robots = sorted({r["robot"] for r in summary}, key=lambda r: (r != "train", robot_order(r) if r != "train" else 0))
+    seeds = max(r["n"] for r in summary)
+    tables = []
+    for command in sorted({r["command_vx"] for r in summary}):
+        out = []
+        for robot in robots:
+            cells = tuple(_cell(by.get((command, robot, v, m))) for v in variants for m, _ in STUDY_TABLE_METRICS)
+            out.append(Row("train (held out)" if robot == "train" else robot_label(robot), cells))
+        caption = (f"Every critic fitted from scratch on one frozen actor's rollouts of the training distribution "
+                   f"({seeds} fit seeds each), scored on that actor's rollouts at {command:g} m/s: mean over the fits "
+                   "[95 % bootstrap interval]. EV, Cos. higher is better; Flip lower.")
+        tables.append(Table(f"critic_study_{command:g}".replace(".", "_"), f"Critic study at {command:g} m/s",
+                            caption, "Target", tuple(m for _ in variants for _, m in STUDY_TABLE_METRICS),
+                            tuple(out), groups=tuple((variant_label(v), len(STUDY_TABLE_METRICS)) for v in variants),
+                            math=False))
+    return tables
+
+
+def study_text(rows: Sequence[dict[str, Any]], actor: str, artifact: str, seconds: dict[str, float]) -> str:
+    """The verdicts of claims (a) and (c) with the actor fixed, each robot's effect with its interval."""
+    lines = [f"The conditioning alone: one frozen actor ({actor}), every critic fitted from scratch on the same "
+             f"training-distribution data (`morfic critic-study`, artifact `{artifact[:12]}`; fits "
+             f"{seconds.get('fits', math.nan):.0f} s, rollouts {seconds.get('rollouts', math.nan):.0f} s, scoring "
+             f"{seconds.get('scoring', math.nan):.0f} s). Verdicts from 95 % bootstrap intervals over fit seeds."]
+    for c in study_claims(rows):
+        if c["claim"] == "a":
+            parts = [f"{r['robot']} {r['effect'].text()} ({r['verdict']})" for r in c["robots"]]
+            what = "EV multiplicative - additive"
+        else:
+            parts = []
+            for r in c["robots"]:
+                worst = _worst_pair(r["pairs"])
+                parts.append(f"{r['robot']} {r['verdict']}" + (f" (weakest: {worst})" if worst else ""))
+            what = "film's Flip lowest and Cos. highest"
+        lines.append(f"- ({c['claim']}) at {c['command_vx']:g} m/s, {what}: **{c['verdict']}**; " + "; ".join(parts))
+    return "\n".join(lines)
+
+
+def _worst_pair(pairs: Sequence[dict[str, Any]]) -> str:
+    """The comparison whose interval lies lowest (the one that decides the verdict), as text."""
+    cands = [(p[m].lo if math.isfinite(p[m].lo) else p[m].estimate, p["other"], m, p[m])
+             for p in pairs for m in ("flip", "cos_grad") if math.isfinite(p[m].estimate)]
+    if not cands:
+        return ""
+    _, other, m, e = min(cands, key=lambda t: t[0])
+    what = f"{other} - film Flip" if m == "flip" else f"film - {other} Cos."
+    return f"{what} {e.text(3)}"
