@@ -8,18 +8,20 @@ mixes its conditioning with the data its own actor produced. This study removes 
    env, the evaluation env's settings otherwise) and a rollout on every target robot (descriptor mode), with
    sampled actions and the observation groups every critic reads (:mod:`~morfic_cli.diagnostics.samples`);
 2. every variant's critic is built fresh (its own morphology encoder, not shared with an actor) and regressed on
-   the Monte-Carlo returns G of the training rollout's samples in I_eps, all with the same optimiser, learning
-   rate, epochs, mini-batches and data order for a given seed (:func:`fit_critic`), several seeds each;
+   the standardised Monte-Carlo returns G of the training rollouts' samples in I_eps (every ``stride``-th step,
+   pooled over the commands, the last ``held_out`` envs left out), all with the same optimiser, learning rate,
+   epochs, mini-batches and data order for a given seed (:func:`fit_critic`), several seeds each;
 3. each fit is scored on every robot's samples exactly as ``morfic diagnose`` scores a run's critic: EV, NVB,
-   NVE, ASA and Flip against G, and CosGrad on the frozen actor (:func:`score_fits`); ``train`` rows are held-out
-   envs of the training distribution (in-distribution calibration).
+   NVE, ASA and Flip against G, and CosGrad on the frozen actor (:func:`score_fits`), per command; ``train`` rows
+   are the held-out envs of the training distribution (in-distribution calibration).
 
 A variant's critic is the same module as in training (:func:`~morfic_cli.rl.runner.build_models`), so ``ppo``'s and
 ``actor-only``'s critics (both unconditioned) are one architecture: the study fits it once, as ``ppo``.
 
 Store: one ``diagnosis`` manifest per call (ref ``diagnoses/critic-study``) with ``critic_study.csv``
-(:data:`STUDY_COLUMNS`, a row per command, robot, variant and fit seed), ``fits.csv`` (each fit's loss curve and
-wall time) and the figure ``critic_study.png``; inputs ``actor`` and every ``rollout/<command>/<robot>``.
+(:data:`STUDY_COLUMNS`, a row per command, robot, variant and fit seed), ``summary.csv`` (each cell's mean and
+interval), ``verdicts.csv`` (claims (a) and (c)), ``fits.csv`` (each fit's loss curve and wall time) and the
+figure ``critic_study.png``; inputs ``actor`` and every ``rollout/<command>/<robot>``.
 """
 
 from __future__ import annotations
