@@ -279,9 +279,11 @@ def sample_note(results: Path, fixed: pd.DataFrame) -> list[str]:
 
 def render(results: Path) -> str:
     """All tables as one markdown block (without the markers)."""
-    ev, cal, fixed = load(results, "eval"), load(results, "calibration"), load_fixed(results)
+    ev, cal, fixed = load_evals(results), load(results, "calibration"), load_fixed(results)
     out: list[str] = []
-    titles = {("descriptor", 2.0): "Descriptor mode (the paper's protocol), 2.0 m/s",
+    titles = {("descriptor", 1.0): "Descriptor mode, 1.0 m/s (the trained regime: seed 0 of every variant, "
+                                   "`<run>-eval-1.0.csv`; the paper reports none)",
+              ("descriptor", 2.0): "Descriptor mode (the paper's protocol), 2.0 m/s",
               ("descriptor", 2.5): "Descriptor mode, 2.5 m/s (the paper reports only MorFiC-F, as v_x^max)",
               ("full", 2.0): "Full mode (the targets' own models; a morfic extension, no paper column), 2.0 m/s",
               ("full", 2.5): "Full mode, 2.5 m/s"}
