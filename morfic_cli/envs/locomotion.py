@@ -194,7 +194,7 @@ class LocomotionEnv(VecEnv):
             self.episode_sums[name] += value
         self.episode_lin_tracking += torch.nan_to_num(raw[TRACKING_TERM])  # unweighted: --set w_lin=0 keeps it
 
-        log: dict[str, torch.Tensor] = {f"/reward/{k}": m * self.dt for k, m in _term_means(terms).items()}
+        log: dict[str, torch.Tensor] = {f"/reward/{k}": m for k, m in _term_means(terms, self.dt).items()}
         log.update({f"/reward_raw/{k}": m for k, m in _term_means(raw).items()})
         vx_err = torch.nan_to_num(state.command[:, 0] - state.base_lin_vel_b[:, 0]).abs()
         log["/tracking/vx_error"] = vx_err.mean()
@@ -444,16 +444,18 @@ class LocomotionEnv(VecEnv):
         self.backend.close()
 
 
-def _term_means(terms: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Mean over envs of each term (non-finite values as 0), as 0-d float64 tensors on the terms' device (no host read).
+def _term_means(terms: dict[str, torch.Tensor], scale: float = 1.0) -> dict[str, torch.Tensor]:
+    """``scale`` x the mean over envs of each term (non-finite values as 0), as 0-d float64 tensors (no host read).
 
-    The means are computed in float32 (as they always were) and widened to float64, so that a log value times dt is
-    the same number as the Python float arithmetic gave. Shape: each value (num_envs,) -> ().
+    The means are computed in float32 (as they always were) and widened to float64 before the scaling, so a value
+    is the same number the Python float arithmetic gave. Shape: each value (num_envs,) -> ().
     """
     names = list(terms)
     if not names:
         return {}
     means = torch.nan_to_num(torch.stack([terms[k] for k in names])).mean(dim=1).double()
+    if scale != 1.0:
+        means = means * scale
     return dict(zip(names, means.unbind(), strict=True))
 
 

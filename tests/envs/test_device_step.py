@@ -6,12 +6,15 @@ tensor, ``nonzero()``, ``wp.array.numpy()``) is patched to raise while ``Locomot
 :mod:`morfic_cli.sim.sync` (the counted reads of a count or a flag). On a GPU each of those would be a transfer and a
 wait for the device. The config makes every part of the step happen within a few dozen steps: resets (short
 episodes), re-randomisation, pushes, command resampling, the curriculum, and a diverged world.
+``MORFIC_WARP_TEST_DEVICE=cuda`` runs it with the warp backend on the GPU (without the CPU-backend comparison:
+the GPU's generator draws other numbers), where the patched reads would be real device-to-host transfers.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -24,6 +27,8 @@ from morfic_cli.envs.locomotion import LocomotionEnv  # noqa: E402
 from morfic_cli.sim import sync  # noqa: E402
 
 N = 6
+DEVICE = os.environ.get("MORFIC_WARP_TEST_DEVICE", "cpu")
+"""Where the warp backend runs: warp's CPU device (default, CI) or the GPU ("cuda")."""
 READS_PER_STEP = 4
 """Counted reads per step: resets, command resampling, re-randomisation (env) and 'did a world diverge' (backend)."""
 
@@ -59,7 +64,7 @@ def no_host_reads():
 
 
 def _cfg(backend: str) -> EnvCfg:
-    cfg = EnvCfg(num_envs=N, sim=SimCfg(num_threads=1, backend=backend, device="cpu"))
+    cfg = EnvCfg(num_envs=N, sim=SimCfg(num_threads=1, backend=backend, device=DEVICE if backend == "warp" else "cpu"))
     return dataclasses.replace(
         cfg, episode_length_s=0.4,  # 20 steps: time-outs and resets
         rand=dataclasses.replace(cfg.rand, push_interval_s=0.1, rerandomize_interval_s=0.14),
@@ -92,8 +97,9 @@ def test_the_warp_step_reads_nothing_back_and_matches_the_cpu_backend():
                 obs, rew, done, extras = warp_env.step(a)
             assert sync.reads - reads <= READS_PER_STEP
             assert all(isinstance(v, torch.Tensor) and v.device == warp_env.device for v in extras["log"].values())
-            dones += done
-            if step < 10:  # before the first reset: the same draws, so the CPU backend's numbers within parity
+            assert obs["policy"].device == rew.device == done.device == warp_env.device
+            dones += done.cpu()
+            if step < 10 and DEVICE == "cpu":  # before the first reset: the same draws, the CPU backend's numbers
                 oc, rc, dc, _ = cpu_env.step(a)
                 assert torch.equal(done, dc)
                 torch.testing.assert_close(obs["critic"], oc["critic"], rtol=0, atol=2e-2)
@@ -104,7 +110,7 @@ def test_the_warp_step_reads_nothing_back_and_matches_the_cpu_backend():
         assert warp_env.nonfinite_resets == 1
         assert float(warp_env.command_ranges.vx[1]) > warp_env.cfg.commands.vx_init[1], "the curriculum ran"
         for key in ("policy", "history", "critic", "privileged", "morphology"):
-            assert torch.isfinite(obs[key]).all(), key
+            assert torch.isfinite(obs[key]).all().cpu(), key
     finally:
         warp_env.close()
         cpu_env.close()
