@@ -1,6 +1,8 @@
 """Results-only bundles: which refs (and how much of each history) hold the results of a set of runs.
 
-``morfic store export runs/NAME --results-only`` names *runs*; the export finds their results itself:
+``morfic store export runs/NAME --results-only`` names *runs*; the export finds their results itself (a named
+ref whose current version is itself a result, e.g. ``diagnoses/critic-study``, goes in at that version only, as
+version 1, with the checkpoints it names reduced like every other run's: no weights, curves or rollout logs):
 
 - each run ``runs/NAME`` goes in at its current version only, as version 1 (as ``--latest`` does), so it merges
   with the run's weights-only bundle (``--latest --without-trainer-state``), which holds the same one-entry history;
@@ -39,10 +41,10 @@ RUN_FILE = "model.pt"
 
 
 def _not_a_run(name: str, manifest: Manifest) -> StoreError:
-    return StoreError(f"--results-only exports runs, and '{name}' is not one (it is a {manifest.kind} artifact): "
-                      "name the runs (runs/NAME, see `morfic store ls --kind checkpoint`) and the export finds the "
-                      "evals and diagnoses made from them, e.g. `morfic store export runs/film-cpu-s0 --results-only "
-                      "--out bundles/`.")
+    return StoreError(f"--results-only exports runs or results, and '{name}' is neither (it is a {manifest.kind} "
+                      "artifact): name the runs (runs/NAME, see `morfic store ls --kind checkpoint`) and the export "
+                      "finds the evals and diagnoses made from them, e.g. `morfic store export runs/film-cpu-s0 "
+                      "--results-only --out bundles/`.")
 
 
 def results_histories(store: Store, runs: list[str]) -> dict[str, list[RefEntry]]:
@@ -50,7 +52,7 @@ def results_histories(store: Store, runs: list[str]) -> dict[str, list[RefEntry]
 
     Raises:
         ArtifactNotFoundError: A name that is not a ref.
-        StoreError: A ref that is not a run, or a run without any eval or diagnosis in this store.
+        StoreError: A ref that is neither a run nor a result, or a run without any eval or diagnosis in this store.
     """
     cache: dict[str, Manifest] = {}
 
@@ -60,15 +62,18 @@ def results_histories(store: Store, runs: list[str]) -> dict[str, list[RefEntry]
         return cache[oid]
 
     out: dict[str, list[RefEntry]] = {}
+    results: set[str] = set()  # named refs that are results themselves, not runs
     for name in sorted(set(runs)):
         history = store.refs.history(check_ref_name(name))
         if not history:
             raise ArtifactNotFoundError(f"no ref '{name}' in store {store.root}; try `morfic store ls`.")
         head = manifest(history[-1].id)
-        if head.kind != "checkpoint" or RUN_FILE not in head.files:
+        if head.kind in RESULT_KINDS:
+            results.add(name)
+        elif head.kind != "checkpoint" or RUN_FILE not in head.files:
             raise _not_a_run(name, head)
         out[name] = [RefEntry(1, history[-1].id, history[-1].time)]
-    checkpoints = {h[-1].id for h in out.values()}
+    checkpoints = {h[-1].id for name, h in out.items() if name not in results}
     found: set[str] = set()
     for ref in store.refs.names():
         if ref in out:
@@ -86,7 +91,7 @@ def results_histories(store: Store, runs: list[str]) -> dict[str, list[RefEntry]
                 found |= hits
         if last is not None:
             out[ref] = history[:last + 1]
-    bare = sorted(name for name in runs if out[name][0].id not in found)
+    bare = sorted(name for name in runs if name not in results and out[name][0].id not in found)
     if bare:
         raise StoreError(f"{bare[0]} has no eval, diagnosis or check in store {store.root}, so a results-only "
                          f"bundle of it would hold no results; evaluate and diagnose it first (`morfic eval "

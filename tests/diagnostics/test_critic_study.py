@@ -81,7 +81,26 @@ def test_study_rows_files_and_verdicts(run_cli, store, tmp_path):
     text = (tmp_path / "report" / "report.md").read_text()
     assert "Critic study: the conditioning alone, the actor fixed" in text
     assert "Critic study at 1 m/s" in text and "train (held out)" in text
+    newest = store.read_manifest("diagnoses/critic-study")  # the second call's study (its timings differ)
+    assert newest.config == manifest.config and newest.id != manifest.id
+    manifest = newest
     assert f"`{manifest.id[:12]}`" in text
+    # a results-only bundle of the study: its files, the actor's and rollouts' manifests without weights or logs
+    bundles = tmp_path / "bundles"
+    code, _, stderr = run_cli("store", "export", "diagnoses/critic-study", "--results-only", "--out", str(bundles))
+    assert code == 0, stderr
+    other = tmp_path / "other"
+    code, _, stderr = run_cli("store", "export", "runs/film-smoke-s0", "--latest", "--out", str(bundles))
+    assert code == 0, stderr
+    for t in (bundles / "film-smoke-s0.tar", bundles / "critic-study.tar"):
+        code, _, stderr = run_cli("store", "import", str(t), "--store", str(other))
+        assert code == 0, stderr
+    assert run_cli("store", "verify", "--store", str(other))[0] == 0
+    copy = Store(other)
+    assert copy.resolve("diagnoses/critic-study") == manifest.id
+    assert copy.read_file(manifest.id, "verdicts.csv") == store.read_file(manifest.id, "verdicts.csv")
+    rollout = copy.read_manifest(manifest.inputs["rollout/1/go2"])
+    assert set(copy.omitted_files(rollout)) == {"rollout.mcap", "obs.npz"}
 
 
 def test_reproduce_runs_the_study_once(store):

@@ -210,11 +210,11 @@ def test_a_weights_only_bundle_on_top_fills_the_weights(src, tmp_path):
 
 
 @pytest.mark.parametrize(("spec", "needle"), [
-    ("evals/a", r"'evals/a' is not one \(it is a eval artifact\): name the runs \(runs/NAME"),
-    ("diagnoses/calibration", r"is not one \(it is a diagnosis artifact\)"),
+    ("rollouts/a", r"'rollouts/a' is neither \(it is a rollout artifact\): name the runs \(runs/NAME"),
     ("runs/nope", "no ref 'runs/nope'"),
 ])
-def test_results_only_takes_runs(src, tmp_path, spec, needle):
+def test_results_only_takes_runs_or_results(src, tmp_path, spec, needle):
+    src.set_ref("rollouts/a", src.put_manifest("rollout", config={"x": 1}))
     before = listing(src.root)
     with pytest.raises((StoreError, ArtifactNotFoundError), match=needle):
         src.export_tar([spec], tmp_path / "x.tar", results_only=True)
@@ -310,7 +310,14 @@ def test_cli_results_only_round_trip(run_cli, src, tmp_path):
     code, _, err = run_cli("store", "get", "runs/b", "--file", "model.pt", "--out", str(tmp_path / "got"),
                            "--store", dst)
     assert code == 1 and err.startswith("Error: file 'model.pt'") and "results-only bundle left it out" in err
-    code, out, err = run_cli("store", "export", "evals/b", "--results-only", "--out", str(tmp_path / "x"),
+    src.set_ref("rollouts/b", b["rollout"])  # neither a run nor a result
+    code, out, err = run_cli("store", "export", "rollouts/b", "--results-only", "--out", str(tmp_path / "x"),
                              "--store", str(src.root))
-    assert code == 1 and out == "" and err.startswith("Error: --results-only exports runs, and 'evals/b' is not one")
+    assert code == 1 and out == ""
+    assert err.startswith("Error: --results-only exports runs or results, and 'rollouts/b' is neither")
     assert not (tmp_path / "x").exists()
+    # a result named by its ref goes in alone, at its current version, its checkpoint without weights or curve
+    report = src.export_tar(["evals/b"], tmp_path / "e.tar", results_only=True)
+    assert report.refs == ["evals/b"]
+    assert {"model.pt", "curve.png", "rollout.mcap", "obs.npz"} <= set(report.omitted_files.values())
+    assert report.omitted == {b["state"]: STATE}
