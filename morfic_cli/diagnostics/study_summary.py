@@ -11,9 +11,10 @@ read from the interval; docs/report.md "How a verdict is read"):
   (film - other, the claim: > 0); it holds on a robot when every one of those comparisons holds, does not hold when
   one of them is reversed, else cannot tell.
 
-A claim over several robots: ``holds`` when it holds on every robot, ``does not hold`` when it is reversed on every
-robot, ``holds partly`` when it holds on some and is reversed on none, ``mixed`` when it holds on some and is
-reversed on others, else ``cannot tell``.
+A claim over several robots: ``holds`` when it holds on every robot, ``holds partly`` when it holds on some and is
+reversed on none, ``mixed`` when it holds on some and is reversed on others, ``does not hold`` when it holds on none
+and is reversed on at least one, else ``cannot tell`` (the rule of :mod:`morfic_cli.report.claims`, with ``mixed``
+split out of ``holds partly``).
 """
 
 from __future__ import annotations
@@ -63,12 +64,12 @@ def combine(verdicts: Sequence[str]) -> str:
     holds, reversed_ = verdicts.count(stats.HOLDS), verdicts.count(stats.NOT)
     if verdicts and holds == len(verdicts):
         return stats.HOLDS
-    if verdicts and reversed_ == len(verdicts):
-        return stats.NOT
     if holds and reversed_:
         return MIXED
     if holds:
         return PARTLY
+    if reversed_:
+        return stats.NOT
     return stats.CANNOT
 
 

@@ -229,7 +229,7 @@ def test_claim_c_needs_film_best_against_every_critic():
     assert pairs["adaln"]["cos_grad"].estimate == pytest.approx(0.1)
     assert aliengo["verdict"] == stats.NOT
     assert claim["robots"][1]["verdict"] == stats.CANNOT  # mini_cheetah: no rows
-    assert claim["verdict"] == stats.CANNOT  # one robot reversed, one without data: neither holds nor all reversed
+    assert claim["verdict"] == stats.NOT  # reversed on one robot, holds on none
 
 
 def test_combine_by_hand():
@@ -237,4 +237,5 @@ def test_combine_by_hand():
     assert ss.combine([stats.NOT, stats.NOT]) == stats.NOT
     assert ss.combine([stats.HOLDS, stats.CANNOT]) == ss.PARTLY
     assert ss.combine([stats.HOLDS, stats.NOT]) == ss.MIXED
-    assert ss.combine([stats.CANNOT, stats.NOT]) == stats.CANNOT
+    assert ss.combine([stats.CANNOT, stats.NOT]) == stats.NOT
+    assert ss.combine([stats.CANNOT, stats.CANNOT]) == stats.CANNOT
