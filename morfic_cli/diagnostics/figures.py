@@ -95,6 +95,10 @@ STUDY_METRICS: tuple[tuple[str, str, bool], ...] = (
 """The critic study figure's columns: metric, axis label, higher is better."""
 
 
+STUDY_LABELS: dict[str, str] = {"ppo": "PPO = Actor-only (no z_m)"}
+"""Legend labels of the critic study where a critic stands for more than one variant."""
+
+
 def critic_study_plot(summary: Sequence[dict[str, Any]]):
     """The critic study figure: one row per command, columns EV / Flip / CosGrad, robots on x, a marker per variant.
 
@@ -142,17 +146,20 @@ def critic_study_plot(summary: Sequence[dict[str, Any]]):
                 face = color if mult.get(variant) else "white"
                 ax.errorbar(xs, ys, yerr=[lo, hi], fmt="none", ecolor=color, elinewidth=1.0, capsize=2)
                 for x, y, c in zip(xs, ys, clipped, strict=True):
-                    ax.plot([x], [y], marker="v" if c else "o", ms=5, mfc=face, mec=color,
-                            label=variant_label(variant) if (x, y) == (xs[0], ys[0]) and i == 0 and j == 0 else None)
+                    ax.plot([x], [y], marker="v" if c else "o", ms=5, mfc=face, mec=color, ls="none")
             if metric == "ev":
                 ax.axhline(0.0, color="black", lw=0.6)
                 ax.set_ylim(-1.08, 1.05)
             ax.set_xticks(range(len(robots)), robots, fontsize=7, rotation=30)
             ax.set_title(f"{ylabel}, {command:g} m/s", fontsize=9)
             ax.grid(axis="y", alpha=0.3)
-    handles, labels = axes[0][0].get_legend_handles_labels()
-    if handles:
-        fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 7), fontsize=8, frameon=False)
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], marker="o", ls="none", ms=6, mec=f"C{k}", mfc=f"C{k}" if mult.get(v) else "white",
+                      label=STUDY_LABELS.get(v, variant_label(v))) for k, v in enumerate(variants)]
+    handles.append(Line2D([], [], marker="v", ls="none", ms=6, mec="grey", mfc="white", label="EV below -1"))
+    if variants:
+        fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.suptitle("Critic study: critics fitted from scratch on one frozen actor's data (mean and 95 % interval over "
                  "fit seeds; filled = multiplicative)", fontsize=10)
     return fig
