@@ -24,7 +24,8 @@ Outputs:
 With ``--write FILE`` the tables replace what stands between ``<!-- results-tables:begin -->`` and
 ``<!-- results-tables:end -->`` in FILE, the claims what stands between ``<!-- results-claims:begin -->`` and
 ``<!-- results-claims:end -->``, the walking checks ``<!-- results-walk:begin -->`` ... ``end``, the bundles
-``<!-- results-bundles:begin -->`` ... ``end``; without it all go to stdout.
+``<!-- results-bundles:begin -->`` ... ``end``, the critic study (``critic-study.csv`` and ``.json``, when there)
+``<!-- results-study:begin -->`` ... ``end``; without it all go to stdout.
 
 Usage: python scripts/results_tables.py [--results docs/results] [--write docs/results.md] [--figures docs/img]
                                         [--bundles artifacts/bundles]
@@ -45,6 +46,9 @@ BEGIN, END = "<!-- results-tables:begin -->", "<!-- results-tables:end -->"
 CLAIMS_BEGIN, CLAIMS_END = "<!-- results-claims:begin -->", "<!-- results-claims:end -->"
 WALK_BEGIN, WALK_END = "<!-- results-walk:begin -->", "<!-- results-walk:end -->"
 BUNDLES_BEGIN, BUNDLES_END = "<!-- results-bundles:begin -->", "<!-- results-bundles:end -->"
+STUDY_BEGIN, STUDY_END = "<!-- results-study:begin -->", "<!-- results-study:end -->"
+STUDY_CSV, STUDY_JSON = "critic-study.csv", "critic-study.json"
+"""The critic study's rows (its ``critic_study.csv`` verbatim) and its id, settings and timings."""
 MIB = 2**20
 ROBOTS = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")
 FIXED_ROBOTS = ("aliengo", "mini_cheetah")
@@ -444,6 +448,21 @@ def render_claims(results: Path) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
+def study_block(results: Path) -> str:
+    """The critic study (``critic-study.csv``, ``critic-study.json``): verdicts of (a) and (c), then its tables."""
+    from morfic_cli.report.markdown import table_markdown
+    from morfic_cli.report.study import study_tables, study_text
+
+    path = results / STUDY_CSV
+    if not path.exists():
+        return "No critic study under results/ yet (`morfic critic-study`, then copy its critic_study.csv).\n"
+    rows = pd.read_csv(path).to_dict("records")
+    meta = json.loads((results / STUDY_JSON).read_text())
+    out = [study_text(rows, meta["actor"], meta["id"], meta["seconds"]), ""]
+    out += [table_markdown(t) + "\n" for t in study_tables(rows)]
+    return "\n".join(out).rstrip() + "\n"
+
+
 # ----------------------------------------------------------------------------------------------- figures
 def write_figures(results: Path, out: Path) -> list[Path]:
     """Write the figures into ``out``; return their paths.
@@ -513,6 +532,8 @@ def main(argv: list[str] | None = None) -> int:
         write_between_markers(args.write, claims, CLAIMS_BEGIN, CLAIMS_END)
         write_between_markers(args.write, "\n".join(walk_table(args.results)) + "\n", WALK_BEGIN, WALK_END)
         write_between_markers(args.write, "\n".join(bundle_table(args.bundles)) + "\n", BUNDLES_BEGIN, BUNDLES_END)
+        if STUDY_BEGIN in args.write.read_text():
+            write_between_markers(args.write, study_block(args.results), STUDY_BEGIN, STUDY_END)
         print(f"{args.write}: tables and claims of {load(args.results, 'eval')['run'].nunique()} run(s) written")
     if args.figures is not None:
         for path in write_figures(args.results, args.figures):

@@ -1,9 +1,9 @@
 """The report's critic-study section: the fits' intervals per robot and the verdicts of (a) and (c), actor fixed.
 
 Built from the rows of a stored ``critic_study.csv`` (``morfic critic-study``; :mod:`~morfic_cli.diagnostics.
-critic_study`) with :mod:`~morfic_cli.diagnostics.study_summary`: one table per command, robots x variants, each
-cell the mean over fit seeds with its 95 % bootstrap interval for EV, Flip and CosGrad, and the claims' verdicts
-as text.
+critic_study`) with :mod:`~morfic_cli.diagnostics.study_summary`: one table per command and metric (EV, Flip,
+CosGrad), robots x variants, each cell the mean over fit seeds with its 95 % bootstrap interval, and the claims'
+verdicts as text.
 """
 
 from __future__ import annotations
@@ -12,25 +12,31 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from morfic_cli.diagnostics.figures import STUDY_LABELS
 from morfic_cli.diagnostics.study_summary import cell_summary, study_claims
 from morfic_cli.report.model import Part, Row, Table
 from morfic_cli.report.tables import robot_label, robot_order
 from morfic_cli.rl.variants import variant_label, variant_order
 
 STUDY_TABLE_METRICS: tuple[tuple[str, str], ...] = (("ev", "EV"), ("flip", "Flip"), ("cos_grad", "Cos."))
-"""The metrics of each variant's column group."""
+"""The metrics of the study's tables, one table each per command."""
+
+
+def _num(x: float) -> str:
+    """Two decimals, or three significant digits past 100 (EV runs to -10^5 where the returns barely vary)."""
+    return f"{x:.2f}" if abs(x) < 100 else f"{x:.3g}"
 
 
 def _cell(c: dict[str, Any] | None) -> tuple[Part, ...]:
     if c is None or c["mean"] is None or not math.isfinite(c["mean"]):
         return (Part(None),)
     if c["lo"] is None or not math.isfinite(c["lo"]):
-        return (Part(c["mean"], None, 2),)
-    return (Part(None, text=f"{c['mean']:.2f} [{c['lo']:.2f}, {c['hi']:.2f}]"),)
+        return (Part(None, text=_num(c["mean"])),)
+    return (Part(None, text=f"{_num(c['mean'])} [{_num(c['lo'])}, {_num(c['hi'])}]"),)
 
 
 def study_tables(rows: Sequence[dict[str, Any]]) -> list[Table]:
-    """One table per command: robots (``train`` first) x (variant: EV, Flip, Cos.) with intervals."""
+    """One table per command and metric (EV, Flip, Cos.): robots (``train`` first) x variants, with intervals."""
     if not rows:
         return []
     summary = cell_summary(rows)
@@ -40,17 +46,17 @@ def study_tables(rows: Sequence[dict[str, Any]]) -> list[Table]:
     seeds = max(r["n"] for r in summary)
     tables = []
     for command in sorted({r["command_vx"] for r in summary}):
-        out = []
-        for robot in robots:
-            cells = tuple(_cell(by.get((command, robot, v, m))) for v in variants for m, _ in STUDY_TABLE_METRICS)
-            out.append(Row("train (held out)" if robot == "train" else robot_label(robot), cells))
-        caption = (f"Every critic fitted from scratch on one frozen actor's rollouts of the training distribution "
-                   f"({seeds} fit seeds each), scored on that actor's rollouts at {command:g} m/s: mean over the fits "
-                   "[95 % bootstrap interval]. EV, Cos. higher is better; Flip lower.")
-        tables.append(Table(f"critic_study_{command:g}".replace(".", "_"), f"Critic study at {command:g} m/s",
-                            caption, "Target", tuple(m for _ in variants for _, m in STUDY_TABLE_METRICS),
-                            tuple(out), groups=tuple((variant_label(v), len(STUDY_TABLE_METRICS)) for v in variants),
-                            math=False))
+        for metric, name in STUDY_TABLE_METRICS:
+            out = [Row("train (held out)" if robot == "train" else robot_label(robot),
+                       tuple(_cell(by.get((command, robot, v, metric))) for v in variants)) for robot in robots]
+            better = "lower" if metric == "flip" else "higher"
+            caption = (f"{name} of every critic fitted from scratch on one frozen actor's rollouts of the training "
+                       f"distribution ({seeds} fit seeds each), scored on that actor's rollouts at {command:g} m/s: "
+                       f"mean over the fits [95 % bootstrap interval]; {better} is better.")
+            key = f"critic_study_{metric}_{command:g}".replace(".", "_")
+            tables.append(Table(key, f"Critic study: {name} at {command:g} m/s", caption, "Target",
+                                tuple(STUDY_LABELS.get(v, variant_label(v)) for v in variants), tuple(out),
+                                math=False))
     return tables
 
 
@@ -59,7 +65,7 @@ def study_text(rows: Sequence[dict[str, Any]], actor: str, artifact: str, second
     lines = [f"The conditioning alone: one frozen actor ({actor}), every critic fitted from scratch on the same "
              f"training-distribution data (`morfic critic-study`, artifact `{artifact[:12]}`; fits "
              f"{seconds.get('fits', math.nan):.0f} s, rollouts {seconds.get('rollouts', math.nan):.0f} s, scoring "
-             f"{seconds.get('scoring', math.nan):.0f} s). Verdicts from 95 % bootstrap intervals over fit seeds."]
+             f"{seconds.get('scoring', math.nan):.0f} s). Verdicts from 95 % bootstrap intervals over fit seeds.", ""]
     for c in study_claims(rows):
         if c["claim"] == "a":
             parts = [f"{r['robot']} {r['effect'].text()} ({r['verdict']})" for r in c["robots"]]

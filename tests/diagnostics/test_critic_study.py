@@ -80,7 +80,7 @@ def test_study_rows_files_and_verdicts(run_cli, store, tmp_path):
     assert code == 0, stderr
     text = (tmp_path / "report" / "report.md").read_text()
     assert "Critic study: the conditioning alone, the actor fixed" in text
-    assert "Critic study at 1 m/s" in text and "train (held out)" in text
+    assert "Critic study: EV at 1 m/s" in text and "train (held out)" in text
     newest = store.read_manifest("diagnoses/critic-study")  # the second call's study (its timings differ)
     assert newest.config == manifest.config and newest.id != manifest.id
     manifest = newest
