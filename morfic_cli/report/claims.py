@@ -240,6 +240,19 @@ def _vx(command_vx: float) -> str:
     return f"{command_vx:.1f} m/s"
 
 
+def _one_seed_note(rows: Sequence[dict[str, Any]], metric: str, among: Iterable[str], what: str) -> str:
+    """The note naming the one-seed variants of ``among`` (fewer than MIN_SEEDS on an OOD robot), else ``""``.
+
+    E.g. `` adaln, hyper have one seed: <what>``.
+    """
+    among = set(among)
+    one_seed = sorted({v for robot in OOD_ROBOTS for v, x in per_seed(rows, metric, robot).items()
+                       if len(x) < MIN_SEEDS and v in among})
+    if not one_seed:
+        return ""
+    return f" {', '.join(one_seed)} {'has' if len(one_seed) == 1 else 'have'} one seed: {what}"
+
+
 def claim_a(calibration: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) -> Claim:
     """(a) On each OOD robot, the group effect on EV: multiplicative critics minus additive ones, interval > 0."""
     text = ("Multiplicative critics keep a higher EV than additive ones on out-of-distribution robots "
@@ -267,11 +280,8 @@ def claim_a(calibration: Sequence[dict[str, Any]], command_vx: float = PAPER_COM
         per_robot.append(line + " (" + ", ".join(f"{v} {_mean(x)}" for v, x in (*mult.items(), *add.items())) + ")")
     v = aggregate(outcomes)
     reason = _reason(outcomes, OOD_ROBOTS, "the multiplicative group's EV is higher (interval above 0)")
-    one_seed = sorted({v for robot in OOD_ROBOTS for v, x in per_seed(rows, "ev", robot).items()
-                       if len(x) < MIN_SEEDS and v in STOCK})
-    if one_seed:
-        reason += (f" {', '.join(one_seed)} {'has' if len(one_seed) == 1 else 'have'} one seed: the group effect has "
-                   "no interval until every variant of both groups has at least 2.")
+    reason += _one_seed_note(rows, "ev", STOCK, "the group effect has no interval until every variant of both "
+                             "groups has at least 2.")
     return Claim("a", text, "Fig. 3 (EV, no numbers): additive critics lose calibration on the heavier and "
                  "out-of-distribution robots; multiplicative ones keep it on Mini Cheetah and AlienGo.",
                  "; ".join(per_robot), v, reason, _ids(rows, (*MULTIPLICATIVE, *ADDITIVE), OOD_ROBOTS), command_vx)
@@ -409,11 +419,8 @@ def claim_d(evals: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) 
                   "ablation\"): " + ", ".join(f"{r} {paper_spread(r):.2f}" if paper_spread(r) is not None
                                               else f"{r} -" for r in OOD_ROBOTS) + " m/s.")
     reason = _reason(outcomes, OOD_ROBOTS, "the spread's interval lies below the tolerance")
-    one_seed = sorted({v for robot in OOD_ROBOTS for v, x in per_seed(rows, "vx_mean", robot).items()
-                       if len(x) < MIN_SEEDS and v in MULTIPLICATIVE})
-    if one_seed:
-        reason += (f" {', '.join(one_seed)} {'has' if len(one_seed) == 1 else 'have'} one seed: the spread has no "
-                   "interval until every multiplicative variant has at least 2.")
+    reason += _one_seed_note(rows, "vx_mean", MULTIPLICATIVE, "the spread has no interval until every "
+                             "multiplicative variant has at least 2.")
     return Claim("d", text, paper_text, "; ".join(per_robot), aggregate(outcomes), reason,
                  _ids(rows, MULTIPLICATIVE, OOD_ROBOTS), command_vx)
 
