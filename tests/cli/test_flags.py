@@ -58,7 +58,7 @@ def test_out_given_a_file_is_an_error_for_every_directory_out(run_cli, tmp_path)
     argv = {
         "eval": ["eval", "runs/x"], "diagnose": ["diagnose", "runs/x"], "export": ["export", "runs/x"],
         "report": ["report"], "reproduce": ["reproduce"], "store get": ["store", "get", "runs/x"],
-        "store export": ["store", "export", "runs/x"],
+        "store export": ["store", "export", "runs/x"], "critic-study": ["critic-study", "--actor", "runs/x"],
     }
     assert set(argv) == {n for n, c in _commands().items() if _option(c, "--out")}
     for name, args in argv.items():

@@ -48,9 +48,11 @@ def _state(store: Store) -> tuple[int, dict[str, int]]:
 def test_reproduce_writes_every_stage_and_the_report(reproduced):
     root, summary = reproduced
     store = Store(root)
-    assert summary["work_done"] == summary["steps"] == 2 + 2 + 2 + 2 + 1 + 1
+    # train, eval, diagnose x 2 variants, fixed rollout x 2 robots, the critic study, compare, report
+    assert summary["work_done"] == summary["steps"] == 2 + 2 + 2 + 2 + 1 + 1 + 1
     for ref in ("runs/film-smoke-s0", "runs/ppo-smoke-s0", "evals/film-smoke-s0", "evals/ppo-smoke-s0",
                 "diagnoses/calibration", "diagnoses/fixed-rollout/aliengo", "diagnoses/fixed-rollout/mini_cheetah",
+                "diagnoses/critic-study",
                 "tables/compare-baselines", "tables/morphology-support", "reports/smoke"):
         assert store.has_ref(ref), ref
     report = store.read_manifest("reports/smoke")
@@ -61,6 +63,7 @@ def test_reproduce_writes_every_stage_and_the_report(reproduced):
     md = store.read_file("reports/smoke", "report.md").decode()
     for oid in report.inputs.values():
         assert oid in md
+    assert "## Critic study: the conditioning alone, the actor fixed" in md  # the smoke preset's tiny study
     assert summary["out"].endswith("reports/smoke") and any(f.endswith("report.md") for f in summary["files"])
     evals = store.read_manifest("evals/film-smoke-s0")
     assert evals.config["command_vx"] == [2.0, 2.5] and evals.config["modes"] == ["descriptor", "full"]
@@ -71,9 +74,9 @@ def test_rerun_does_no_work(run_cli, store):
     code, out, err = run_cli("reproduce", "--preset", "smoke", "--variants", VARIANTS, "--format", "json")
     assert code == 0, err
     summary = json.loads(out)
-    assert summary["work_done"] == 0 and summary["skipped"] == summary["steps"] == 10
+    assert summary["work_done"] == 0 and summary["skipped"] == summary["steps"] == 11
     assert _state(store) == before  # not one new manifest, not one new ref version
-    assert err.count("skipped (in the store)") == 10
+    assert err.count("skipped (in the store)") == 11
     assert "report:" in err and "reports/smoke" in err
 
 
