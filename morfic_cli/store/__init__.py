@@ -377,6 +377,8 @@ class Store:
     def ls(self, kind: str | None = None, *, include_superseded: bool = True) -> list[dict[str, Any]]:
         """One row per manifest, oldest first: ``ref``, ``id``, ``kind``, ``created``, ``files``, ``size``.
 
+        ``size`` counts the files this store holds (a results-only import leaves weights and logs out).
+
         ``ref`` is the name of a ref whose current version is this manifest; else ``name@N`` for
         an old version of a ref; else ``None``.
 
@@ -402,8 +404,9 @@ class Store:
             manifest = parse_manifest(oid, self.objects.get_bytes(oid, verify=False))
         except StoreError:
             return {"ref": label, "id": oid, "kind": None, "created": None, "files": None, "size": None}
+        absent = self.omitted_files(manifest)  # left out by a results-only import: not held, not counted
         return {"ref": label, "id": oid, "kind": manifest.kind, "created": manifest.created,
-                "files": len(manifest.files), "size": sum(f.size for f in manifest.files.values())}
+                "files": len(manifest.files), "size": sum(f.size for n, f in manifest.files.items() if n not in absent)}
 
     def _ref_labels(self) -> dict[str, list[str]]:
         """Id -> every ref label naming it: current names first (sorted), then ``name@N`` (newest first)."""

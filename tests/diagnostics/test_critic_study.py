@@ -101,6 +101,9 @@ def test_study_rows_files_and_verdicts(run_cli, store, tmp_path):
     assert copy.read_file(manifest.id, "verdicts.csv") == store.read_file(manifest.id, "verdicts.csv")
     rollout = copy.read_manifest(manifest.inputs["rollout/1/go2"])
     assert set(copy.omitted_files(rollout)) == {"rollout.mcap", "obs.npz"}
+    # `store ls` counts only the files held: a rollout whose log and observations were left out weighs nothing
+    sizes = {r["id"]: r["size"] for r in copy.ls("rollout")}
+    assert sizes[rollout.id] == 0 and sum(f.size for f in rollout.files.values()) > 0
 
 
 def test_reproduce_runs_the_study_once(store):
