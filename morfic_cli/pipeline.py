@@ -616,9 +616,10 @@ class Pipeline:
             from morfic_cli.store.transfer import import_tar
 
             self._start("critic-study", STUDY_LABEL, 1, "bundle")
-            import_tar(self.store, shipped)
+            report = import_tar(self.store, shipped)
+            status = "skipped" if all(v == "unchanged" for v in report.refs.values()) else "done"  # a rerun: as held
             found = self.store.resolve(STUDY_REF) if self.store.has_ref(STUDY_REF) else None
-            return StepResult("critic-study", STUDY_LABEL, "done", found, STUDY_REF, detail=f"imported {shipped.name}")
+            return StepResult("critic-study", STUDY_LABEL, status, found, STUDY_REF, detail=f"imported {shipped.name}")
         why = self.fixed_rollout_unavailable()
         if why is not None:
             return StepResult("critic-study", STUDY_LABEL, NOT_RUN, detail=why)

@@ -141,3 +141,22 @@ def test_shipped_flags_need_the_shipped_preset_and_bundles(run_cli, tmp_path):
     assert code == 1 and "no bundle folder" in err, err
     code, _, err = run_cli("reproduce", "--preset", "smoke", "--full-protocol")
     assert code == 1 and "--full-protocol is for --preset shipped" in err, err
+
+
+def test_shipped_imports_the_shipped_critic_study_once(bundles, tmp_path):
+    import shutil
+
+    folder = tmp_path / "bundles"
+    shutil.copytree(bundles, folder, ignore=shutil.ignore_patterns("store-*"))
+    shipped_study = Path(__file__).resolve().parents[2] / "artifacts" / "bundles" / "results" / "critic-study.tar"
+    (folder / "results").mkdir()
+    shutil.copy(shipped_study, folder / "results" / "critic-study.tar")
+    store = Store(tmp_path / "store")
+    pipe = Pipeline(store, _tiny(reproduce_cfg("shipped", bundles=folder)))
+    assert [kind for kind, _, _ in pipe.plan()][-3:] == ["critic-study", "compare", "report"]
+    first = pipe.critic_study()
+    assert (first.status, first.ref) == ("done", "diagnoses/critic-study")
+    assert first.id == store.resolve("diagnoses/critic-study")
+    assert "critic_study.csv" in store.read_manifest(first.id).files
+    again = Pipeline(store, _tiny(reproduce_cfg("shipped", bundles=folder))).critic_study()
+    assert (again.status, again.id) == ("skipped", first.id)  # importing the same tar again changes nothing
