@@ -400,7 +400,8 @@ def run_study(store: Store, actor_spec: str, cfg: StudyCfg, *, actor: TrainedMod
     trained = actor if actor is not None else load_trained(store, actor_spec)
     gamma, clip = trained.cfg.ppo.gamma, trained.cfg.ppo.clip_param
     variants = canonical_variants(cfg.variants)
-    multiplicative = {v: resolve_variant(v).multiplicative for v in variants}  # user classes fail here, early
+    # user classes fail here, early; a user's critic is neither group of claim (a) (None)
+    multiplicative = {v: (resolve_variant(v).multiplicative if resolve_variant(v).stock else None) for v in variants}
     check_horizon(gamma, cfg.diagnose_cfg(cfg.commands[0], True))
     label = run_label(trained, actor_spec)
     rows: list[dict[str, Any]] = []

@@ -117,7 +117,9 @@ def critic_study_plot(summary: Sequence[dict[str, Any]]):
     commands = sorted({r["command_vx"] for r in summary})
     robots = list(dict.fromkeys(r["robot"] for r in summary))
     variants = list(dict.fromkeys(r["variant"] for r in summary))
-    mult = {r["variant"]: bool(r["multiplicative"]) for r in summary}
+    from morfic_cli.diagnostics.study_summary import group_of
+
+    mult = {r["variant"]: bool(group_of(r["multiplicative"])) for r in summary}
     cell = {(r["command_vx"], r["robot"], r["variant"], r["metric"]): r for r in summary}
     fig, axes = plt.subplots(len(commands), len(STUDY_METRICS), squeeze=False, constrained_layout=True,
                              figsize=(4.6 * len(STUDY_METRICS), 2.9 * len(commands) + 0.6))

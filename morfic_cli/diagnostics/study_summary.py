@@ -7,6 +7,7 @@ read from the interval; docs/report.md "How a verdict is read"):
 - a **cell** is one metric of one variant on one robot at one command: its mean over fit seeds with an interval;
 - claim **(a)** per robot: the effect mean EV(multiplicative critics) - mean EV(additive critics)
   (:func:`~morfic_cli.report.stats.group_effect`, each variant's seed mean weighing the same), higher is the claim;
+  a user's critic (``multiplicative`` None) is in neither group;
 - claim **(c)** per robot: film's Flip against every other critic's (other - film, the claim: > 0) and its CosGrad
   (film - other, the claim: > 0); it holds on a robot when every one of those comparisons holds, does not hold when
   one of them is reversed, else cannot tell.
@@ -35,6 +36,15 @@ FILM = "film"
 PARTLY, MIXED = "holds partly", "mixed"
 
 
+def group_of(value: Any) -> bool | None:
+    """A row's ``multiplicative`` as read back from a CSV: True, False, or None (a user's critic: no group)."""
+    if isinstance(value, str):
+        return {"true": True, "false": False}.get(value.strip().lower())
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return None
+    return bool(value)
+
+
 def _values(rows: Sequence[dict[str, Any]], metric: str, **match: Any) -> list[float]:
     """The metric of every row matching ``match`` (one per fit seed)."""
     return [math.nan if r[metric] is None else float(r[metric]) for r in rows
@@ -48,7 +58,7 @@ def cell_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         Rows ``command_vx, robot, variant, multiplicative, metric, mean, lo, hi, n`` (NaN ends for one seed).
     """
     keys = list(dict.fromkeys((r["command_vx"], r["robot"], r["variant"]) for r in rows))
-    mult = {r["variant"]: bool(r["multiplicative"]) for r in rows}
+    mult = {r["variant"]: group_of(r["multiplicative"]) for r in rows}
     out = []
     for command, robot, variant in keys:
         for metric in SUMMARY_METRICS:
@@ -85,11 +95,11 @@ def _all_pairs(verdicts: Sequence[str]) -> str:
 def claim_a(rows: Sequence[dict[str, Any]], command: float) -> dict[str, Any]:
     """Claim (a) at ``command``: per robot the EV effect multiplicative - additive, and the combined verdict."""
     variants = list(dict.fromkeys(r["variant"] for r in rows))
-    mult = {r["variant"]: bool(r["multiplicative"]) for r in rows}
+    mult = {r["variant"]: group_of(r["multiplicative"]) for r in rows}  # None (a user's critic): in neither group
     per_robot = []
     for robot in OOD_ROBOTS:
-        side = {m: [_values(rows, "ev", command_vx=command, robot=robot, variant=v) for v in variants if mult[v] == m]
-                for m in (True, False)}
+        side = {m: [_values(rows, "ev", command_vx=command, robot=robot, variant=v) for v in variants
+                    if mult[v] is m] for m in (True, False)}
         effect = stats.group_effect(side[True], side[False])
         per_robot.append({"robot": robot, "effect": effect, "verdict": effect.verdict(higher=True)})
     return {"claim": "a", "command_vx": command, "robots": per_robot,

@@ -235,6 +235,17 @@ def test_claim_c_needs_film_best_against_every_critic():
     assert claim["verdict"] == stats.NOT  # reversed on one robot, holds on none
 
 
+def test_a_users_critic_is_in_neither_group_of_claim_a():
+    rows = _rows({("film", "aliengo"): [0.5, 0.5], ("ppo", "aliengo"): [0.1, 0.1], ("mine", "aliengo"): [9.0, 9.0]},
+                 "ev")
+    for r in rows:
+        if r["variant"] == "mine":
+            r["multiplicative"] = float("nan")  # as a CSV with an empty cell reads back
+    effect = ss.claim_a(rows, 1.0)["robots"][0]["effect"]
+    assert effect.estimate == pytest.approx(0.4) and (effect.n_a, effect.n_b) == (2, 2)
+    assert [ss.group_of(v) for v in (True, "False", None, float("nan"), "true")] == [True, False, None, None, True]
+
+
 def test_combine_by_hand():
     assert ss.combine([stats.HOLDS, stats.HOLDS]) == stats.HOLDS
     assert ss.combine([stats.NOT, stats.NOT]) == stats.NOT
