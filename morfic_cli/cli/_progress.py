@@ -7,7 +7,8 @@ class StepBar:
     """A progress bar over ``total`` policy steps, labelled ``label``; nothing is shown when ``quiet``.
 
     ``with StepBar("eval", total, quiet) as bar``: ``bar.describe(text)`` names the current rollout,
-    ``bar.step()`` advances one policy step.
+    ``bar.step()`` advances one policy step; ``bar.phase(text, total)`` starts the next stage of a command whose
+    stages count different work (``critic-study``: rollout steps, gradient steps, sample sets).
     """
 
     def __init__(self, label: str, total: int, quiet: bool) -> None:
@@ -25,6 +26,16 @@ class StepBar:
             self.bar.__enter__()
             self.task = self.bar.add_task("", total=self.total)
         return self
+
+    def phase(self, text: str, total: int) -> None:
+        """Start a new stage of the command with its own ``total`` (the previous one is shown complete)."""
+        if self.bar is not None:
+            current = next(t for t in self.bar.tasks if t.id == self.task)
+            if current.total:
+                self.bar.update(self.task, completed=current.total)
+            else:  # the bar was opened without work of its own (total 0): the stages replace it
+                self.bar.remove_task(self.task)
+            self.task = self.bar.add_task(text, total=total)
 
     def describe(self, text: str) -> None:
         if self.bar is not None:

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, QuietOpt, RobotsOpt, SeedOpt, StoreOpt
+from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
 from morfic_cli.errors import MorficError
 from morfic_cli.validation import check_args
@@ -74,7 +75,7 @@ def critic_study(
     """
     check_args(store=store, out_dir=out, seed=seed, envs=target_envs, steps=steps, command_vx=command_vx,
                robots=robots, specs=[actor] if actor else None)
-    from morfic_cli.diagnostics.critic_study import STUDY_VARIANTS, StudyCfg, check_cfg, run_study
+    from morfic_cli.diagnostics.critic_study import STUDY_VARIANTS, StudyCfg, StudyProgress, check_cfg, run_study
     from morfic_cli.diagnostics.fixed_rollout import default_actor
     from morfic_cli.evaluation.protocol import parse_commands
     from morfic_cli.morphology.distance import parse_robot_list
@@ -95,8 +96,8 @@ def critic_study(
     st = Store(store)
     spec = actor or default_actor(st)
     trained = load_trained(st, spec)  # a bad ref fails here, before any work
-    with _Bar(quiet) as bar:
-        result = run_study(st, spec, cfg, actor=trained, progress=bar.progress())
+    with StepBar("critic-study", 0, quiet) as bar:
+        result = run_study(st, spec, cfg, actor=trained, progress=StudyProgress(phase=bar.phase, advance=bar.step))
     _write_out(out, st, result.id)
     if not quiet:
         s = result.seconds
@@ -144,39 +145,3 @@ def _write_out(out: Path | None, st, manifest_id: str) -> None:
     manifest = st.read_manifest(manifest_id)
     for name in manifest.files:
         (out / name).write_bytes(st.read_file(manifest_id, name))
-
-
-class _Bar:
-    """A rich progress bar whose task is replaced at every phase of the study (rollouts, fits, scoring)."""
-
-    def __init__(self, quiet: bool) -> None:
-        self.quiet = quiet
-        self.bar = None
-        self.task = None
-
-    def __enter__(self) -> _Bar:
-        if not self.quiet:
-            from rich.console import Console
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-            self.bar = Progress(TextColumn("[bold]critic-study[/] {task.description}"), BarColumn(),
-                                MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True))
-            self.bar.__enter__()
-        return self
-
-    def progress(self):
-        from morfic_cli.diagnostics.critic_study import StudyProgress
-
-        if self.bar is None:
-            return StudyProgress()
-
-        def phase(label: str, total: int) -> None:
-            if self.task is not None:
-                self.bar.update(self.task, completed=self.bar.tasks[-1].total)
-            self.task = self.bar.add_task(label, total=total)
-
-        return StudyProgress(phase=phase, advance=lambda: self.bar.advance(self.task))
-
-    def __exit__(self, *exc: object) -> None:
-        if self.bar is not None:
-            self.bar.__exit__(*exc)
