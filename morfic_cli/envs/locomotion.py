@@ -190,8 +190,10 @@ class LocomotionEnv(VecEnv):
 
         for name, value in terms.items():
             value = torch.nan_to_num(value) * self.dt
-            self.episode_sums.setdefault(name, torch.zeros(self.num_envs, device=self.device))
-            self.episode_sums[name] += value
+            if name in self.episode_sums:
+                self.episode_sums[name] += value
+            else:  # the first step: one buffer per term (setdefault would allocate a spare one every step)
+                self.episode_sums[name] = value.clone()
         self.episode_lin_tracking += torch.nan_to_num(raw[TRACKING_TERM])  # unweighted: --set w_lin=0 keeps it
 
         log: dict[str, torch.Tensor] = {f"/reward/{k}": m for k, m in _term_means(terms, self.dt).items()}
