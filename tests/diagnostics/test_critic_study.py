@@ -6,11 +6,11 @@ import csv
 import io
 import json
 import math
-import shutil
 
 import numpy as np
 import pytest
 import torch
+from smoke_runs import copy_store, train_smoke_runs
 
 from morfic_cli.diagnostics import critic_study as cs
 from morfic_cli.diagnostics import study_summary as ss
@@ -28,22 +28,14 @@ TINY = ("--train-envs", "4", "--held-out", "1", "--target-envs", "2", "--steps",
 
 @pytest.fixture(scope="module")
 def smoke_store(tmp_path_factory):
-    from morfic_cli.rl.config import smoke_preset
-    from morfic_cli.rl.runner import new_run
-
     root = tmp_path_factory.mktemp("study") / "store"
-    run = new_run(Store(root), smoke_preset("film"), "film-smoke-s0")
-    run.train()
-    run.env.close()
+    train_smoke_runs(root, ("film",), name="{variant}-smoke-s{seed}")  # reproduce's fixed-rollout actor
     return root
 
 
 @pytest.fixture
 def store(smoke_store, tmp_path, monkeypatch):
-    root = tmp_path / "store"
-    shutil.copytree(smoke_store, root)
-    monkeypatch.setenv("MORFIC_STORE", str(root))
-    return Store(root)
+    return copy_store(smoke_store, tmp_path, monkeypatch)
 
 
 def test_study_rows_files_and_verdicts(run_cli, store, tmp_path):

@@ -7,15 +7,13 @@ import dataclasses
 import io
 import json
 import math
-import shutil
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from smoke_runs import train_smoke_runs
+from smoke_runs import copy_store, train_smoke_runs
 
 from morfic_cli.diagnostics.samples import DiagnoseCfg, collect_samples, load_samples
-from morfic_cli.store import Store
 
 # The smallest budget that still has samples in I_eps: --trunc-eps 0.8 -> H_eps = ceil(ln 0.8 / ln 0.99) = 23.
 SMALL = ("--envs", "2", "--steps", "30", "--trunc-eps", "0.8")
@@ -34,10 +32,7 @@ def smoke_store(tmp_path_factory):
 
 @pytest.fixture
 def store(smoke_store, tmp_path, monkeypatch):
-    root = tmp_path / "store"
-    shutil.copytree(smoke_store, root)
-    monkeypatch.setenv("MORFIC_STORE", str(root))
-    return Store(root)
+    return copy_store(smoke_store, tmp_path, monkeypatch)
 
 
 def test_diagnose_rows_table_figure_and_reuse(run_cli, store):

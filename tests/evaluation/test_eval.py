@@ -9,11 +9,10 @@ import os
 
 import numpy as np
 import pytest
-from smoke_runs import train_smoke_runs
+from smoke_runs import copy_store, train_smoke_runs
 
 from morfic_cli.evaluation.protocol import EvalCfg, evaluate, rollout_role
 from morfic_cli.morphology.robots import list_robots
-from morfic_cli.store import Store
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -28,12 +27,7 @@ def smoke_store(tmp_path_factory):
 
 @pytest.fixture
 def store(smoke_store, tmp_path, monkeypatch):
-    import shutil
-
-    root = tmp_path / "store"
-    shutil.copytree(smoke_store, root)
-    monkeypatch.setenv("MORFIC_STORE", str(root))
-    return Store(root)
+    return copy_store(smoke_store, tmp_path, monkeypatch)
 
 
 def test_every_robot_in_both_modes_through_the_cli(run_cli, store):
