@@ -237,19 +237,20 @@ class CurveLogger(Logger):
             "action_std": float(action_std.detach().mean()),
         }
         row.update({k: float(v) for k, v in loss_dict.items()})
-        episodes = host_values(self.ep_extras)  # one device -> host read for the iteration's logs
-        keys = dict.fromkeys(k for extras in episodes for k in extras)
-        for key in keys:
-            values = [e[key] for e in episodes if key in e]
+        by_key: dict[str, list[float]] = {}  # each log key's values over the iteration's steps
+        for step_log in host_values(self.ep_extras):  # one device -> host read for the iteration's logs
+            for key, value in step_log.items():
+                by_key.setdefault(key, []).append(value)
+        means = {key: sum(values) / len(values) for key, values in by_key.items()}
+        for key, values in by_key.items():
             name = key.strip("/").replace("/", ".")
             if name.startswith("reward.") or name == "env.nonfinite_resets":
                 continue  # per-step means; the episode means below are what the curve shows
-            row[name] = max(values) if name == "curriculum.vx_max" else sum(values) / len(values)
+            row[name] = max(values) if name == "curriculum.vx_max" else means[key]
         if self.live is not None:
             from morfic_cli.rl.live_log import write_iteration
 
-            extras = {key: sum(e[key] for e in episodes if key in e) / sum(1 for e in episodes if key in e)
-                      for key in keys}
+            extras = means
             # before the first episode ends: the mean return and length so far of the episodes under way
             reward = (sum(self.rewbuffer) / len(self.rewbuffer) if self.rewbuffer
                       else float(self.cur_reward_sum.float().mean()))
