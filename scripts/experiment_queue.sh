@@ -7,7 +7,7 @@
 # (artifacts/bundles/<run>.tar), any other seed as a results-only bundle (artifacts/bundles/results/<run>.tar: its
 # evals and diagnoses without weights, logs or other runs' curves, ~3.6 MiB; `morfic store import` it, then `morfic report runs/<run>`).
 #
-# Usage: scripts/experiment_queue.sh [--stop-at HH:MM] [--last-start HH:MM] VARIANT:SEED ...
+# Usage: scripts/experiment_queue.sh [--stop-at HH:MM] [--last-start HH:MM] [--train-at COMMIT] VARIANT:SEED ...
 #   e.g.  MORFIC_STORE=/work/stores/exp nohup scripts/experiment_queue.sh --stop-at 23:05 concat:0 actor-only:0 \
 #           > queue.log 2>&1 &
 #
@@ -17,16 +17,21 @@
 # --last-start (UTC): no training starts (or resumes) at or after that time; the queue stops there instead, so a
 # run that could not finish before --stop-at is not begun (its partial bundle, ~25 MiB with the trainer state, would
 # stay in git history). A finished run is still evaluated and shipped.
+# --train-at COMMIT: train with the training code of COMMIT (a git worktree of it under .train-worktrees/, put first
+# on PYTHONPATH; the run records that commit as meta.git_commit) and evaluate, diagnose and ship with this checkout's.
+# For seeds added to an experiment whose training code has since changed (docs/results.md, "One code for all runs").
 # Runs are done strictly one after another: two CPU-heavy jobs on 2 cores slow each other.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 : "${MORFIC_STORE:?set MORFIC_STORE to the experiment store (kept between runs)}"
 STOP_AT=""
 LAST_START=""
+TRAIN_AT=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --stop-at) STOP_AT=${2:?--stop-at takes a time HH:MM (UTC)}; shift 2 ;;
     --last-start) LAST_START=${2:?--last-start takes a time HH:MM (UTC)}; shift 2 ;;
+    --train-at) TRAIN_AT=${2:?--train-at takes a commit}; shift 2 ;;
     -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     -*) echo "Error: unknown option '$1'; see scripts/experiment_queue.sh --help" >&2; exit 1 ;;
     *) break ;;
@@ -40,6 +45,15 @@ for t in "$STOP_AT" "$LAST_START"; do
   if [ $(( $(date -u +%s) - at )) -gt 43200 ]; then DAY_SHIFT["$t"]=86400; else DAY_SHIFT["$t"]=0; fi
 done
 [ $# -gt 0 ] || { echo "Error: name at least one run as VARIANT:SEED, e.g. concat:0" >&2; exit 1; }
+TRAIN_ENV=()
+if [ -n "$TRAIN_AT" ]; then
+  commit=$(git rev-parse --verify --quiet "$TRAIN_AT^{commit}") \
+    || { echo "Error: --train-at '$TRAIN_AT' is not a commit of this repository; give a hash or tag (git log)" >&2; exit 1; }
+  tree=".train-worktrees/${commit:0:12}"
+  [ -d "$tree" ] || git worktree add --detach "$tree" "$commit" >/dev/null
+  TRAIN_ENV=(env "PYTHONPATH=$PWD/$tree${PYTHONPATH:+:$PYTHONPATH}")
+  echo "== training code: $commit ($tree); evaluation code: $(git rev-parse HEAD)"
+fi
 RESULTS=docs/results
 BUNDLES=artifacts/bundles
 mkdir -p "$RESULTS" "$BUNDLES" "$BUNDLES/partial" "$BUNDLES/results"
@@ -72,7 +86,7 @@ for item in "$@"; do
       args=(--variant "$variant" --preset cpu --seed "$seed" --name "$name")
     fi
     echo "== $(date -u +%T) train $name (${args[*]})"
-    morfic train "${args[@]}" -q & pid=$!
+    "${TRAIN_ENV[@]}" morfic train "${args[@]}" -q & pid=$!
     while kill -0 "$pid" 2>/dev/null; do
       if [ "$(seconds_left)" -le 0 ]; then
         echo "== $(date -u +%T) stop time: Ctrl-C to $name, it checkpoints"

@@ -4,6 +4,8 @@ Writes, for run RUN (its results as `morfic reproduce --preset cpu` stored them,
 so a table is never another run's):
 
 - ``<out>/RUN-eval.csv`` and ``<out>/RUN-calibration.csv``: the eval's and the diagnosis's files, verbatim;
+- ``<out>/RUN-eval-1.0.csv``: the eval at 1.0 m/s, the trained regime (:func:`trained_regime_cfg`: descriptor mode,
+  64 envs x 500 steps, as ``morfic eval runs/RUN --command-vx 1.0``), verbatim;
 - ``<out>/fixed-rollout-<robot>.csv``: RUN's critic row (and the MC reference row) of the fixed-rollout analysis
   on each robot, the frozen film actor's rollout, merged with the rows of the critics scored before, each row with
   the content id of the samples it was scored on (``samples``). The first samples are the reference
@@ -11,11 +13,13 @@ so a table is never another run's):
   another CPU does not reproduce them bit for bit) scores on a new rollout, whose rows go in beside the reference
   rows (:func:`merge_fixed_rows`);
 - ``<out>/RUN-curve.csv``: the training curve's main columns (:data:`CURVE_COLUMNS`);
-- ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, diagnosis and fixed-rollout analyses.
+- ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, 1.0 m/s eval (``eval-1.0``), diagnosis and
+  fixed-rollout analyses.
 
-With ``--run-missing`` the run is first evaluated, diagnosed and its critic scored in the fixed-rollout analysis,
-each step with the paper's protocol (``morfic reproduce --preset cpu``'s configs) and skipped when the store holds
-it: the experiment queue's evaluation of a run, without re-evaluating the variant's other seeds. With
+With ``--run-missing`` the run is first evaluated (at 2.0/2.5 and at 1.0 m/s), diagnosed and its critic scored in
+the fixed-rollout analysis, each step with the paper's protocol (``morfic reproduce --preset cpu``'s configs) and
+skipped when the store holds it: the experiment queue's evaluation of a run, without re-evaluating the variant's
+other seeds. With
 ``--fixed-rollout-only`` only the fixed-rollout rows are written (the analysis run first when the store lacks it).
 When RUN's critic had to be scored on other samples than the reference (:func:`merge_fixed_rows`), ``--run-missing``
 also scores every seed-0 critic whose weights the store holds on those samples (:func:`seed0_to_rescore`), which
@@ -108,6 +112,37 @@ def one_run_pipeline(store, variant: str, seed: int, spec: str):
     return OneRun(store, reproduce_cfg("cpu", variants=(variant,), seeds=seed + 1))
 
 
+def trained_regime_cfg():
+    """The 1.0 m/s evaluation (``morfic eval RUN --command-vx 1.0``: descriptor mode, the paper's 64 envs x 500 steps).
+
+    Every robot in the CLI's order (``--robots all``), not batched: the config (and so the content address) the
+    seed-0 runs' ``eval-1.0`` ids were made with.
+    """
+    from morfic_cli.evaluation.protocol import EvalCfg
+    from morfic_cli.morphology.distance import parse_robot_list
+
+    return EvalCfg(robots=tuple(parse_robot_list("all")), modes=("descriptor",), command_vx=(1.0,))
+
+
+def trained_regime_eval(store, spec: str, run_missing: bool) -> str | None:
+    """The id of the stored 1.0 m/s eval of ``spec``'s checkpoint (:func:`trained_regime_cfg`).
+
+    Run first when ``run_missing`` and the store lacks it; None when it lacks it otherwise.
+    """
+    from morfic_cli.evaluation.protocol import eval_config, evaluate
+    from morfic_cli.pipeline import _json
+    from morfic_cli.store.publish import find_manifest
+
+    cfg = trained_regime_cfg()
+    found = find_manifest(store, "eval", _json(eval_config(spec, cfg)),
+                          inputs_subset={"checkpoint": store.resolve(spec)}, files=("eval.csv",))
+    if found is None and run_missing:
+        start = time.monotonic()
+        found = evaluate(store, spec, cfg).id
+        print(f"eval {spec} at 1.0 m/s: done in {time.monotonic() - start:.0f} s", file=sys.stderr)
+    return found
+
+
 def main(argv: list[str] | None = None) -> int:
     """Write the tables; 1 with ``Error:`` when the store has no paper-protocol result of the run."""
     from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS
@@ -156,6 +191,15 @@ def main(argv: list[str] | None = None) -> int:
             path.write_bytes(store.read_file(step.id, file))
             ids[what] = step.id
             print(f"{path} (artifact {step.id[:12]})")
+        slow = trained_regime_eval(store, spec, args.run_missing)
+        if slow is None:
+            print(f"Error: no 1.0 m/s eval of {spec} in {store.root}; rerun with --run-missing (or `morfic eval "
+                  f"{spec} --command-vx 1.0`) first.", file=sys.stderr)
+            return 1
+        path = args.out / f"{args.run}-eval-1.0.csv"
+        path.write_bytes(store.read_file(slow, "eval.csv"))
+        ids["eval-1.0"] = slow
+        print(f"{path} (artifact {slow[:12]})")
     fixed_ids = ids.setdefault("fixed_rollout", {})
     used: dict[str, str] = {}  # robot -> the samples RUN's critic was scored on here
     for robot in pipe.cfg.fixed_rollout_robots:

@@ -219,3 +219,14 @@ def test_bundle_table_sizes_every_tar_from_the_files(tmp_path):
     assert lines[4] == f"| `{(bundles / 'results' / 'film-cpu-s1.tar').as_posix()}` | results only | 0.2 |"
     assert lines[-1] == "| 3 tars | weights-only 4.5, results only 0.2 | **4.8** |"
     assert rt.bundle_table(tmp_path / "none") == [f"No bundle under {tmp_path / 'none'}."]
+
+
+def test_the_queue_evaluates_at_one_metre_per_second_as_the_seed0_runs_were():
+    # the config of the seed-0 runs' eval-1.0 manifests (e.g. 5ab3f74638d4, `morfic eval runs/film-cpu-s0
+    # --command-vx 1.0`), written out by hand: the queue's 1.0 m/s eval must have the same content address
+    from morfic_cli.evaluation.protocol import eval_config
+    from morfic_cli.pipeline import _json
+
+    assert _json(eval_config("runs/film-cpu-s1", et.trained_regime_cfg())) == {
+        "spec": "runs/film-cpu-s1", "robots": ["go2", "a1", "aliengo", "anymal_c", "b1", "go1", "mini_cheetah"],
+        "modes": ["descriptor"], "command_vx": [1.0], "num_envs": 64, "steps": 500, "seed": 0, "scene_envs": 4}
