@@ -1,10 +1,22 @@
-"""Hand-made (hostile) export tars for the import tests: any manifest bytes, any members, any header."""
+"""Hand-made (hostile) export tars for the import tests: any manifest bytes, any members, any header.
+
+Three levels: :func:`write_bundle` (a bundle from blobs, manifests and histories), :func:`write_members` (any
+``TarInfo`` members, links and devices included, plain or compressed), and :func:`ustar_block` / :func:`raw_tar`
+(header blocks byte by byte: lying size fields, bad checksums, raw name bytes). :func:`stream` and
+:func:`zeros_stream` build compression bombs by concatenating compressed streams, without ever holding the
+expanded bytes.
+"""
 
 from __future__ import annotations
 
+import bz2
+import functools
+import gzip
 import hashlib
 import io
 import json
+import lzma
+import os
 import tarfile
 from pathlib import Path
 from typing import Any
@@ -71,3 +83,146 @@ def listing(root: Path) -> dict[str, bytes]:
     if not root.exists():
         return {}
     return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def tree(root: Path, *, skip: Path | None = None) -> dict[str, object]:
+    """Every entry under ``root`` but ``skip``: files by bytes and mode, folders, symlinks by target, others by type."""
+    out: dict[str, object] = {}
+    for folder, dirs, files in os.walk(root):
+        here = Path(folder)
+        if skip is not None and here == skip:
+            dirs[:] = []
+            continue
+        for name in [*dirs, *files]:
+            path = here / name
+            if skip is not None and path == skip:
+                out[path.relative_to(root).as_posix()] = "<skipped>"
+                continue
+            st = path.lstat()
+            rel = path.relative_to(root).as_posix()
+            if path.is_symlink():
+                out[rel] = ("link", os.readlink(path))
+            elif path.is_file():
+                out[rel] = ("file", st.st_mode, path.read_bytes())
+            elif path.is_dir():
+                out[rel] = ("dir",)
+            else:
+                out[rel] = ("other", st.st_mode)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- members
+
+DATA = b"a,b\n1,2\n"
+
+
+def header_bytes(objects: int, refs: list[str], **extra: Any) -> bytes:
+    """An export header (``morfic-export.json``) declaring ``objects`` and ``refs``."""
+    return json.dumps({"format": 1, "morfic_version": "0.1.0", "objects": objects, "refs": sorted(refs),
+                       **extra}).encode()
+
+
+def member(name: str, data: bytes = b"", *, kind: bytes = tarfile.REGTYPE, linkname: str = "",
+           size: int | None = None, pax: dict[str, str] | None = None) -> tuple[tarfile.TarInfo, bytes]:
+    """A tar member: ``kind`` is a tarfile type (``SYMTYPE``, ``LNKTYPE``, ``CHRTYPE``, ``FIFOTYPE``, ...)."""
+    info = tarfile.TarInfo(name)
+    info.type = kind
+    info.linkname = linkname
+    info.size = len(data) if size is None else size
+    info.mode = 0o644
+    if pax:
+        info.pax_headers = dict(pax)
+    return info, data
+
+
+def good_members(ref: str = "runs/x", blob: bytes = DATA) -> list[tuple[tarfile.TarInfo, bytes]]:
+    """The members of a well-formed one-ref bundle: header, a blob, a report manifest naming it, its marker, the ref."""
+    manifest = manifest_bytes(files={"t.csv": {"id": oid_of(blob), "size": len(blob)}})
+    return [member("morfic-export.json", header_bytes(2, [ref])),
+            *[member(f"objects/{oid_of(d)[:2]}/{oid_of(d)[2:]}", d) for d in sorted([blob, manifest], key=oid_of)],
+            member(f"manifests/{oid_of(manifest)}"),
+            member(f"refs/{ref}", history_bytes([oid_of(manifest)]))]
+
+
+def object_name(data: bytes) -> str:
+    """The member name of ``data`` as an object."""
+    oid = oid_of(data)
+    return f"objects/{oid[:2]}/{oid[2:]}"
+
+
+def write_members(path: Path, members: list[tuple[tarfile.TarInfo, bytes]], *, fmt: int = tarfile.PAX_FORMAT,
+                  compression: str = "") -> Path:
+    """A tar of exactly ``members`` (in order, duplicates kept); ``compression``: ``gz``, ``bz2``, ``xz`` or ``""``."""
+    with tarfile.open(path, f"w:{compression}" if compression else "w", format=fmt) as tar:
+        for info, data in members:
+            tar.addfile(info, io.BytesIO(data) if info.size else None)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- raw blocks
+
+BLOCK = 512
+
+
+def ustar_block(name: bytes, size: int | bytes = 0, *, typeflag: bytes = b"0", linkname: bytes = b"",
+                checksum: bool = True, extra: dict[int, bytes] | None = None) -> bytes:
+    """One ustar header block, byte by byte: ``size`` as a number or as the raw 12-byte field, ``extra``: raw bytes
+    at offsets (e.g. the GNU sparse fields), ``checksum=False``: a wrong checksum."""
+    buf = bytearray(BLOCK)
+    buf[0:len(name[:100])] = name[:100]
+    buf[100:108] = b"0000644\0"
+    buf[108:116] = buf[116:124] = b"0000000\0"
+    buf[124:136] = size if isinstance(size, bytes) else b"%011o\0" % size
+    buf[136:148] = b"00000000000\0"
+    buf[156:157] = typeflag
+    buf[157:157 + len(linkname[:100])] = linkname[:100]
+    buf[257:265] = b"ustar\x0000"
+    for offset, raw in (extra or {}).items():
+        buf[offset:offset + len(raw)] = raw
+    buf[148:156] = b" " * 8
+    total = sum(buf) + (0 if checksum else 1)
+    buf[148:156] = b"%06o\0 " % total
+    return bytes(buf)
+
+
+def base256(value: int) -> bytes:
+    """A 12-byte GNU base-256 number field (negative values too)."""
+    return bytes([0xFF if value < 0 else 0x80]) + (value & ((1 << 88) - 1)).to_bytes(11, "big")
+
+
+def padded(data: bytes) -> bytes:
+    return data + b"\0" * (-len(data) % BLOCK)
+
+
+def file_blocks(name: str, data: bytes) -> bytes:
+    """A regular member with a truthful header, as blocks."""
+    return ustar_block(name.encode(), len(data)) + padded(data)
+
+
+def raw_tar(path: Path, *parts: bytes, end: bool = True) -> Path:
+    """Concatenate header and data blocks (and the two zero blocks that end an archive)."""
+    path.write_bytes(b"".join(parts) + (b"\0" * 2 * BLOCK if end else b""))
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- compression
+
+_COMPRESS = {"gz": lambda d: gzip.compress(d, mtime=0), "bz2": bz2.compress, "xz": lambda d: lzma.compress(d, preset=0)}
+
+
+def stream(kind: str, data: bytes) -> bytes:
+    """``data`` as one complete gzip, bzip2 or xz stream; concatenated streams read back as one file."""
+    return _COMPRESS[kind](data)
+
+
+@functools.cache
+def zeros_stream(kind: str, size: int) -> bytes:
+    """``size`` zero bytes as one compressed stream (16 MiB: 16 KiB as gzip, 45 bytes as bzip2, 2.5 KiB as xz)."""
+    return stream(kind, bytes(size))
+
+
+def member_header(name: str, size: int) -> bytes:
+    """The header block(s) of a regular member of ``size`` bytes (a pax header first when it needs one)."""
+    info = tarfile.TarInfo(name)
+    info.size = size
+    return info.tobuf(tarfile.PAX_FORMAT)

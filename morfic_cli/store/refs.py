@@ -158,7 +158,7 @@ def decode_history(name: str, data: bytes) -> list[RefEntry]:
     for number, line in enumerate(data.split(b"\n")[:-1], start=1):
         try:
             raw = json.loads(line)
-        except ValueError:
+        except (ValueError, RecursionError):  # RecursionError: nested too deep
             raise damaged(number, "not JSON") from None
         if not isinstance(raw, dict) or frozenset(raw) not in _ENTRY_KEYS:
             raise damaged(number, "not a history entry")

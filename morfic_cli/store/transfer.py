@@ -24,6 +24,8 @@ a store leaves them out (and lists them) by itself.
 
 from __future__ import annotations
 
+import bz2
+import gzip
 import hashlib
 import io
 import json
@@ -35,6 +37,7 @@ import tarfile
 import tempfile
 import zlib
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
@@ -297,13 +300,16 @@ def _classify(tar: tarfile.TarFile, path: Path) -> _Members:
     members = _Members()
     names: set[str] = set()
     for member in tar.getmembers():
-        name = member.name
-        if member.isdir():
+        name, shown = member.name, _shown(member.name)
+        if member.isdir():  # nothing is ever extracted: a folder entry (as `tar` writes one) is ignored
             continue
         if not member.isfile():
-            raise StoreError(f"{path} is not a morfic export: member '{name[:200]}' is not a regular file.")
+            raise StoreError(f"{path} is not a morfic export: member {shown} is not a regular file.")
+        if member.sparse is not None or member.size < 0:  # a sparse file's holes read as zeros: a bomb in a plain tar
+            raise StoreError(f"{path} is not a morfic export: member {shown} is a sparse file or has a negative "
+                             "size.")
         if name in names:
-            raise StoreError(f"{path} is not a morfic export: member '{name[:200]}' appears twice.")
+            raise StoreError(f"{path} is not a morfic export: member {shown} appears twice.")
         names.add(name)
         if name == HEADER:
             members.header = member
@@ -316,10 +322,15 @@ def _classify(tar: tarfile.TarFile, path: Path) -> _Members:
         elif name.startswith("refs/") and is_ref_name(name[5:]):
             members.refs[name[5:]] = member
         else:
-            raise StoreError(f"{path} is not a morfic export: unexpected member '{name[:200]}'.")
+            raise StoreError(f"{path} is not a morfic export: unexpected member {shown}.")
     if members.header is None:
         raise StoreError(f"{path} is not a morfic export (no {HEADER}); make one with `morfic store export`.")
     return members
+
+
+def _shown(name: str) -> str:
+    """A member name for a message: quoted, cut at 200 characters, control characters and bad bytes escaped."""
+    return repr(name[:200])
 
 
 def _object_id_of(name: str) -> str | None:
@@ -332,15 +343,129 @@ def _chunks(fh: IO[bytes]) -> Iterator[bytes]:
     return iter(lambda: fh.read(CHUNK_SIZE), b"")
 
 
-def _open_tar(path: Path) -> tarfile.TarFile:
+#: A compressed bundle (gzip, bzip2, xz: ``foo.tar.gz``) may expand to at most this many times its own size
+#: when read (a shipped bundle expands about 2 times), or to :data:`MIN_EXPANDED_BYTES`, whichever is more;
+#: past that it is refused as a compression bomb while streaming, before its bytes fill memory or disk. A plain
+#: tar (what ``morfic store export`` writes) cannot expand: import never reads more than the file holds.
+MAX_EXPANSION = 32
+
+#: Every compressed bundle may expand to this many bytes (so small ones always import), see :data:`MAX_EXPANSION`.
+MIN_EXPANDED_BYTES = 64 << 20
+
+#: Import reads a bundle about three times over (list, check, stage); a tar that makes it read (decompress) more
+#: than this many times its limit (the file's size, or a compressed bundle's expansion limit) is refused: its
+#: member headers point backwards or loop.
+MAX_READ_PASSES = 8
+
+_COMPRESSED = ((b"\x1f\x8b", "gzip", lambda fh: gzip.GzipFile(fileobj=fh, mode="rb")),
+               (b"BZh", "bzip2", bz2.BZ2File), (b"\xfd7zXZ\x00", "xz", lzma.LZMAFile))
+
+_READ_ERRORS = (tarfile.TarError, EOFError, zlib.error, lzma.LZMAError, gzip.BadGzipFile, ValueError)
+"""What a hostile or damaged tar makes :mod:`tarfile` raise while reading (ValueError: e.g. a bad sparse map)."""
+
+
+class _BoundedReader:
+    """A bundle's bytes as :mod:`tarfile` reads them (decompressed), with a bomb and a loop refused while streaming.
+
+    ``limit``: the largest offset a compressed bundle may reach (None for a plain tar). Every byte read, skipped
+    forward or (compressed) decompressed again after a backward seek counts towards ``MAX_READ_PASSES`` times
+    the limit (the file's size for a plain tar), and a single read is at most what a morfic member needs.
+    """
+
+    def __init__(self, stream: IO[bytes], path: Path, size: int, limit: int | None, kind: str) -> None:
+        self._stream, self._path, self._size, self._limit, self._kind = stream, path, size, limit, kind
+        self._budget = MAX_READ_PASSES * max(limit or size, 1 << 20)
+        self._pos = 0
+
+    def _spend(self, n: int) -> None:
+        self._budget -= n
+        if self._budget < 0:
+            raise StoreError(f"{self._path} makes import read it more than {MAX_READ_PASSES} times over (its tar "
+                             "headers point backwards or loop); it was not made by `morfic store export`, nothing "
+                             "was imported. Re-export it.")
+
+    def _bomb(self) -> StoreError:
+        return StoreError(f"{self._path} is {self._kind}-compressed and expands to more than {self._limit} bytes, "
+                          f"over {MAX_EXPANSION} times its {self._size} bytes (a compression bomb?); nothing was "
+                          "imported. `morfic store export` writes plain tars: decompress a bundle you trust first "
+                          "and import the .tar (a plain tar has no such limit).")
+
+    def read(self, size: int | None = -1) -> bytes:
+        if size is None or size < 0:  # (tarfile always asks for a size)
+            size = max((self._limit if self._limit is not None else self._size) - self._pos + 1, 0)
+        elif size > MAX_SMALL_MEMBER + tarfile.BLOCKSIZE:  # import reads 1 MiB chunks; tarfile reads headers whole
+            raise StoreError(f"{self._path} has a tar header of more than {MAX_SMALL_MEMBER} bytes; it was not made "
+                             "by `morfic store export`, nothing was imported.")
+        data = self._stream.read(size)
+        self._pos += len(data)
+        self._spend(len(data))
+        if self._limit is not None and self._pos > self._limit:
+            raise self._bomb()
+        return data
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        target = offset + (self._pos if whence == 1 else 0)
+        if whence not in (0, 1) or target < 0 or (self._limit is None and target > self._size):
+            raise tarfile.ReadError(f"a member runs to offset {target}, the file has {self._size} bytes")
+        if self._limit is not None and target > self._limit:  # a member header claims bytes past the limit
+            raise self._bomb()
+        if target >= self._pos:
+            self._spend(target - self._pos)
+        elif self._limit is not None:  # a compressed stream decompresses again from its start
+            self._spend(target)
+        self._pos = self._stream.seek(target)
+        return self._pos
+
+    def tell(self) -> int:
+        return self._pos
+
+    def seekable(self) -> bool:
+        return True
+
+    def readable(self) -> bool:
+        return True
+
+
+class _ForwardTarFile(tarfile.TarFile):
+    """A tar read forwards only: a member whose header moves the next one back (a negative size) ends the read."""
+
+    def next(self) -> tarfile.TarInfo | None:
+        cached, before = self.firstmember is not None, self.offset  # (the first member is read when opening)
+        info = super().next()
+        if info is not None and not cached and self.offset <= before:  # tarfile would read them forever
+            raise tarfile.ReadError(f"the member header at offset {before} points backwards")
+        return info
+
+
+@contextmanager
+def _open_tar(path: Path) -> Iterator[tarfile.TarFile]:
+    """The tar at ``path``, plain or gzip/bzip2/xz-compressed, read through :class:`_BoundedReader`."""
     try:
-        return tarfile.open(path, "r:*")
+        raw = open(path, "rb")  # noqa: SIM115 (closed below, after the tar)
     except FileNotFoundError:
         raise StoreError(f"no such file: {path}.") from None
     except IsADirectoryError:
         raise StoreError(f"{path} is a folder; give the tar file made by `morfic store export`.") from None
-    except (tarfile.TarError, OSError, EOFError, zlib.error, lzma.LZMAError) as exc:
+    except OSError as exc:
         raise StoreError(f"{path} is not a readable tar file ({exc}); make one with `morfic store export`.") from exc
+    stream: IO[bytes] = raw
+    try:
+        try:
+            size = os.fstat(raw.fileno()).st_size
+            magic = raw.read(6)
+            raw.seek(0)
+            kind, opener = next(((k, o) for m, k, o in _COMPRESSED if magic.startswith(m)), ("plain", None))
+            stream = raw if opener is None else opener(raw)
+            limit = None if opener is None else max(MIN_EXPANDED_BYTES, MAX_EXPANSION * size)
+            tar = _ForwardTarFile(fileobj=_BoundedReader(stream, path, size, limit, kind), mode="r")
+        except (*_READ_ERRORS, OSError) as exc:
+            raise StoreError(f"{path} is not a readable tar file ({exc}); make one with `morfic store export`.") \
+                from exc
+        with tar:
+            yield tar
+    finally:
+        stream.close()
+        raw.close()
 
 
 @dataclass
@@ -400,7 +525,7 @@ def _checked_stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path
                    append: bool = False) -> _Plan:
     try:
         return _stage(store, tar, path, staging, append)
-    except (tarfile.TarError, EOFError, zlib.error, lzma.LZMAError) as exc:
+    except _READ_ERRORS as exc:
         raise StoreError(f"{path} is damaged or truncated ({exc}); nothing was imported. Copy the whole file "
                          "again, or re-export it.") from exc
     except OSError as exc:
@@ -466,10 +591,26 @@ def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
     if sorted(plan.histories) != header["refs"]:
         raise StoreError(f"{path} is inconsistent: its header lists refs {header['refs'][:5]}, it holds "
                          f"{sorted(plan.histories)[:5]}; nothing was imported. Re-export it.")
+    _check_ref_folders(store, sorted(plan.histories), path)
     for name, history in plan.histories.items():
         if not append:
             merge_status(name, store.refs.history(name), history)  # diverged: refuse before writing anything
     return plan
+
+
+def _check_ref_folders(store: Store, names: list[str], path: Path) -> None:
+    """Refuse a ref of the bundle that is a folder of refs, or inside a ref, here or in the bundle (before writing)."""
+    taken = set(names)
+    for name in names:
+        parts = name.split("/")
+        clash = next((p for p in ("/".join(parts[:i]) for i in range(1, len(parts)))
+                      if p in taken or store.refs.exists(p)), None)
+        if clash is None and store.refs.path(name).is_dir():
+            clash = next(n for n in store.refs.names() if n.startswith(name + "/"))
+        if clash is not None:
+            raise StoreError(f"{path} holds ref '{name}', but ref '{clash}' exists here or in it, and a name cannot "
+                             "be both a ref and a folder of refs; nothing was imported. Rename the local ref, or "
+                             "import into another store.")
 
 
 def _appended(local: list[RefEntry], incoming: list[RefEntry]) -> list[RefEntry]:
@@ -497,7 +638,7 @@ def _read_header(tar: tarfile.TarFile, members: _Members, path: Path) -> dict:
                      "newer morfic: upgrade morfic).")
     try:
         header = json.loads(_read_small(tar, members.header, HEADER, path), parse_constant=_no_constant)
-    except ValueError:
+    except (ValueError, RecursionError):  # RecursionError: JSON nested too deep
         raise bad from None
     if not isinstance(header, dict) or not _HEADER_KEYS <= set(header) <= _HEADER_KEYS | _OPTIONAL_HEADER_KEYS:
         raise bad
