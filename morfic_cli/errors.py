@@ -37,3 +37,7 @@ class ArtifactNotFoundError(StoreError):
 
 class DescriptorError(MorficError):
     """A morphology descriptor with the wrong shape or values outside any sane range."""
+
+
+class UntrustedVariantError(MorficError):
+    """A user variant (code) a stored run names that the user has not consented to import (docs/extending.md)."""

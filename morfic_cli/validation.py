@@ -261,6 +261,7 @@ def check_args(
     reference: str | None = None,
     variants: str | None = None,
     specs: Iterable[str] | None = None,
+    trust: Iterable[str] | None = None,
 ) -> None:
     """Check the arguments a command was given, before it does any work.
 
@@ -280,10 +281,15 @@ def check_args(
         reference: ``--reference``: exactly one known robot.
         variants: ``reproduce --variants``: ``all`` or a non-empty comma list of known variants.
         specs: Artifact names (refs, ids): non-empty, no control characters, at most 300 characters.
+        trust: ``--trust-variant``: well-formed user variant names (``module.path:Class``, an entry-point name);
+            this command consents to importing them (:func:`morfic_cli.rl.variants.trust_variants`). Checked first,
+            so that ``variants`` and later steps may resolve them.
 
     Raises:
         MorficError: The first bad argument, with what a good one looks like.
     """
+    if trust:
+        _trusted_list(trust)
     if store is not None:
         check_store_root(store)
     if out_file is not None:
@@ -409,7 +415,7 @@ def _robot_list(text: str, flag: str) -> list[str]:
 
 def _variant_list(text: str) -> list[str]:
     from morfic_cli.errors import UnknownNameError
-    from morfic_cli.rl.variants import VARIANTS, is_import_path, resolve_variant
+    from morfic_cli.rl.variants import VARIANTS, is_import_path, resolve_variant, trust_variants
 
     if text.strip().lower() == "all":
         return list(VARIANTS)
@@ -418,7 +424,23 @@ def _variant_list(text: str) -> list[str]:
         raise MorficError("--variants is empty; give 'all' or variants such as film,concat.")
     for name in names:
         if is_import_path(name):
+            trust_variants([name])  # named on this command line: the user's consent to import it
             resolve_variant(name)  # a user's variant (module:Class): Error: when it cannot be imported
         elif name not in VARIANTS:
             raise UnknownNameError("variant", name, VARIANTS)
     return names
+
+
+def _trusted_list(names: Iterable[str]) -> None:
+    """``--trust-variant``: each a well-formed user variant name, consented to for this command (nothing imported)."""
+    from morfic_cli.rl.variants import STOCK, check_variant_name, trust_variants
+
+    for name in names:
+        try:
+            check_variant_name(name)
+        except MorficError as exc:
+            raise MorficError(f"--trust-variant: {exc}") from None
+        if name in STOCK:
+            raise MorficError(f"--trust-variant {name}: {name} is a stock variant, which needs no trust; give a user "
+                              "variant, module.path:Class or an entry-point name.")
+    trust_variants(names)

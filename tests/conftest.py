@@ -9,11 +9,25 @@ import pytest
 from gl_probe import PROBE, probe_env
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _isolated_config(tmp_path_factory):
+    """The user's config folder (the allow-list of trusted variants, `morfic trust`) is a temporary one, for module
+    fixtures too; each test then gets its own (below)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("XDG_CONFIG_HOME", str(tmp_path_factory.mktemp("config")))
+        yield
+
+
 @pytest.fixture(autouse=True)
 def _isolated_store(tmp_path, monkeypatch):
     monkeypatch.setenv("MORFIC_STORE", str(tmp_path / "store"))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))  # the allow-list of trusted variants
     monkeypatch.setenv("MORFIC_LOG_DIR", str(tmp_path / "logs"))  # `morfic train`'s TensorBoard run folders
     monkeypatch.delenv("MORFIC_DEBUG", raising=False)
+    from morfic_cli.rl.variants import consent_scope
+
+    with consent_scope():  # consent to a user variant given in one test never reaches the next
+        yield
 
 
 @pytest.fixture

@@ -38,6 +38,7 @@ from morfic_cli.cli import (
     robots,
     store,
     train,
+    trust,
 )
 from morfic_cli.errors import MorficError
 from morfic_cli.threads import configure_openmp
@@ -84,6 +85,7 @@ app.command("reproduce")(reproduce.reproduce)
 app.add_typer(store.app, name="store")
 app.add_typer(robots.app, name="robots")
 app.command("bench")(bench.bench)
+app.command("trust")(trust.trust)
 
 
 def unwrap_help(doc: str) -> str:
@@ -149,8 +151,11 @@ def main(argv: list[str] | None = None) -> None:
     """Console-script entry point: run the app with central error handling."""
     configure_openmp()  # before any command imports torch (morfic_cli/threads.py)
     debug = os.environ.get("MORFIC_DEBUG", "") not in ("", "0")
+    from morfic_cli.rl.variants import consent_scope
+
     try:
-        rc = app(args=argv, prog_name="morfic", standalone_mode=False)
+        with consent_scope():  # consent given on this command line (--trust-variant, --variant) ends with it
+            rc = app(args=argv, prog_name="morfic", standalone_mode=False)
         if isinstance(rc, int) and rc != 0:
             sys.exit(rc)
     except MorficError as exc:

@@ -68,6 +68,9 @@ def bench(
     if overrides and (what is not _options.Benchmark.train or compare is not None):
         raise MorficError("--set overrides the training config of `morfic bench train` (without --compare); drop it.")
     if what is _options.Benchmark.train:
+        from morfic_cli.rl.variants import trust_variants
+
+        trust_variants([variant])  # --variant names it on this command line: the user's consent to import it
         if compare is not None:
             _compare_train(compare, preset.value, variant, iterations, rounds, seed, fmt, quiet, device.value, backend)
             return

@@ -7,7 +7,16 @@ from typing import Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, QuietOpt, RobotsOpt, SeedOpt, StoreOpt
+from morfic_cli.cli._options import (
+    DEFAULT_STORE,
+    FormatOpt,
+    OutputFormat,
+    QuietOpt,
+    RobotsOpt,
+    SeedOpt,
+    StoreOpt,
+    TrustOpt,
+)
 from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
 from morfic_cli.errors import MorficError
@@ -58,6 +67,7 @@ def critic_study(
         "into this directory.")] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
+    trust_variant: TrustOpt = None,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Fit every variant's critic from scratch on one frozen actor's rollouts and score it on every robot.
@@ -74,12 +84,13 @@ def critic_study(
     Example: morfic critic-study --variants film,concat --seeds 2 --robots aliengo --command-vx 1.0 --epochs 2
     """
     check_args(store=store, out_dir=out, seed=seed, envs=target_envs, steps=steps, command_vx=command_vx,
-               robots=robots, specs=[actor] if actor else None)
+               robots=robots, specs=[actor] if actor else None, trust=trust_variant)
     from morfic_cli.diagnostics.critic_study import STUDY_VARIANTS, StudyCfg, StudyProgress, check_cfg, run_study
     from morfic_cli.diagnostics.fixed_rollout import default_actor
     from morfic_cli.evaluation.protocol import parse_commands
     from morfic_cli.morphology.distance import parse_robot_list
     from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.variants import trust_variants
     from morfic_cli.store import Store
 
     try:
@@ -89,6 +100,7 @@ def critic_study(
             from exc
     names = STUDY_VARIANTS if variants.strip().lower() == "all" else tuple(
         v.strip() for v in variants.split(",") if v.strip())
+    trust_variants(names)  # the critics named by --variants: the user's consent to import them
     cfg = StudyCfg(variants=names, seeds=seeds, commands=commands, robots=tuple(parse_robot_list(robots)),
                    train_envs=train_envs, held_out=held_out, target_envs=target_envs, steps=steps, seed=seed,
                    stride=stride, epochs=epochs, minibatch=minibatch, trunc_eps=trunc_eps)

@@ -18,6 +18,7 @@ from morfic_cli.cli._options import (
     RobotsOpt,
     SeedOpt,
     StoreOpt,
+    TrustOpt,
 )
 from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
@@ -77,6 +78,7 @@ def diagnose(
                                                           "fixed_rollout.csv) into this directory.")] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
+    trust_variant: TrustOpt = None,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Critic calibration (EV, |NVB|/NVE/ASA, Flip, CosGrad) per run and robot, or the fixed-rollout analysis.
@@ -91,7 +93,8 @@ def diagnose(
     Example: morfic diagnose runs/film-cpu-s0 runs/ppo-cpu-s0 --robots aliengo,mini_cheetah
     Example: morfic diagnose --fixed-rollout aliengo --actor runs/film-cpu-s0 --critics runs/film-cpu-s0,runs/ppo-cpu-s0
     """
-    check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=str(command_vx), specs=runs)
+    check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=str(command_vx), specs=runs,
+               trust=trust_variant)
     from morfic_cli.diagnostics.samples import DiagnoseCfg
     from morfic_cli.morphology.distance import parse_robot_list
     from morfic_cli.store import Store

@@ -16,6 +16,7 @@ from morfic_cli.cli._options import (
     RobotsOpt,
     SeedOpt,
     StoreOpt,
+    TrustOpt,
 )
 from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
@@ -62,6 +63,7 @@ def evaluate(
     ] = False,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
+    trust_variant: TrustOpt = None,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Zero-shot evaluation of a trained policy on each target robot (paper protocol by default).
@@ -78,7 +80,7 @@ def evaluate(
     Example: morfic eval runs/film-cpu-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
     """
     check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=command_vx, robots=robots,
-               specs=[run])
+               specs=[run], trust=trust_variant)
     if training_conditions:
         _training_check(run, robots, command_vx, mode, envs, steps, seed, video, out, fmt, quiet, store)
         return

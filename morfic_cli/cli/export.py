@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, ExportTo, FormatOpt, OutputFormat, QuietOpt, StoreOpt
+from morfic_cli.cli._options import DEFAULT_STORE, ExportTo, FormatOpt, OutputFormat, QuietOpt, StoreOpt, TrustOpt
 from morfic_cli.cli._render import emit_object, err_console, info
 from morfic_cli.errors import MorficError
 from morfic_cli.validation import check_args
@@ -53,6 +53,7 @@ def export(
     samples: Annotated[int, typer.Option("--samples", help="Random inputs of the verification.")] = 256,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
+    trust_variant: TrustOpt = None,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Export a deployable policy with the metadata a robot stack needs.
@@ -72,7 +73,7 @@ def export(
 
     Example: morfic export runs/film-cpu-s0 --robot go1 --to onnx --out deploy/go1
     """
-    check_args(store=store, out_dir=out, specs=[run])
+    check_args(store=store, out_dir=out, specs=[run], trust=trust_variant)
     from morfic_cli.export.artifact import ExportCfg, export_policy
     from morfic_cli.store import Store
 

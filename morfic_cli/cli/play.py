@@ -7,9 +7,10 @@ from typing import Annotated
 
 import typer
 
-from morfic_cli.cli._options import DEFAULT_STORE, EvalMode, ModeOpt, QuietOpt, SeedOpt, StoreOpt
+from morfic_cli.cli._options import DEFAULT_STORE, EvalMode, ModeOpt, QuietOpt, SeedOpt, StoreOpt, TrustOpt
 from morfic_cli.cli._render import info
 from morfic_cli.errors import MorficError
+from morfic_cli.validation import check_args
 
 
 def play(
@@ -30,6 +31,7 @@ def play(
                                        "Ctrl-C).")] = 0,
     seed: SeedOpt = 0,
     quiet: QuietOpt = False,
+    trust_variant: TrustOpt = None,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Run a policy in real time (50 policy steps per second) and serve the 3D scene and its numbers live.
@@ -39,6 +41,7 @@ def play(
 
     Example: morfic play runs/film-cpu-s0 --robot go1 --command-vx 1.5 --envs 4 --record go1.mcap
     """
+    check_args(trust=trust_variant)
     from morfic_cli.evaluation.play import PlayCfg
     from morfic_cli.evaluation.play import play as run_play
     from morfic_cli.morphology.robots import list_robots

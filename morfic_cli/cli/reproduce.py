@@ -18,6 +18,7 @@ from morfic_cli.cli._options import (
     OutputFormat,
     QuietOpt,
     StoreOpt,
+    TrustOpt,
 )
 from morfic_cli.cli._render import emit_object, info
 from morfic_cli.rl.variants import VARIANTS
@@ -66,7 +67,8 @@ def reproduce(
     seeds: Annotated[int, typer.Option("--seeds", help="Seeds per variant (0..N-1).")] = 1,
     variants: Annotated[
         str, typer.Option("--variants", help=f"Comma-separated variants to train, or 'all' (the paper's: "
-                          f"{', '.join(VARIANTS)}); a user variant by import path module:Class.")
+                          f"{', '.join(VARIANTS)}); a user variant by import path module:Class (named here, it is "
+                          "imported, and added to your allow-list of trusted variants: `morfic trust`).")
     ] = "all",
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Folder for the report's files (default "
@@ -101,6 +103,7 @@ def reproduce(
     ] = 3,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
+    trust_variant: TrustOpt = None,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Train all variants, evaluate, diagnose, compare and report: the paper's pipeline in one command.
@@ -119,7 +122,7 @@ def reproduce(
 
     Example: morfic reproduce --preset shipped
     """
-    check_args(store=store, out_dir=out, variants=variants)
+    check_args(store=store, out_dir=out, variants=variants, trust=trust_variant)
     _check_executor(executor, address, retries)
     _check_shipped(preset, bundles, full_protocol, executor, overrides)
     from morfic_cli.pipeline import Pipeline, reproduce_cfg
@@ -139,6 +142,11 @@ def reproduce(
         apply_overrides(preset_cfg(cfg.preset), list(overrides))  # unknown keys fail before anything runs
         cfg = dataclasses.replace(cfg, train_overrides=tuple(overrides))
     check_device(cfg.device)
+    users = [v for v in cfg.variants if v not in VARIANTS]  # named by --variants: trusted here and from now on
+    if users:
+        from morfic_cli.cli.trust import remember_variants
+
+        remember_variants(users, quiet)
     if executor is Executor.ray:
         from morfic_cli.cluster.ray_executor import import_ray
 

@@ -237,6 +237,19 @@ def export(
                  "omitted": sorted(report.omitted), "omitted_files": sorted(report.omitted_files)}, fmt)
 
 
+def _say_user_variants(bundle: str, needed: dict[str, list[str]]) -> None:
+    """A line per user variant an imported bundle's runs name: its refs, and whether this user trusts it."""
+    from morfic_cli.rl.variants import is_trusted
+
+    for variant, refs in needed.items():
+        shown = escape(", ".join(refs[:5])) + (f" and {len(refs) - 5} more" if len(refs) > 5 else "")
+        how = ("trusted here" if is_trusted(variant) else
+               f"NOT trusted here: commands on them import it only with --trust-variant {variant}, or after "
+               f"`morfic trust {variant}`")
+        info(f"{escape(bundle)}: needs the user variant {variant} (code morfic imports to rebuild the models) for "
+             f"{shown}; {how}")
+
+
 @app.command("import")
 def import_(
     paths: Annotated[list[Path], typer.Argument(help="Tar files made by `morfic store export`, one or more.")],
@@ -248,6 +261,10 @@ def import_(
     Prints a row per ref of each tar (bundle, ref, status) and, on stderr, a line per tar. A tar that cannot be
     imported gets its own `Error:` line and leaves the store as it was; the others are imported all the same,
     and the command exits 1 at the end.
+
+    Nothing in a bundle is executed. A line on stderr names each user variant (module.path:Class) its runs need,
+    with their refs and whether you trust it (`morfic trust`); commands import it only with your consent. A
+    bundle naming a variant that is not a well-formed name is refused.
 
     Example: morfic store import artifacts/bundles/*.tar --store artifacts
     """
@@ -272,6 +289,7 @@ def import_(
         filled = f"; {len(report.filled)} left-out object(s) filled in" if report.filled else ""
         info(f"{escape(path.name)}: imported {report.objects_added} new object(s) ({report.objects_present} already "
              f"present{repaired}), {len(report.refs)} ref(s) into {escape(str(store))}{left_out}{filled}")
+        _say_user_variants(path.name, report.user_variants)
     if rows or not failed:
         title = f"refs imported from {paths[0].name}" if len(paths) == 1 else f"refs imported from {len(paths)} tars"
         _emit(rows, fmt, [Column("bundle"), Column("ref"), Column("status")], title=title)

@@ -20,10 +20,12 @@ from morfic_cli.cli._options import (
     QuietOpt,
     SeedOpt,
     StoreOpt,
+    TrustOpt,
 )
 from morfic_cli.cli._render import emit_object, info
+from morfic_cli.cli.trust import remember_variants
 from morfic_cli.errors import MorficError
-from morfic_cli.rl.variants import help_text
+from morfic_cli.rl.variants import help_text, trust_variants
 from morfic_cli.runs import run_name
 from morfic_cli.validation import check_args
 
@@ -58,6 +60,7 @@ def train(
     ] = Path("logs"),
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
+    trust_variant: TrustOpt = None,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Train a policy with one critic-conditioning variant; checkpoints go to ref runs/NAME.
@@ -70,10 +73,17 @@ def train(
     --device cuda simulates with MuJoCo Warp on the GPU (pip install 'morfic[gpu]'); several GPUs:
     torchrun --nproc_per_node=G -m morfic_cli train --device cuda ... (docs/gpu.md).
 
+    Your own critic class, by import path: --variant names it, so this command imports it, and adds it to your
+    allow-list of trusted variants (`morfic trust`), so later commands on its runs import it too. --resume of a
+    run with a user variant imports it only when it is on that list or named with --trust-variant.
+
     Example: morfic train --variant film --preset cpu --seed 0
     Your own critic: morfic train --variant my_lab.critics:GatedCritic (docs/extending.md)
     """
-    check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None)
+    check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None,
+               trust=trust_variant)
+    named = [variant] if variant is not None and resume is None else []
+    trust_variants(named)  # --variant names it on this command line: the user's consent to import it
     from morfic_cli.rl.config import apply_overrides, preset_cfg
     from morfic_cli.rl.live_log import check_logger
     from morfic_cli.rl.precision import float32_note
@@ -96,6 +106,8 @@ def train(
 
     cfg = run.cfg
     quiet = quiet or run.dist.rank != 0  # torchrun: one progress bar, rank 0's
+    if named and run.dist.rank == 0:
+        remember_variants(named, quiet)
     if not quiet:
         info(f"train: runs/{run.name} variant={cfg.variant} preset={cfg.preset} seed={cfg.seed} "
              f"envs={cfg.env.num_envs} iterations {run.iteration}->{cfg.max_iterations} "

@@ -170,8 +170,10 @@ class RayExecutor:
 
     def _run_jobs(self, ray, result: ReproduceResult) -> list[StepResult]:
         from morfic_cli.cluster.worker import Outcome, execute
+        from morfic_cli.rl.variants import trusted_variants
 
         store, cfg = self.pipeline.store, self.pipeline.cfg
+        trusted = tuple(trusted_variants())  # the driver's consent travels with each job (workers re-resolve variants)
         board = _board_class(ray).remote()
         task = ray.remote(execute)
         steps: dict[str, StepResult] = {}
@@ -191,7 +193,8 @@ class RayExecutor:
                 inputs = [self._export([job.label], with_resume=True)] if store.has_ref(job.label) else []
             else:
                 inputs = [train_refs[n] if n in train_refs else ray.put(self._export([n])) for n in job.needs]
-            ref = task.options(**self._options(job)).remote(job, cfg, __version__, *inputs, board=board)
+            ref = task.options(**self._options(job)).remote(job, cfg, __version__, *inputs, board=board,
+                                                            trusted=trusted)
             pending[ref] = job
             if job.kind == "train":
                 train_refs[job.label] = ref

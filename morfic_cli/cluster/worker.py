@@ -81,8 +81,12 @@ def input_bundle(result: Outcome | bytes) -> bytes:
 
 
 def execute(job: Job, cfg: ReproduceCfg, driver_version: str, *inputs: Outcome | bytes,
-            board=None) -> Outcome:
+            board=None, trusted: tuple[str, ...] = ()) -> Outcome:
     """Run ``job`` in a fresh store fed with ``inputs``; return its refs as one export bundle.
+
+    ``trusted``: the user variants the driver's user consented to (its command line and allow-list,
+    :func:`~morfic_cli.rl.variants.trusted_variants`); the job imports those and no other user code, whatever
+    its input runs name (plus what this node's own allow-list holds).
 
     A :class:`MorficError` (a user error: bad config, a mismatched morfic version, an input job that failed) is
     returned in ``Outcome.error``, so Ray does not retry it; anything else raises (a bug keeps its traceback).
@@ -90,6 +94,7 @@ def execute(job: Job, cfg: ReproduceCfg, driver_version: str, *inputs: Outcome |
     """
     import torch
 
+    from morfic_cli.rl.variants import consent_scope
     from morfic_cli.store import Store
 
     out = Outcome(job.key, where(), os.getpid())
@@ -106,7 +111,8 @@ def execute(job: Job, cfg: ReproduceCfg, driver_version: str, *inputs: Outcome |
         before = _histories(store)
         if cfg.torch_threads:
             torch.set_num_threads(cfg.torch_threads)
-        out.step = run_job(Pipeline(store, cfg), job)
+        with consent_scope(trusted):
+            out.step = run_job(Pipeline(store, cfg), job)
         after = _histories(store)
         out.refs = sorted(name for name, ids in after.items() if before.get(name) != ids)
         if out.refs:

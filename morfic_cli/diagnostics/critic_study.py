@@ -393,15 +393,15 @@ def run_study(store: Store, actor_spec: str, cfg: StudyCfg, *, actor: TrainedMod
     )
     from morfic_cli.recording.tables import rows_to_csv
     from morfic_cli.rl.runner import load_trained
-    from morfic_cli.rl.variants import resolve_variant
+    from morfic_cli.rl.variants import STOCK, resolve_variant
 
     check_cfg(cfg)
     progress = progress or StudyProgress()
     trained = actor if actor is not None else load_trained(store, actor_spec)
     gamma, clip = trained.cfg.ppo.gamma, trained.cfg.ppo.clip_param
     variants = canonical_variants(cfg.variants)
-    # user classes fail here, early; a user's critic is neither group of claim (a) (None)
-    multiplicative = {v: (resolve_variant(v).multiplicative if resolve_variant(v).stock else None) for v in variants}
+    # user classes were resolved by check_cfg (consent, import); a user's critic is neither group of claim (a) (None)
+    multiplicative = {v: (resolve_variant(v).multiplicative if v in STOCK else None) for v in variants}
     check_horizon(gamma, cfg.diagnose_cfg(cfg.commands[0], True))
     label = run_label(trained, actor_spec)
     rows: list[dict[str, Any]] = []

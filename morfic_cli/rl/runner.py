@@ -135,6 +135,8 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
 
     Raises:
         ArtifactNotFoundError: Nothing by that name.
+        UntrustedVariantError: Its user variant is neither trusted nor named on this command line (nothing of it
+            is imported; :func:`~morfic_cli.rl.variants.require_trusted`).
         MorficError: It is not a training checkpoint, or its user variant cannot be imported or its weights do
             not fit that class.
     """
@@ -144,9 +146,9 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
                           "pass a run ref such as runs/film-cpu-s0 (see `morfic store ls --kind checkpoint`).")
     check_weights(store, spec, manifest)
     cfg = train_cfg_from_dict(manifest.config)
+    variant = resolve_variant(cfg.variant, source=spec)  # a user variant: only with the user's consent, else Error
     actor, critic = build_models(cfg)
     state = _load_weights(store, manifest.id, "cpu")
-    variant = resolve_variant(cfg.variant)
     try:
         actor.load_state_dict(state["actor"])
         critic.load_state_dict(state["critic"])
@@ -556,6 +558,7 @@ def resume_run(store: Store, spec: str, overrides: list[str] | None = None, devi
 
     Raises:
         ArtifactNotFoundError: No such checkpoint.
+        UntrustedVariantError: Its user variant is neither trusted nor named on this command line.
         MorficError: Not a checkpoint, or its trainer state is missing (a weights-only bundle, or a policy bundle
             of an older morfic) or cannot be loaded as tensors.
     """
@@ -591,6 +594,7 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-cpu-s0.")
     name = run_of(spec, manifest.meta)
+    resolve_variant(train_cfg_from_dict(manifest.config).variant, source=spec)  # consent first (morfic_cli.rl.variants)
     check_weights(store, spec, manifest)
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
     if state_id is not None and store.is_omitted(state_id):

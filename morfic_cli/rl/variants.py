@@ -23,17 +23,32 @@ The actor of a user variant is the stock actor with z_m (as ``film``). The run r
 variant and the resolved model config in the checkpoint manifest; ``eval``, ``diagnose``, ``export``,
 ``compare-baselines`` and ``report`` reload the class by that path. This module imports neither torch nor the
 user's code until a user variant is resolved.
+
+Consent (docs/extending.md, "Which code morfic imports"): a stored run, imported from anyone's bundle, names its
+variant, so a user variant is imported only when the user consented to that exact name: named on this command
+line (``--variant``, ``--variants``, ``--trust-variant``: :func:`trust_variants`, scoped to one command by
+:func:`consent_scope`) or listed in the allow-list in the user's config folder (:func:`allow_list_path`, managed
+by ``morfic trust``), which no bundle can write. :func:`resolve_variant` is the one place that imports, and it
+checks both (:func:`require_trusted`) and the name's form (:func:`check_variant_name`) before it imports
+anything; stock names need neither.
 """
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import importlib
 import importlib.metadata
+import keyword
+import os
+import re
+import tempfile
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
-from morfic_cli.errors import MorficError, UnknownNameError
+from morfic_cli.errors import MorficError, UnknownNameError, UntrustedVariantError
 
 ACTOR_CLASS = "morfic_cli.rl.models:MorficActor"
 CRITIC_CLASS = "morfic_cli.rl.models:MorficCritic"
@@ -171,27 +186,252 @@ def is_import_path(name: str) -> bool:
     return ":" in name
 
 
-def resolve_variant(name: str) -> Variant:
-    """The :class:`Variant` of a ``--variant`` value: a stock name, an entry point, or ``module:Class``.
+# ---------------------------------------------------------------------------- well-formed names
+MAX_NAME_LENGTH = 200
+"""The longest variant name morfic accepts (a stored run's, or one on the command line)."""
+
+_IDENT = r"[A-Za-z_][A-Za-z0-9_]*"
+_IMPORT_PATH = re.compile(rf"{_IDENT}(?:\.{_IDENT})*:{_IDENT}(?:\.{_IDENT})*")
+_BARE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*(?:\.[A-Za-z0-9_-]+)*")
+
+
+def _shown(value: object) -> str:
+    """A value as an error message shows it: quoted, cut at 80 characters, control characters escaped."""
+    if not isinstance(value, str):
+        return f"{type(value).__name__} {ascii(value)[:80]}"
+    cut = value[:80] + ("..." if len(value) > 80 else "")
+    return f"'{cut}'" if cut.isascii() and cut.isprintable() else ascii(cut)
+
+
+def check_variant_name(name: object) -> str:
+    """``name`` when it is a well-formed variant name, else MorficError; never imports anything.
+
+    Well-formed: a stock name; an entry-point-style name (ASCII letters, digits, ``_``, ``-``, dots between
+    parts); or an import path ``module.path:Class.attr`` whose parts are Python identifiers (ASCII, not keywords):
+    no relative import (leading dot), no empty part, no whitespace or other characters; at most
+    :data:`MAX_NAME_LENGTH` characters. ``morfic store import`` refuses a bundle whose manifests name anything else,
+    and :func:`resolve_variant` checks it again before it imports (a store written before the check).
+
+    Raises:
+        MorficError: Not a string, too long, or not of either form.
+    """
+    if not isinstance(name, str):
+        raise MorficError(f"variant {_shown(name)} is not a variant name; a variant is a stock name "
+                          f"({', '.join(VARIANTS)}), an entry-point name, or an import path module:Class.")
+    if name in STOCK:
+        return name
+    if len(name) > MAX_NAME_LENGTH:
+        raise MorficError(f"variant {_shown(name)} is {len(name)} characters long; a variant name has at most "
+                          f"{MAX_NAME_LENGTH}.")
+    if is_import_path(name):
+        parts = re.split(r"[.:]", name)
+        if not _IMPORT_PATH.fullmatch(name) or any(keyword.iskeyword(p) for p in parts):
+            raise MorficError(f"variant {_shown(name)} is not an import path; write it as module.path:Class, Python "
+                              "identifiers joined by dots, without a leading dot or spaces (e.g. "
+                              "my_lab.critics:GatedCritic).")
+        return name
+    if not _BARE_NAME.fullmatch(name):
+        raise MorficError(f"variant {_shown(name)} is not a variant name; give a stock name ({', '.join(VARIANTS)}), "
+                          "an entry-point name (letters, digits, _ and -), or your own critic class by import path, "
+                          "module:Class (docs/extending.md).")
+    return name
+
+
+def stored_variants(config: Mapping[str, Any], meta: Mapping[str, Any]) -> list[str]:
+    """The variant names a stored manifest records (``variant`` and ``variants`` of its config and meta), checked.
+
+    Only checked for form (:func:`check_variant_name`); nothing is imported. Order kept, each once.
+
+    Raises:
+        MorficError: One of them is not a well-formed variant name, or ``variants`` is not a list.
+    """
+    out: list[str] = []
+    for doc in (config, meta):
+        named = [doc["variant"]] if "variant" in doc else []
+        if "variants" in doc:
+            if not isinstance(doc["variants"], list):
+                raise MorficError(f"its 'variants' is {type(doc['variants']).__name__}, not a list of variant names.")
+            named += doc["variants"]
+        for name in named:
+            if check_variant_name(name) not in out:
+                out.append(name)
+    return out
+
+
+# ---------------------------------------------------------------------------- consent
+_named: set[str] = set()
+"""User variants named on this command line (``--variant``, ``--variants``, ``--trust-variant``)."""
+
+
+def trust_variants(names: Iterable[str]) -> None:
+    """Consent to importing these user variants in this process (until :func:`consent_scope` ends).
+
+    The CLI calls it with the names given on the command line; a Python caller that builds a user variant's models
+    itself calls it with the names it means. Stock names need no consent and are ignored.
+
+    Raises:
+        MorficError: A name that is not well-formed (:func:`check_variant_name`).
+    """
+    for name in names:
+        if check_variant_name(name) not in STOCK:
+            _named.add(name)
+
+
+@contextlib.contextmanager
+def consent_scope(names: Iterable[str] = ()) -> Iterator[None]:
+    """While open, this process consents to exactly ``names`` (plus the allow-list); the consent before is restored.
+
+    One CLI command runs in one scope (``morfic_cli.cli.main``), so consent given to one command never carries over
+    to the next in the same process; a cluster worker runs its job in a scope of the driver's consent.
+    """
+    saved = set(_named)
+    _named.clear()
+    try:
+        trust_variants(names)
+        yield
+    finally:
+        _named.clear()
+        _named.update(saved)
+
+
+def allow_list_path() -> Path:
+    """The allow-list of trusted user variants: ``$XDG_CONFIG_HOME/morfic/trusted-variants``.
+
+    ``~/.config/morfic/trusted-variants`` when ``XDG_CONFIG_HOME`` is unset or not an absolute path. It lives in
+    the user's config folder, never in a store, so no imported bundle can write it.
+    """
+    base = os.environ.get("XDG_CONFIG_HOME", "")
+    root = Path(base) if base and Path(base).is_absolute() else Path.home() / ".config"
+    return root / "morfic" / "trusted-variants"
+
+
+def _allow_list_lines() -> list[str]:
+    try:
+        return allow_list_path().read_text(encoding="utf-8", errors="replace").splitlines()
+    except FileNotFoundError:
+        return []
+    except OSError as exc:
+        raise MorficError(f"cannot read the allow-list of trusted variants {allow_list_path()} ({exc.strerror}); "
+                          "fix its permissions, or pass --trust-variant to this command.") from exc
+
+
+def allow_list() -> list[str]:
+    """The user variants on the allow-list (one name a line; blank lines and ``#`` comments skipped)."""
+    names = [line.strip() for line in _allow_list_lines()]
+    return [n for n in dict.fromkeys(names) if n and not n.startswith("#")]
+
+
+def _write_allow_list(lines: list[str]) -> None:
+    path = allow_list_path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".trusted-variants-")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write("".join(f"{line}\n" for line in lines))
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def add_to_allow_list(names: Iterable[str]) -> list[str]:
+    """Put user variants on the allow-list; returns those that were not on it (stock names are never added).
+
+    Raises:
+        MorficError: A name that is not well-formed.
+        OSError: The config folder cannot be written.
+    """
+    new = [n for n in dict.fromkeys(check_variant_name(n) for n in names) if n not in STOCK]
+    have = set(allow_list())
+    new = [n for n in new if n not in have]
+    if new:
+        lines = _allow_list_lines()
+        if not lines:
+            lines = ["# User variants morfic may import when a stored run names them (`morfic trust`; "
+                     "docs/extending.md)."]
+        _write_allow_list(lines + new)
+    return new
+
+
+def remove_from_allow_list(names: Iterable[str]) -> list[str]:
+    """Take names off the allow-list; returns those that were on it.
+
+    Raises:
+        OSError: The config folder cannot be written.
+    """
+    drop = set(names)
+    lines = _allow_list_lines()
+    kept = [line for line in lines if line.strip() not in drop]
+    removed = [n for n in dict.fromkeys(line.strip() for line in lines) if n in drop]
+    if removed:
+        _write_allow_list(kept)
+    return removed
+
+
+def _well_formed(name: str) -> bool:
+    try:
+        check_variant_name(name)
+    except MorficError:
+        return False
+    return True
+
+
+def trusted_variants() -> list[str]:
+    """Every user variant this process may import now: named on this command line, or on the allow-list.
+
+    A line of the allow-list that is no well-formed name (edited by hand) is left out: it can never match one.
+    """
+    return sorted(_named | {n for n in allow_list() if _well_formed(n)})
+
+
+def is_trusted(name: str) -> bool:
+    """Whether ``name`` may be imported now: a stock name, named on this command line, or on the allow-list."""
+    return name in STOCK or name in _named or name in allow_list()
+
+
+def require_trusted(name: str, *, source: str | None = None) -> None:
+    """Raise :class:`UntrustedVariantError` unless ``name`` may be imported (:func:`is_trusted`); imports nothing.
+
+    ``source`` names the stored run that asks for it (``runs/NAME`` or an id), for the message.
+    """
+    if is_trusted(name):
+        return
+    how = (f"If you trust that code, pass --trust-variant {name} to this command, or trust it for every command "
+           f"with `morfic trust {name}` (the allow-list {allow_list_path()}).")
+    if source is not None:
+        raise UntrustedVariantError(f"run {source} needs the user variant {name}; morfic will not import code named "
+                                    f"by a stored run without --trust-variant {name}. {how}")
+    raise UntrustedVariantError(f"the user variant {name} was neither named on this command line nor trusted; morfic "
+                                f"imports a user's code only with consent. {how}")
+
+
+def resolve_variant(name: str, *, source: str | None = None) -> Variant:
+    """The :class:`Variant` of a variant name: a stock name, an entry point, or ``module:Class``.
+
+    A user variant (entry point or import path) is imported only when it is well-formed and trusted
+    (:func:`require_trusted`): both are checked before anything is imported. ``source``: the stored run that names
+    it (for the message), None for a name from the command line.
 
     Raises:
         UnknownNameError: Neither a stock name, an entry point nor an import path.
-        MorficError: The import path's module cannot be imported, has no such class, or it is not a class.
+        UntrustedVariantError: A user variant without the user's consent (nothing imported).
+        MorficError: A name that is not well-formed; the import path's module cannot be imported, has no such
+            class, or it is not a class.
     """
-    if name in STOCK:
+    if check_variant_name(name) in STOCK:
         return STOCK[name]
     if not is_import_path(name):
-        points = {ep.name: ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}
+        points = {ep.name: ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}  # metadata only
         if name in points:
+            require_trusted(name, source=source)
             return user_variant(name, points[name].load(), f"{points[name].value}")
         exc = UnknownNameError("variant", name, [*VARIANTS, *points])
         exc.args = (f"{exc.args[0].rstrip('.')}; or your own critic class by import path, module:Class "
                     "(docs/extending.md).",)
         raise exc
+    require_trusted(name, source=source)
     module_name, _, attr = name.partition(":")
-    if not module_name or not attr:
-        raise MorficError(f"variant '{name}' is not an import path; write it as module:Class "
-                          "(e.g. my_lab.critics:GatedCritic).")
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:

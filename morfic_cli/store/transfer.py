@@ -43,7 +43,8 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 from morfic_cli import __version__
-from morfic_cli.errors import ArtifactNotFoundError, StoreError
+from morfic_cli.errors import ArtifactNotFoundError, MorficError, StoreError
+from morfic_cli.rl.variants import STOCK, stored_variants
 from morfic_cli.store.gc import walk
 from morfic_cli.store.manifest import MAX_MANIFEST_BYTES, parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, is_object_id, object_relpath, store_os_error, unlink_quiet
@@ -104,6 +105,8 @@ class ImportReport:
         omitted: Inputs the (weights-only) export left out and this store lacks, now recorded under ``shallow/``.
         omitted_files: Files the (results-only) export left out and this store lacks, recorded the same way.
         filled: Inputs and files this store had recorded as left out and that this import brought.
+        user_variants: User variant (not stock) -> the refs (or manifest ids) of the bundle whose manifests name
+            it: code that commands on those runs import, with the user's consent (docs/extending.md).
     """
 
     objects_added: int = 0
@@ -114,6 +117,7 @@ class ImportReport:
     omitted: list[str] = field(default_factory=list)
     omitted_files: list[str] = field(default_factory=list)
     filled: list[str] = field(default_factory=list)
+    user_variants: dict[str, list[str]] = field(default_factory=dict)
 
 
 def _info(name: str, size: int, mode: int) -> tarfile.TarInfo:
@@ -485,6 +489,8 @@ class _Plan:
     """Ids of the files the export declares left out (weights and rollout logs of its manifests)."""
     objects: list[str] = field(default_factory=list)
     """Every object id the tar holds."""
+    variants: dict[str, list[str]] = field(default_factory=dict)
+    """Manifest id -> the user variants it names (checked well-formed, never imported)."""
 
 
 def import_tar(store: Store, path: Path, *, append: bool = False) -> ImportReport:
@@ -707,6 +713,14 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
         raise StoreError(f"the export lists manifest {oid} but does not contain it; nothing was imported. "
                          "Re-export it.")
     manifest = parse_manifest(oid, data)
+    try:  # a variant names code that commands would import: refuse any string that is not a well-formed name
+        users = [v for v in stored_variants(manifest.config, manifest.meta) if v not in STOCK]
+    except MorficError as exc:
+        raise StoreError(f"manifest {oid} in the export names a variant that is not well-formed ({exc}); nothing was "
+                         "imported. morfic records a stock name, an entry-point name or module.path:Class: the bundle "
+                         "was not made by morfic, or was edited.") from None
+    if users:
+        plan.variants[oid] = users
     named: set[str] = set()
     for name, entry in manifest.files.items():
         size = sizes.get(entry.id)
@@ -782,3 +796,21 @@ def _commit(store: Store, plan: _Plan, report: ImportReport, append: bool = Fals
                     store.refs.remove(name)
             raise
         report.refs = statuses
+        report.user_variants = _user_variants(plan)
+
+
+def _user_variants(plan: _Plan) -> dict[str, list[str]]:
+    """User variant -> the bundle's refs whose versions name it (a manifest no ref points at: its short id)."""
+    out: dict[str, list[str]] = {}
+    pointed: set[str] = set()
+    for name, history in sorted(plan.histories.items()):
+        for entry in history:
+            pointed.add(entry.id)
+            for variant in plan.variants.get(entry.id, ()):
+                refs = out.setdefault(variant, [])
+                if name not in refs:
+                    refs.append(name)
+    for oid, names in sorted(plan.variants.items()):
+        for variant in names if oid not in pointed else ():
+            out.setdefault(variant, []).append(oid[:12])
+    return dict(sorted(out.items()))

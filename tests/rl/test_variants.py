@@ -28,7 +28,8 @@ def test_run_names_follow_one_rule():
 
 
 def test_a_user_class_becomes_a_variant_with_the_stock_actor():
-    variant = V.resolve_variant("collections:OrderedDict")  # any importable class stands in for a critic here
+    with V.consent_scope(["collections:OrderedDict"]):  # any importable class stands in for a critic here
+        variant = V.resolve_variant("collections:OrderedDict")
     assert not variant.stock and variant.label == "OrderedDict"
     actor, critic, groups = variant.model_cfgs()
     assert actor["class_name"] == V.ACTOR_CLASS and actor["morphology_group"] == "morphology"
@@ -44,7 +45,7 @@ def test_a_user_class_becomes_a_variant_with_the_stock_actor():
     (":Critic", "not an import path"),
 ])
 def test_bad_variant_names_are_user_errors(name, needle):
-    with pytest.raises(MorficError, match=needle):
+    with V.consent_scope([name] if ":" in name[1:] else []), pytest.raises(MorficError, match=needle):
         V.resolve_variant(name)
 
 
@@ -53,3 +54,95 @@ def test_an_unknown_stock_name_lists_the_valid_ones():
         V.resolve_variant("film-xl")
     for name in V.VARIANTS:
         assert name in str(info.value)
+
+
+# ---------------------------------------------------------------------------- consent (issue 36)
+@pytest.fixture
+def sentinel(tmp_path, monkeypatch):
+    """A module on sys.path whose top-level code leaves a marker file when it is imported: (name, marker)."""
+    marker = tmp_path / "imported"
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / "sentinel_critic.py").write_text(
+        f"import pathlib\npathlib.Path({str(marker)!r}).write_text('imported')\nclass Critic:\n    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    monkeypatch.delitem(__import__("sys").modules, "sentinel_critic", raising=False)
+    return "sentinel_critic:Critic", marker
+
+
+def _imported(marker) -> bool:
+    import sys
+
+    return marker.exists() or "sentinel_critic" in sys.modules
+
+
+def test_a_user_variant_is_imported_only_with_consent(sentinel):
+    name, marker = sentinel
+    with V.consent_scope(), pytest.raises(V.UntrustedVariantError) as info:
+        V.resolve_variant(name, source="runs/x")
+    assert str(info.value).startswith(f"run runs/x needs the user variant {name}; morfic will not import code named "
+                                      f"by a stored run without --trust-variant {name}")
+    assert f"morfic trust {name}" in str(info.value)
+    assert not _imported(marker)
+    with V.consent_scope([name]):
+        assert V.resolve_variant(name, source="runs/x").critic_class == name
+    assert _imported(marker)
+
+
+def test_the_allow_list_is_consent_and_lives_in_the_config_folder(sentinel, tmp_path, monkeypatch):
+    name, marker = sentinel
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
+    assert V.allow_list_path() == tmp_path / "xdg" / "morfic" / "trusted-variants"
+    assert V.add_to_allow_list([name, "film", name]) == [name]  # stock names need no trust, each name once
+    assert V.add_to_allow_list([name]) == []
+    with V.consent_scope():
+        assert V.is_trusted(name) and V.trusted_variants() == [name]
+        V.resolve_variant(name)
+    assert _imported(marker)
+    assert V.remove_from_allow_list([name, "other:X"]) == [name]
+    with V.consent_scope():
+        assert not V.is_trusted(name)
+        with pytest.raises(V.UntrustedVariantError):
+            V.resolve_variant(name)
+    monkeypatch.setenv("XDG_CONFIG_HOME", "relative/path")  # not absolute: ignored (XDG), ~/.config instead
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert V.allow_list_path() == tmp_path / "home" / ".config" / "morfic" / "trusted-variants"
+
+
+def test_consent_ends_with_its_scope_and_stock_names_need_none():
+    with V.consent_scope(["a.b:C"]):
+        assert V.is_trusted("a.b:C")
+        with V.consent_scope():
+            assert not V.is_trusted("a.b:C")
+        assert V.is_trusted("a.b:C")
+    assert not V.is_trusted("a.b:C")
+    with V.consent_scope():
+        assert all(V.is_trusted(v) and V.resolve_variant(v, source="runs/x").stock for v in V.VARIANTS)
+
+
+@pytest.mark.parametrize("name", [
+    ".relative:Critic", "..up:Critic", "pkg..mod:Critic", "pkg.:Critic", "pkg:", ":Critic", "pkg:Critic.",
+    "pkg:Cri tic", " pkg:Critic", "pkg:Critic\n", "pkg/mod:Critic", "pkg:Critic:X", "os;rm:X", "pkg:Critïc",
+    "class:X", "a" * 190 + ".b:" + "C" * 10, "-film", "film xl", "", "x\x1b[31m", 3, None, ["film"],
+])
+def test_malformed_names_are_refused_before_any_import(name):
+    with pytest.raises(MorficError) as info:
+        V.check_variant_name(name)
+    assert "\x1b" not in str(info.value) and "\n" not in str(info.value)
+    with V.consent_scope(), pytest.raises(MorficError):
+        V.resolve_variant(name, source="runs/x")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", [*V.VARIANTS, "gated", "my-lab.gated_v2", "pkg.mod:Critic", "_p.m2:Outer.Inner",
+                                  "a" * 180 + ":C"])
+def test_well_formed_names_pass(name):
+    assert V.check_variant_name(name) == name
+
+
+def test_stored_variants_lists_config_and_meta_names_checked():
+    assert V.stored_variants({"variant": "film"}, {"variant": "film", "variants": ["ppo", "a:B"]}) == \
+        ["film", "ppo", "a:B"]
+    assert V.stored_variants({}, {}) == []
+    with pytest.raises(MorficError, match="not an import path"):
+        V.stored_variants({"variant": "film"}, {"variant": ".x:Y"})
+    with pytest.raises(MorficError, match="not a list"):
+        V.stored_variants({"variants": "film"}, {})
