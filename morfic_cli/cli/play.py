@@ -52,12 +52,20 @@ def play(
         raise MorficError(f"unknown robot '{robot}'; valid robots are: {', '.join(list_robots())}.")
     if envs < 1 or steps < 0 or not 0 <= port <= 65535:
         raise MorficError("--envs must be positive, --steps >= 0 and --port in 0..65535.")
+    if not host.strip():  # an empty host would bind every interface
+        raise MorficError("--host must name an interface: 127.0.0.1 (this machine only, the default) or 0.0.0.0 "
+                          "(every interface).")
     mode_name = mode.value if isinstance(mode, EvalMode) else str(mode)
     cfg = PlayCfg(robot=robot, mode=mode_name, command_vx=command_vx, num_envs=envs, seed=seed, steps=steps,
                   host=host, port=port, record=record, viewer=viewer)
     trained = load_trained(Store(store), run)  # bad refs fail here, before anything opens
 
     def ready(live) -> None:
+        from morfic_cli.recording.ws_relay import is_loopback
+
+        if live is not None and not is_loopback(host):  # even with --quiet
+            info(f"warning: --host {host} serves the live view to other machines too, without authentication: "
+                 f"anyone who can reach port {live.port} can watch")
         if quiet:
             return
         if live is None:

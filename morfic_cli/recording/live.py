@@ -10,7 +10,9 @@ that connects late, or seeks back in its buffer, has them again within that time
 
 The SDK's server accepts only the subprotocol ``foxglove.sdk.v1``; it listens on a private port of 127.0.0.1 and
 a :class:`~morfic_cli.recording.ws_relay.SubprotocolRelay` listens where the user asked, accepting
-``foxglove.sdk.v1`` and ``foxglove.websocket.v1`` (the protocol's original name, the same messages).
+``foxglove.sdk.v1`` and ``foxglove.websocket.v1`` (the protocol's original name, the same messages). The relay is
+also what faces bad clients: it refuses what is not the protocol, bounds each client's queue, and reports each bad
+client in one warning line (``docs/mcap.md``, "Bad clients").
 """
 
 from __future__ import annotations
@@ -56,10 +58,12 @@ class LiveView:
         num_envs: N, envs in each step's arrays.
         term_names: K reward-term names (the columns of ``reward_terms``).
         scene: The 3D scene of some envs (None: numbers only).
-        host: Interface to bind (``127.0.0.1``: this machine only).
+        host: Interface to bind, explicitly (``127.0.0.1``: this machine only; ``0.0.0.0``: every interface; empty
+            is refused). The SDK's own server always binds 127.0.0.1.
         port: TCP port (0: any free one; :attr:`port` says which).
 
     Raises:
+        ValueError: ``host`` is empty.
         OSError: ``host:port`` cannot be bound (e.g. the port is taken).
     """
 

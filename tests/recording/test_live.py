@@ -8,6 +8,7 @@ import base64
 import json
 import struct
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -104,12 +105,13 @@ def test_a_client_offering_either_subprotocol_gets_the_channels(live, offered):
     assert live.app_url().endswith(f"ws%3A%2F%2F127.0.0.1%3A{live.port}")
 
 
-def test_a_client_offering_neither_gets_a_400_naming_both_and_morfic_says_so(live):
+def test_a_client_offering_neither_gets_a_400_naming_both_and_morfic_says_so(live, caplog):
+    import logging
+
     import websockets
 
-    refused = []
-    relay = SubprotocolRelay(live.relay.upstream.rsplit(":", 1)[1], host="127.0.0.1", port=0,
-                             on_refused=refused.append)
+    caplog.set_level(logging.WARNING)
+    relay = SubprotocolRelay(live.relay.upstream.rsplit(":", 1)[1], host="127.0.0.1", port=0)
     try:
         async def connect(subprotocols):
             async with websockets.connect(f"ws://127.0.0.1:{relay.port}", subprotocols=subprotocols):
@@ -121,9 +123,15 @@ def test_a_client_offering_neither_gets_a_400_naming_both_and_morfic_says_so(liv
             body = exc.value.response.body.decode()
             assert exc.value.response.status_code == 400
             assert SDK_SUBPROTOCOL in body and LEGACY_SUBPROTOCOL in body
+        for _ in range(2000):  # until the relay is done with both (20 s at most: a failure guard)
+            if relay.busy == 0:
+                break
+            time.sleep(0.01)
     finally:
         relay.close()
-    assert len(refused) == 2 and "offered: foxglove.websocket.v2" in refused[0] and "offered: none" in refused[1]
+    refused = [r.getMessage() for r in caplog.records if r.name == "morfic_cli.recording.ws_relay"]
+    assert len(refused) == 2 and all(m.startswith("live view: refused client 127.0.0.1:") for m in refused)
+    assert "offered: foxglove.websocket.v2" in refused[0] and "offered: none" in refused[1]
 
 
 def test_a_taken_port_is_an_oserror(live):
