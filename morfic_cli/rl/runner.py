@@ -13,7 +13,9 @@ iterations. Store layout of a run named ``NAME``:
   tensors + JSON, :mod:`morfic_cli.rl.trainer_state`).
 
 A checkpoint is therefore ONE ref update: whatever instant a kill hits, ``runs/NAME`` names a
-checkpoint whose trainer state is there, and ``--resume`` continues bit-exactly on CPU. Every
+checkpoint whose trainer state is there, and ``--resume`` continues bit-exactly on CPU. The update is a
+compare-and-set on the version this process last wrote (or resumed from; none for a new run), so two trainings
+that write one run at once cannot interleave their checkpoints: the second to checkpoint stops with an error. Every
 ``torch.load`` here is ``weights_only=True``: a bundle from anyone can never run code.
 
 Runs written before this layout kept the trainer state apart, under ref ``resume/NAME`` (``trainer.pt``,
@@ -27,6 +29,7 @@ import contextlib
 import dataclasses
 import io
 import os
+import re
 import subprocess
 from collections import deque
 from collections.abc import Callable
@@ -50,7 +53,9 @@ from morfic_cli.rl.rsl_rl_patches import raw_models, replace_logger
 from morfic_cli.rl.variants import resolve_variant
 from morfic_cli.runs import RESUME_PREFIX, RUNS_PREFIX, run_of
 from morfic_cli.sim.args import NUM_JOINTS
-from morfic_cli.store import Store
+from morfic_cli.store import RefMovedError, Store
+from morfic_cli.store.lock import LockTimeoutError
+from morfic_cli.store.refs import is_ref_name
 from morfic_cli.store.shallow import TRAINER_STATE_ROLE  # defined by the store: weights-only bundles leave it out
 
 
@@ -348,6 +353,8 @@ class TrainingRun:
         self.rows: list[dict[str, float]] = []
         self.iteration = 0
         self.parent: str | None = None
+        self.head: str | None = None
+        """The id ``runs/NAME`` must point at when the next checkpoint is written (None: no ref yet)."""
         self.stop_requested = False
         self.interrupted = False
         self.progress: Callable[[dict[str, float]], None] | None = None
@@ -409,7 +416,7 @@ class TrainingRun:
             "vx_max": float(self.env.command_ranges.vx[1]), **variant_record(self.cfg),
             **({"bf16_matmul": alg.bf16_matmul} if getattr(alg, "bf16_matmul", None) else {}),
         }
-        with self.store.writing():
+        with self._stopped_on_lock_timeout(), self.store.writing():
             state = self.store.put_manifest("checkpoint", config={"role": "trainer-state"}, files=trainer,
                                             meta={"iteration": self.iteration, "run": self.name,
                                                   "format": trainer_state.FORMAT})
@@ -417,11 +424,46 @@ class TrainingRun:
                 "checkpoint", config=train_cfg_to_dict(self.cfg), meta=meta, inputs={TRAINER_STATE_ROLE: state},
                 files={"model.pt": model, "curve.csv": curve_csv(self.rows), "curve.png": curve_png(self.rows)},
             )
-            version = self.store.set_ref(RUNS_PREFIX + self.name, ckpt)  # the one visible step
-        self.parent = ckpt
+            try:  # the one visible step, unless another process wrote this run meanwhile
+                version = self.store.set_ref(RUNS_PREFIX + self.name, ckpt, expect=self.head)
+            except RefMovedError as exc:
+                raise MorficError(self._moved_message(exc)) from exc
+        self.parent = self.head = ckpt
         out = Checkpoint(ckpt, RUNS_PREFIX + self.name, version, self.iteration)
         self.checkpoints.append(out)
         return out
+
+    def _moved_message(self, exc: RefMovedError) -> str:
+        """What a training whose run another process wrote meanwhile says as it stops (it lost the race)."""
+        ref = RUNS_PREFIX + self.name
+        if exc.current is None:
+            now = "was removed"
+        else:
+            try:
+                other = self.store.read_manifest(exc.current.id).meta.get("iteration")
+            except MorficError:
+                other = None
+            at = f" at iteration {other}" if other is not None else ""
+            now = (f"was created by another process ({exc.current.id[:12]}{at})" if self.head is None else
+                   f"was advanced by another process (version {exc.current.version} is {exc.current.id[:12]}{at}, "
+                   f"not this training's last checkpoint {self.head[:12]})")
+        return (f"run '{ref}' {now} while this training ran: two trainings cannot write one run, so this one "
+                f"stops without recording its checkpoint at iteration {self.iteration} (gc removes it); the ref keeps "
+                f"the other training's checkpoints (`morfic store show {ref} --history`). Give each training its own "
+                f"--name; `morfic train --resume {ref}` continues from the ref's current version.")
+
+    @contextlib.contextmanager
+    def _stopped_on_lock_timeout(self):
+        """Turn a store lock that stayed busy (a long gc) during a checkpoint into an error that says how to go on."""
+        try:
+            yield
+        except LockTimeoutError as exc:
+            ref = RUNS_PREFIX + self.name
+            last = (f"`morfic train --resume {ref}` continues from its last checkpoint" if self.head is not None else
+                    f"it has no checkpoint yet: start it again with `morfic train --name {self.name}` (and its "
+                    "--variant, --preset, --seed and --set)")
+            raise MorficError(f"{exc} This training stopped at iteration {self.iteration} without writing that "
+                              f"checkpoint; {last}.") from exc
 
     def _restore(self, ckpt_id: str, trainer: dict[str, Any], rows: list[dict[str, float]]) -> None:
         alg = self.runner.alg
@@ -567,6 +609,11 @@ def resume_run(store: Store, spec: str, overrides: list[str] | None = None, devi
     cfg = apply_overrides(train_cfg_from_dict(point.manifest.config), list(overrides or []))
     run = TrainingRun(store, cfg, point.name, device, live)
     run._restore(point.manifest.id, point.trainer, point.rows)
+    ref = RUNS_PREFIX + point.name
+    if "@" not in spec and spec in (ref, point.name):  # the ref's current version, as read: no re-read race
+        run.head = point.manifest.id
+    else:  # an older version or an id: its checkpoints go on after the ref's current version (a fork)
+        run.head = store.resolve(ref) if store.has_ref(ref) else None
     return run
 
 
@@ -586,9 +633,15 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
 
     try:
         manifest = store.read_manifest(spec)
-    except ArtifactNotFoundError:
+    except ArtifactNotFoundError as exc:
         if not spec.startswith(RUNS_PREFIX) and store.has_ref(RUNS_PREFIX + spec):
             manifest = store.read_manifest(RUNS_PREFIX + spec)
+        elif "@" not in spec and is_ref_name(spec) and not store.has_ref(spec) and not _HEX.fullmatch(spec):
+            name = spec.removeprefix(RUNS_PREFIX)
+            raise ArtifactNotFoundError(
+                f"{exc} A run killed before its first checkpoint (written every save_interval iterations) leaves "
+                f"nothing to resume: start it afresh with `morfic train --name {name}` and its --variant, --preset, "
+                "--seed and --set.") from exc
         else:
             raise
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
@@ -615,6 +668,8 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
     rows = read_curve_csv(store.read_file(manifest.id, "curve.csv"))
     return ResumePoint(manifest, name, trainer, rows)
 
+
+_HEX = re.compile(r"[0-9a-f]{4,64}")
 
 #: Keys every trainer state holds.
 TRAINER_KEYS = frozenset({"iteration", "alg", "learning_rate", "env", "logger", "torch_rng"})

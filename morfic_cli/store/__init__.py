@@ -32,7 +32,7 @@ from typing import Any
 from morfic_cli import __version__
 from morfic_cli.errors import ArtifactNotFoundError, StoreError
 from morfic_cli.store.gc import GcItem, GcReport, VerifyReport, collect_garbage, load_manifest_if_any, verify_store
-from morfic_cli.store.lock import DEFAULT_TIMEOUT_S, StoreLock
+from morfic_cli.store.lock import StoreLock, default_timeout
 from morfic_cli.store.manifest import (
     MANIFEST_KINDS,
     FileEntry,
@@ -48,7 +48,7 @@ from morfic_cli.store.manifest import (
 )
 from morfic_cli.store.objects import ObjectDB, store_os_error
 from morfic_cli.store.publish import Published, publish
-from morfic_cli.store.refs import RefDB, RefEntry, check_ref_name, pick_version, split_spec
+from morfic_cli.store.refs import ANY, RefDB, RefEntry, RefMovedError, check_ref_name, pick_version, split_spec
 from morfic_cli.store.shallow import OMITTABLE_FILES, OMITTABLE_ROLES, OmittedIndex
 from morfic_cli.store.transfer import ExportReport, ImportReport, export_tar, import_tar
 
@@ -62,6 +62,7 @@ __all__ = [
     "Manifest",
     "Published",
     "RefEntry",
+    "RefMovedError",
     "Store",
     "VerifyReport",
 ]
@@ -78,13 +79,15 @@ class Store:
 
     Args:
         root: Store root directory. A missing directory reads as an empty store.
-        lock_timeout: Seconds to wait for a lock before raising :class:`StoreError`.
+        lock_timeout: Seconds to wait for a lock before raising :class:`StoreError` (default: env
+            ``MORFIC_LOCK_TIMEOUT``, else :data:`~morfic_cli.store.lock.DEFAULT_TIMEOUT_S`, 60 s).
 
     Raises:
-        StoreError: ``root`` (or a folder on its way) is an existing file.
+        StoreError: ``root`` (or a folder on its way) is an existing file, or ``MORFIC_LOCK_TIMEOUT`` is not a
+            number of seconds.
     """
 
-    def __init__(self, root: Path | str, *, lock_timeout: float = DEFAULT_TIMEOUT_S) -> None:
+    def __init__(self, root: Path | str, *, lock_timeout: float | None = None) -> None:
         self.root = Path(root)
         for path in (self.root, *self.root.parents):
             if path.exists():
@@ -92,11 +95,12 @@ class Store:
                     raise StoreError(f"store root {self.root}: {path} is a file, not a directory; pass a folder (or a "
                                      "path that does not exist yet) to --store or MORFIC_STORE.")
                 break
+        self.lock_timeout = default_timeout() if lock_timeout is None else lock_timeout
         self.objects = ObjectDB(self.root)
         self.index = ManifestIndex(self.root)
-        self.refs = RefDB(self.root)
+        self.refs = RefDB(self.root, self.lock_timeout)
         self.omitted = OmittedIndex(self.root)
-        self._lock = StoreLock(self.root / "locks" / "store.lock", lock_timeout)
+        self._lock = StoreLock(self.root / "locks" / "store.lock", self.lock_timeout)
 
     def __repr__(self) -> str:
         return f"Store({str(self.root)!r})"
@@ -269,14 +273,17 @@ class Store:
 
     # -- refs ---------------------------------------------------------------------------------
 
-    def set_ref(self, name: str, oid: str) -> int:
+    def set_ref(self, name: str, oid: str, *, expect: str | None | object = ANY) -> int:
         """Point ref ``name`` at a manifest, appending a version; return its 1-based version number.
 
         ``oid`` may be a full id, a prefix or another ref. Setting a ref to the manifest it already
-        points at adds no version and returns the current one.
+        points at adds no version and returns the current one. ``expect`` makes it a compare-and-set: the
+        full id the ref must point at now, or ``None`` for a ref that must not exist yet (how a training
+        refuses to interleave its checkpoints with another process's in one run).
 
         Raises:
             StoreError: Invalid name, a name clash with a folder of refs, or ``oid`` is not a manifest.
+            RefMovedError: ``expect`` was given and the ref points elsewhere; nothing was written.
         """
         check_ref_name(name)
         with self.writing():
@@ -284,7 +291,7 @@ class Store:
             if not self.index.has(target):
                 raise StoreError(f"refs name manifests, but {target} is not one; give the id of a manifest "
                                  "(see `morfic store ls`).")
-            return self.refs.append(name, target, utc_now())
+            return self.refs.append(name, target, utc_now(), expect=expect)
 
     def publish(self, kind: str, ref: str | None = None, **kwargs: Any) -> Published:
         """Store a result as one manifest and advance ``ref`` (see :func:`morfic_cli.store.publish.publish`)."""

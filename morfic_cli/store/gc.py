@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -229,7 +230,7 @@ def ref_roots(store: Store, names: Iterable[str] | None = None) -> list[str]:
 
 
 def temp_files(store: Store) -> list[str]:
-    """Names of files left in ``tmp/`` (by interrupted writes)."""
+    """Names of files left in ``tmp/`` by interrupted writes (and staging folders of killed imports)."""
     tmp = store.root / "tmp"
     return sorted(os.listdir(tmp)) if tmp.is_dir() else []
 
@@ -267,7 +268,11 @@ def _delete(store: Store, oids: list[str], leftovers: list[str], absent: set[str
         if oid not in absent:  # filled since, or no longer reached: the marker says nothing any more
             store.omitted.remove(oid)
     for name in leftovers:
-        unlink_quiet(store.root / "tmp" / name)
+        path = store.root / "tmp" / name
+        if path.is_dir() and not path.is_symlink():  # the staging folder of an import killed mid-way
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            unlink_quiet(path)
 
 
 def _rehash(path: os.PathLike[str]) -> tuple[str, int]:

@@ -26,8 +26,34 @@ from pathlib import Path
 
 from morfic_cli.errors import StoreError
 
-#: Seconds to wait for a lock before giving up with a :class:`StoreError`.
+#: Seconds to wait for a lock before giving up with a :class:`LockTimeoutError` (env ``MORFIC_LOCK_TIMEOUT``).
 DEFAULT_TIMEOUT_S = 60.0
+
+#: Environment variable that overrides :data:`DEFAULT_TIMEOUT_S` for every store a process opens.
+TIMEOUT_ENV = "MORFIC_LOCK_TIMEOUT"
+
+
+class LockTimeoutError(StoreError):
+    """A store lock stayed busy (held by another process) longer than the timeout."""
+
+
+def default_timeout() -> float:
+    """Seconds a store waits for a lock: ``MORFIC_LOCK_TIMEOUT`` if set, else :data:`DEFAULT_TIMEOUT_S`.
+
+    Raises:
+        StoreError: ``MORFIC_LOCK_TIMEOUT`` is not a positive number of seconds.
+    """
+    raw = os.environ.get(TIMEOUT_ENV, "").strip()
+    if not raw:
+        return DEFAULT_TIMEOUT_S
+    try:
+        value = float(raw)
+    except ValueError:
+        value = -1.0
+    if not 0 < value < float("inf"):
+        raise StoreError(f"{TIMEOUT_ENV}={raw[:40]!r} is not a number of seconds; set it to how long to wait for a "
+                         f"busy store lock (e.g. {TIMEOUT_ENV}=600), or unset it for {DEFAULT_TIMEOUT_S:.0f} s.")
+    return value
 
 
 def _open_lock_file(path: Path) -> int:
@@ -53,23 +79,27 @@ def _acquire(fd: int, path: Path, *, exclusive: bool, timeout: float) -> None:
                 raise StoreError(f"cannot lock {path}: {exc.strerror or exc}.") from exc
         if time.monotonic() >= deadline:
             kind = "exclusive" if exclusive else "shared"
-            raise StoreError(
-                f"timed out after {timeout:.0f} s waiting for the {kind} lock {path}: another morfic "
-                "process is using the store (a gc, or a long write). Wait for it to finish and retry."
+            holder = ("a writer: a training's checkpoint, an import, ..." if exclusive
+                      else "`morfic store gc`") if path.name == "store.lock" else "another writer"
+            raise LockTimeoutError(
+                f"timed out after {timeout:g} s waiting for the {kind} lock {path}: another morfic "
+                f"process is using the store ({holder}). Wait for it to finish and retry (or wait longer: "
+                f"{TIMEOUT_ENV}=SECONDS)."
             )
         time.sleep(delay)
         delay = min(delay * 2, 0.05)
 
 
 @contextmanager
-def file_lock(path: Path, *, exclusive: bool = True, timeout: float = DEFAULT_TIMEOUT_S) -> Iterator[None]:
+def file_lock(path: Path, *, exclusive: bool = True, timeout: float | None = None) -> Iterator[None]:
     """Hold ``flock`` on ``path`` (created if missing) for the body of a ``with`` block.
 
     Args:
         path: The lock file. Its content is never used.
         exclusive: ``LOCK_EX`` if true, else ``LOCK_SH``.
-        timeout: Seconds to wait before raising :class:`StoreError`.
+        timeout: Seconds to wait before raising :class:`LockTimeoutError` (default :func:`default_timeout`).
     """
+    timeout = default_timeout() if timeout is None else timeout
     fd = _open_lock_file(path)
     try:
         _acquire(fd, path, exclusive=exclusive, timeout=timeout)
@@ -87,9 +117,9 @@ class StoreLock:
     holds the lock shared is refused (it would wait for itself).
     """
 
-    def __init__(self, path: Path, timeout: float = DEFAULT_TIMEOUT_S) -> None:
+    def __init__(self, path: Path, timeout: float | None = None) -> None:
         self.path = path
-        self.timeout = timeout
+        self.timeout = default_timeout() if timeout is None else timeout
         self._mutex = threading.RLock()
         self._fd: int | None = None
         self._mode: str | None = None

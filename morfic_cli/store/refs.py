@@ -203,15 +203,37 @@ def merge_status(name: str, local: list[RefEntry], incoming: list[RefEntry]) -> 
     return "extended" if len(incoming) > len(local) else "unchanged"
 
 
+class RefMovedError(StoreError):
+    """A compare-and-set ref update found the ref somewhere else than the writer expected (another writer moved it).
+
+    Attributes:
+        name: The ref.
+        expected: The id the writer expected as the current version (``None``: no ref yet).
+        current: The ref's current entry (``None``: no ref).
+    """
+
+    def __init__(self, name: str, expected: str | None, current: RefEntry | None) -> None:
+        self.name, self.expected, self.current = name, expected, current
+        now = f"is at version {current.version} ({current.id[:12]})" if current is not None else "does not exist"
+        was = f"at {expected[:12]}" if expected is not None else "not to exist yet"
+        super().__init__(f"ref '{name}' {now}, but this writer expected it {was}: another process updated it; "
+                         "nothing was written.")
+
+
+#: ``expect`` of :meth:`RefDB.append` that checks nothing (a plain append).
+ANY = object()
+
+
 class RefDB:
     """The ``refs/`` directory: read, list and update ref histories."""
 
-    def __init__(self, root: Path) -> None:
+    def __init__(self, root: Path, lock_timeout: float | None = None) -> None:
         self.root = root
         self.dir = root / "refs"
         self.heads_dir = root / "heads"
         self.tmp_dir = root / "tmp"
         self.lock_path = root / "locks" / "refs.lock"
+        self.lock_timeout = lock_timeout
 
     def path(self, name: str) -> Path:
         """The history file of ref ``name`` (validated)."""
@@ -246,17 +268,30 @@ class RefDB:
     @contextmanager
     def locked(self) -> Iterator[None]:
         """Hold the exclusive ref lock (for read-modify-write of histories)."""
-        with file_lock(self.lock_path, exclusive=True):
+        with file_lock(self.lock_path, exclusive=True, timeout=self.lock_timeout):
             yield
 
-    def append(self, name: str, oid: str, time: str) -> int:
+    def append(self, name: str, oid: str, time: str, *, expect: str | None | object = ANY) -> int:
         """Point ``name`` at ``oid``, appending a version; return the new version number.
 
         Setting a ref to the id it already points at appends nothing and returns the current version.
+
+        Args:
+            name: The ref.
+            oid: The manifest id of the new version.
+            time: UTC time of the update.
+            expect: Compare-and-set: the id the ref must point at now (``None``: the ref must not exist yet);
+                checked under the ref lock. The default appends whatever the ref holds.
+
+        Raises:
+            RefMovedError: ``expect`` was given and the ref is elsewhere; nothing was written.
         """
         self.path(name)
         with self.locked():
             history = self.history(name)
+            current = history[-1].id if history else None
+            if expect is not ANY and current != expect:
+                raise RefMovedError(name, expect, history[-1] if history else None)  # type: ignore[arg-type]
             if history and history[-1].id == oid:
                 return history[-1].version
             entry = next_entry(history, oid, time)

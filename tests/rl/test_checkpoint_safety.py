@@ -164,7 +164,7 @@ def test_a_kill_at_every_point_between_the_checkpoint_writes_leaves_the_run_resu
     with monkeypatch.context() as mp:
         all_writes = _kill_at(mp, 10**9)
         run.save_checkpoint(finished=True)
-    run.parent = first  # as if that save had not happened
+    run.parent = run.head = first  # as if that save had not happened
     assert len(all_writes) >= 9  # 5 file objects, 2 manifests, 2 index markers, the ref and its head
     for k in range(len(all_writes) + 1):
         shutil.rmtree(root)
@@ -185,7 +185,7 @@ def test_a_kill_at_every_point_between_the_checkpoint_writes_leaves_the_run_resu
         with pytest.raises(MorficError, match="already exists.*--resume runs/k"):
             new_run(store, cfg, "k")
         assert store.verify().ok, (k, store.verify().problems)
-        run.parent = first
+        run.parent = run.head = first
 
 
 def test_trainer_state_round_trip_is_exact():

@@ -205,3 +205,22 @@ def test_interrupted_ref_update_keeps_old_history(store, monkeypatch):
     assert [e.id for e in store.ref_history("runs/x")] == [a]
     assert os.listdir(store.root / "tmp") == []
     assert store.set_ref("runs/x", b) == 2
+
+
+def test_compare_and_set_ref_update(store):
+    """``expect``: the update happens only when the ref is where the writer last saw it (None: not there yet)."""
+    from morfic_cli.store import RefMovedError
+
+    a, b, c = _manifests(store, 3)
+    assert store.set_ref("runs/cas", a, expect=None) == 1
+    with pytest.raises(RefMovedError, match="ref 'runs/cas' is at version 1.*expected it not to exist yet"):
+        store.set_ref("runs/cas", b, expect=None)
+    assert store.set_ref("runs/cas", b, expect=a) == 2
+    with pytest.raises(RefMovedError, match="expected it at") as err:
+        store.set_ref("runs/cas", c, expect=a)  # a stale writer
+    assert err.value.current is not None and err.value.current.id == b and err.value.expected == a
+    with pytest.raises(RefMovedError, match="does not exist"):
+        store.set_ref("runs/other", c, expect=a)
+    assert [e.id for e in store.ref_history("runs/cas")] == [a, b]
+    assert not store.has_ref("runs/other")
+    assert store.verify().ok
