@@ -42,7 +42,7 @@ from pathlib import Path
 
 
 def merge_fixed_rows(path: Path, new_rows: list[dict[str, str]], columns: list[str],
-                     samples: str) -> list[dict[str, str]]:
+                     samples: str, same_weights: frozenset[str] = frozenset()) -> list[dict[str, str]]:
     """``path``'s rows with ``new_rows`` merged in, one row per (critic, samples); MC rows first.
 
     ``samples`` is the content id of the new rows' rollout samples (its ``obs.npz``). A rollout's manifest id (the
@@ -52,6 +52,11 @@ def merge_fixed_rows(path: Path, new_rows: list[dict[str, str]], columns: list[s
     rollout manifests that held them); rows on other samples are kept beside them (``other_samples``), so a critic
     scored on both measures what the samples change, and ``results_tables.load_fixed`` reads one row per critic,
     the reference row where there is one. A critic's new row on the same samples replaces its old one.
+
+    A run retrained under its old name (its weights lost) is another critic unless its weights are the same bytes:
+    a critic's old rows whose ``checkpoint`` is neither a new row's nor in ``same_weights`` (checkpoint ids known to
+    hold the new checkpoint's weights) are dropped, on every samples, so no table reads a lost run's row as the
+    retrained run's.
     """
     side = path.with_suffix(".json")
     old = list(csv.DictReader(path.open())) if path.is_file() else []
@@ -65,6 +70,8 @@ def merge_fixed_rows(path: Path, new_rows: list[dict[str, str]], columns: list[s
         others = known.setdefault("other_samples", {})
         others[samples] = sorted({*others.get(samples, []), *(r["rollout"] for r in new_rows)})
     side.write_text(json.dumps(known, indent=1) + "\n")
+    kept = {r["critic"]: {r.get("checkpoint", ""), *same_weights} for r in new_rows if r["critic"] != "MC"}
+    old = [r for r in old if r["critic"] not in kept or r.get("checkpoint", "") in kept[r["critic"]]]
     merged = {(r["critic"], r["samples"]): r for r in old}
     merged.update({(r["critic"], r["samples"]): r for r in new_rows})
     order = [known["samples"], *known.get("other_samples", {})]
@@ -169,7 +176,13 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     ids_path = args.out / f"{args.run}-artifacts.json"
     ids = json.loads(ids_path.read_text()) if ids_path.is_file() else {"run": args.run}
+    weights = manifest.files["model.pt"].id if "model.pt" in manifest.files else None
+    # the checkpoint these tables had (a run retrained under its name keeps its rows only if its weights are the same)
+    same_weights = frozenset({ids["checkpoint"]} if ids.get("checkpoint") and weights and ids.get("weights") == weights
+                             else ())
     ids["checkpoint"] = manifest.id
+    if weights:
+        ids["weights"] = weights
     if "curve.csv" in manifest.files:
         curve = args.out / f"{args.run}-curve.csv"
         write_csv(curve, curve_rows(store.read_file(manifest.id, "curve.csv").decode()), CURVE_COLUMNS)
@@ -216,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
         samples = store.read_manifest(mine[0]["rollout"]).files["obs.npz"].id
         path = args.out / f"fixed-rollout-{robot}.csv"
         columns = [*FIXED_ROLLOUT_COLUMNS, "samples"]
-        merged = merge_fixed_rows(path, mine, columns, samples)
+        merged = merge_fixed_rows(path, mine, columns, samples, same_weights)
         write_csv(path, merged, columns)
         used[robot] = samples
         reference = json.loads(path.with_suffix(".json").read_text())["samples"]

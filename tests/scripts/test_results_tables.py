@@ -230,3 +230,23 @@ def test_the_queue_evaluates_at_one_metre_per_second_as_the_seed0_runs_were():
     assert _json(eval_config("runs/film-cpu-s1", et.trained_regime_cfg())) == {
         "spec": "runs/film-cpu-s1", "robots": ["go2", "a1", "aliengo", "anymal_c", "b1", "go1", "mini_cheetah"],
         "modes": ["descriptor"], "command_vx": [1.0], "num_envs": 64, "steps": 500, "seed": 0, "scene_envs": 4}
+
+
+def test_a_run_retrained_under_its_name_replaces_the_lost_runs_rows_unless_its_weights_are_the_same(tmp_path):
+    cols = ["critic", "flip", "checkpoint", "rollout", "samples"]
+    path = tmp_path / "fixed-rollout-aliengo.csv"
+
+    def row(critic, flip, checkpoint):
+        return {"critic": critic, "flip": flip, "checkpoint": checkpoint, "rollout": "r"}
+
+    first = [row("MC", 0, ""), row("film-cpu-s1", 0.40, "lost"), row("ppo-cpu-s0", 0.35, "p0")]
+    et.write_csv(path, et.merge_fixed_rows(path, first, cols, "amd"), cols)
+    # film-cpu-s1 retrained (checkpoint "new", other weights), scored on another CPU's samples: the lost run's
+    # reference row goes, ppo's stays
+    merged = et.merge_fixed_rows(path, [row("MC", 0, ""), row("film-cpu-s1", 0.45, "new")], cols, "intel")
+    assert [(r["critic"], r["checkpoint"], r["samples"]) for r in merged] == [
+        ("MC", "", "amd"), ("ppo-cpu-s0", "p0", "amd"), ("MC", "", "intel"), ("film-cpu-s1", "new", "intel")]
+    # ppo-cpu-s0 retrained bit for bit (same weights under checkpoint "p0b"): its reference row is kept beside the new
+    merged = et.merge_fixed_rows(path, [row("MC", 0, ""), row("ppo-cpu-s0", 0.36, "p0b")], cols, "intel",
+                                 same_weights=frozenset({"p0"}))
+    assert ("ppo-cpu-s0", "p0", "amd") in [(r["critic"], r["checkpoint"], r["samples"]) for r in merged]
