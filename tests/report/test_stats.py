@@ -31,6 +31,9 @@ def test_permutation_p_by_enumeration():
     assert stats.permutation_p([3, 4], [1, 2]) == pytest.approx(1 / 3)
     # with 3 seeds a side the smallest reachable p is 2 / C(6, 3) = 0.1
     assert stats.permutation_p([10, 11, 12], [0, 1, 2]) == pytest.approx(0.1)
+    # 3 against 2: the observed split is the only one of C(5, 2) = 10 with |diff| >= 10.5 (no mirror split of
+    # unequal sizes), so p = 1/10, again 0.1 (docs/report.md, the caveat)
+    assert stats.permutation_p([10, 11, 12], [0, 1]) == pytest.approx(0.1)
 
 
 def test_one_seed_has_no_interval_and_cannot_tell():
