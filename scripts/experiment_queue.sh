@@ -2,10 +2,12 @@
 # The paper's experiment, run by run (docs/results.md, "Status of the runs"): train each run with the cpu preset,
 # evaluate and diagnose it with the paper's protocol (scripts/experiment_tables.py --run-missing: `morfic reproduce
 # --preset cpu`'s steps for this run, skipped where the store holds them, its critic scored on the frozen film actor's
-# rollouts), copy its result tables under docs/results/, regenerate docs/results.md's tables, claims and figures
-# (scripts/results_tables.py) and ship it: a seed-0 run as a weights-only bundle
-# (artifacts/bundles/<run>.tar), any other seed as a results-only bundle (artifacts/bundles/results/<run>.tar: its
-# evals and diagnoses without weights, logs or other runs' curves, ~3.6 MiB; `morfic store import` it, then `morfic report runs/<run>`).
+# rollouts, evaluated and diagnosed at 1.0 m/s too), copy its result tables under docs/results/, regenerate
+# docs/results.md's tables, claims and figures (scripts/results_tables.py) and ship it: a seed-0 run as a
+# weights-only bundle (artifacts/bundles/<run>.tar, what `reproduce --preset shipped` imports), any other seed as a
+# results-only bundle (artifacts/bundles/results/<run>.tar: its evals and diagnoses without weights, logs or other
+# runs' curves; `morfic store import` it, then `morfic report runs/<run>`) and a weights-only one
+# (artifacts/bundles/weights/<run>.tar, ~7 MiB: import it on top to evaluate or diagnose the run again).
 #
 # Usage: scripts/experiment_queue.sh [--stop-at HH:MM] [--last-start HH:MM] [--train-at COMMIT] VARIANT:SEED ...
 #   e.g.  MORFIC_STORE=/work/stores/exp nohup scripts/experiment_queue.sh --stop-at 23:05 concat:0 actor-only:0 \
@@ -56,7 +58,7 @@ if [ -n "$TRAIN_AT" ]; then
 fi
 RESULTS=docs/results
 BUNDLES=artifacts/bundles
-mkdir -p "$RESULTS" "$BUNDLES" "$BUNDLES/partial" "$BUNDLES/results"
+mkdir -p "$RESULTS" "$BUNDLES" "$BUNDLES/partial" "$BUNDLES/results" "$BUNDLES/weights"
 
 finished() {  # 0 when runs/$1 is a finished run in the store
   local doc
@@ -109,12 +111,14 @@ for item in "$@"; do
     shipped="$BUNDLES/$name.tar"
     morfic store export "runs/$name" --latest --without-trainer-state --out "$BUNDLES" --force
   else
-    shipped="$BUNDLES/results/$name.tar"
+    shipped="$BUNDLES/results/$name.tar and $BUNDLES/weights/$name.tar"
     morfic store export "runs/$name" --results-only --out "$BUNDLES/results" --force
+    morfic store export "runs/$name" --latest --without-trainer-state --out "$BUNDLES/weights" --force
   fi
   rm -f "$BUNDLES/partial/$name.tar"
   # after the export, so that the generated bundle weight counts this run's bundle
   python scripts/results_tables.py --write docs/results.md --figures docs/img
-  echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,calibration.csv,curve.csv,artifacts.json}," \
+  echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,eval-1.0.csv,calibration.csv," \
+       "calibration-1.0.csv,curve.csv,artifacts.json}," \
        "docs/results.md's tables and claims, docs/img/results-*.png and $shipped"
 done

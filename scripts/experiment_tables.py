@@ -6,6 +6,9 @@ so a table is never another run's):
 - ``<out>/RUN-eval.csv`` and ``<out>/RUN-calibration.csv``: the eval's and the diagnosis's files, verbatim;
 - ``<out>/RUN-eval-1.0.csv``: the eval at 1.0 m/s, the trained regime (:func:`trained_regime_cfg`: descriptor mode,
   64 envs x 500 steps, as ``morfic eval runs/RUN --command-vx 1.0``), verbatim;
+- ``<out>/RUN-calibration-1.0.csv``: the critic's diagnosis at 1.0 m/s (:func:`trained_regime_diagnosis`: the
+  paper's protocol at that command), verbatim, when the store holds it or the run's weights to make it (a run
+  imported from a results-only bundle has none: the file is left out, with a note);
 - ``<out>/fixed-rollout-<robot>.csv``: RUN's critic row (and the MC reference row) of the fixed-rollout analysis
   on each robot, the frozen film actor's rollout, merged with the rows of the critics scored before, each row with
   the content id of the samples it was scored on (``samples``). The first samples are the reference
@@ -13,20 +16,21 @@ so a table is never another run's):
   another CPU does not reproduce them bit for bit) scores on a new rollout, whose rows go in beside the reference
   rows (:func:`merge_fixed_rows`);
 - ``<out>/RUN-curve.csv``: the training curve's main columns (:data:`CURVE_COLUMNS`);
-- ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, 1.0 m/s eval (``eval-1.0``), diagnosis and
-  fixed-rollout analyses.
+- ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, 1.0 m/s eval (``eval-1.0``), diagnosis, 1.0 m/s
+  diagnosis (``diagnosis-1.0``) and fixed-rollout analyses.
 
-With ``--run-missing`` the run is first evaluated (at 2.0/2.5 and at 1.0 m/s), diagnosed and its critic scored in
-the fixed-rollout analysis, each step with the paper's protocol (``morfic reproduce --preset cpu``'s configs) and
-skipped when the store holds it: the experiment queue's evaluation of a run, without re-evaluating the variant's
-other seeds. With
-``--fixed-rollout-only`` only the fixed-rollout rows are written (the analysis run first when the store lacks it).
+With ``--run-missing`` the run is first evaluated (at 2.0/2.5 and at 1.0 m/s), diagnosed (at 2.0 and 1.0 m/s) and
+its critic scored in the fixed-rollout analysis, each step with the paper's protocol (``morfic reproduce --preset
+cpu``'s configs) and skipped when the store holds it: the experiment queue's evaluation of a run, without
+re-evaluating the variant's other seeds. With ``--fixed-rollout-only`` only the fixed-rollout rows are written
+(the analysis run first when the store lacks it); with ``--diagnosis-1.0-only`` only the 1.0 m/s diagnosis (run
+first when the store lacks it and holds the weights), for a run whose other tables are in ``--out`` already.
 When RUN's critic had to be scored on other samples than the reference (:func:`merge_fixed_rows`), ``--run-missing``
 also scores every seed-0 critic whose weights the store holds on those samples (:func:`seed0_to_rescore`), which
 measures what the other samples change.
 
 Usage: python scripts/experiment_tables.py RUN_NAME [--out docs/results] [--store STORE] [--run-missing]
-       [--fixed-rollout-only [--rescore]]
+       [--fixed-rollout-only [--rescore] | --diagnosis-1.0-only]
 """
 
 from __future__ import annotations
@@ -119,6 +123,10 @@ def one_run_pipeline(store, variant: str, seed: int, spec: str):
     return OneRun(store, reproduce_cfg("cpu", variants=(variant,), seeds=seed + 1))
 
 
+#: The trained regime's command (m/s): where every run but adaln walks on its own template.
+TRAINED_REGIME_VX = 1.0
+
+
 def trained_regime_cfg():
     """The 1.0 m/s evaluation (``morfic eval RUN --command-vx 1.0``: descriptor mode, the paper's 64 envs x 500 steps).
 
@@ -128,7 +136,7 @@ def trained_regime_cfg():
     from morfic_cli.evaluation.protocol import EvalCfg
     from morfic_cli.morphology.distance import parse_robot_list
 
-    return EvalCfg(robots=tuple(parse_robot_list("all")), modes=("descriptor",), command_vx=(1.0,))
+    return EvalCfg(robots=tuple(parse_robot_list("all")), modes=("descriptor",), command_vx=(TRAINED_REGIME_VX,))
 
 
 def trained_regime_eval(store, spec: str, run_missing: bool) -> str | None:
@@ -150,6 +158,47 @@ def trained_regime_eval(store, spec: str, run_missing: bool) -> str | None:
     return found
 
 
+def trained_regime_diagnose_cfg(pipe):
+    """``pipe``'s diagnosis config (the paper's: every robot, descriptor mode, 64 envs x 800 steps) at 1.0 m/s."""
+    import dataclasses
+
+    return dataclasses.replace(pipe.diagnose_cfg(pipe.cfg.robots), command_vx=TRAINED_REGIME_VX)
+
+
+def trained_regime_diagnosis(store, pipe, spec: str, run_missing: bool) -> str | None:
+    """The id of the stored 1.0 m/s diagnosis of ``spec``'s checkpoint: ``pipe``'s (the paper's protocol) at 1.0 m/s.
+
+    Run first when ``run_missing``, the store lacks it and holds the run's weights; None when it lacks it otherwise.
+    """
+    from morfic_cli.diagnostics.calibration import diagnose_runs
+    from morfic_cli.diagnostics.samples import diagnose_config
+    from morfic_cli.pipeline import _json
+    from morfic_cli.store.publish import find_manifest
+
+    cfg = trained_regime_diagnose_cfg(pipe)
+    checkpoint = store.resolve(spec)
+    found = find_manifest(store, "diagnosis", _json({"specs": [spec], **diagnose_config(cfg)}),
+                          inputs_subset={f"checkpoint/{spec}": checkpoint}, files=("calibration.csv",))
+    if found is None and run_missing and "model.pt" not in store.omitted_files(store.read_manifest(checkpoint)):
+        start = time.monotonic()
+        found = diagnose_runs(store, [spec], cfg).id
+        print(f"diagnose {spec} at 1.0 m/s: done in {time.monotonic() - start:.0f} s", file=sys.stderr)
+    return found
+
+
+def write_trained_regime_diagnosis(store, pipe, spec: str, run: str, out: Path, ids: dict, run_missing: bool) -> None:
+    """Write ``out/RUN-calibration-1.0.csv`` and its id (``diagnosis-1.0``), or say on stderr why it is left out."""
+    found = trained_regime_diagnosis(store, pipe, spec, run_missing)
+    if found is None:
+        print(f"note: no 1.0 m/s diagnosis of {spec} in {store.root} (it needs the run's weights: import its bundle "
+              "and rerun with --run-missing); claim (a) at 1.0 m/s reads the runs that have one", file=sys.stderr)
+        return
+    path = out / f"{run}-calibration-1.0.csv"
+    path.write_bytes(store.read_file(found, "calibration.csv"))
+    ids["diagnosis-1.0"] = found
+    print(f"{path} (artifact {found[:12]})")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Write the tables; 1 with ``Error:`` when the store has no paper-protocol result of the run."""
     from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS
@@ -164,10 +213,14 @@ def main(argv: list[str] | None = None) -> int:
                         "with the paper's protocol, skipped when the store holds it)")
     p.add_argument("--fixed-rollout-only", action="store_true",
                    help="only the fixed-rollout rows; run the analysis (film actor frozen) if the store lacks it")
+    p.add_argument("--diagnosis-1.0-only", dest="diagnosis_only", action="store_true",
+                   help="only the 1.0 m/s diagnosis (run if the store lacks it and holds the run's weights)")
     p.add_argument("--rescore", action="store_true",
                    help="with --fixed-rollout-only: score the critic again on the film actor's rollout this store "
                         "holds or collects, even where it holds the analysis (on other samples)")
     args = p.parse_args(argv)
+    if args.diagnosis_only and (args.fixed_rollout_only or args.rescore):
+        p.error("--diagnosis-1.0-only goes alone: not with --fixed-rollout-only or --rescore")
     store = Store(args.store)
     spec = f"runs/{args.run}"
     manifest = store.read_manifest(spec)
@@ -187,6 +240,10 @@ def main(argv: list[str] | None = None) -> int:
         curve = args.out / f"{args.run}-curve.csv"
         write_csv(curve, curve_rows(store.read_file(manifest.id, "curve.csv").decode()), CURVE_COLUMNS)
         print(f"{curve} (training curve, {len(CURVE_COLUMNS)} columns)")
+    if args.diagnosis_only:
+        write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, run_missing=True)
+        ids_path.write_text(json.dumps(ids, indent=1) + "\n")
+        return 0
     if args.run_missing and not args.fixed_rollout_only:
         for step in (pipe.evaluate, pipe.diagnose):
             start = time.monotonic()
@@ -213,6 +270,7 @@ def main(argv: list[str] | None = None) -> int:
         path.write_bytes(store.read_file(slow, "eval.csv"))
         ids["eval-1.0"] = slow
         print(f"{path} (artifact {slow[:12]})")
+        write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, args.run_missing)
     fixed_ids = ids.setdefault("fixed_rollout", {})
     used: dict[str, str] = {}  # robot -> the samples RUN's critic was scored on here
     for robot in pipe.cfg.fixed_rollout_robots:

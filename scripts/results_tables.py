@@ -1,8 +1,9 @@
 """docs/results.md's tables, claims and figures, from the run CSVs under docs/results/, beside the paper's.
 
 Inputs (written by scripts/experiment_tables.py from the experiment store, each CSV the artifact's file verbatim):
-``<run>-eval.csv``, ``<run>-calibration.csv``, ``<run>-artifacts.json`` (the ids of the run's checkpoint, eval,
-diagnosis and fixed-rollout analyses) and ``fixed-rollout-<robot>.csv`` (every critic scored on the frozen film
+``<run>-eval.csv``, ``<run>-calibration.csv``, their 1.0 m/s counterparts ``<run>-eval-1.0.csv`` and (where the
+run's weights were at hand) ``<run>-calibration-1.0.csv``, ``<run>-artifacts.json`` (the ids of the run's checkpoint,
+evals, diagnoses and fixed-rollout analyses) and ``fixed-rollout-<robot>.csv`` (every critic scored on the frozen film
 actor's one rollout of the robot).
 
 Outputs:
@@ -285,8 +286,8 @@ def render(results: Path) -> str:
     """All tables as one markdown block (without the markers)."""
     ev, cal, fixed = load_evals(results), load(results, "calibration"), load_fixed(results)
     out: list[str] = []
-    titles = {("descriptor", 1.0): "Descriptor mode, 1.0 m/s (the trained regime: seed 0 of every variant, "
-                                   "`<run>-eval-1.0.csv`; the paper reports none)",
+    titles = {("descriptor", 1.0): "Descriptor mode, 1.0 m/s (the trained regime: every run, `<run>-eval-1.0.csv`; "
+                                   "the paper reports none)",
               ("descriptor", 2.0): "Descriptor mode (the paper's protocol), 2.0 m/s",
               ("descriptor", 2.5): "Descriptor mode, 2.5 m/s (the paper reports only MorFiC-F, as v_x^max)",
               ("full", 2.0): "Full mode (the targets' own models; a morfic extension, no paper column), 2.0 m/s",
@@ -297,6 +298,10 @@ def render(results: Path) -> str:
     if not cal.empty:
         out += ["### Critic calibration (`morfic diagnose RUN`: descriptor mode, 2.0 m/s, 64 envs x 800 steps)", "",
                 *calibration_table(cal), ""]
+    slow = load(results, "calibration-1.0")
+    if not slow.empty:
+        out += ["### Critic calibration at 1.0 m/s (the trained regime; the runs whose weights a store held, "
+                "`<run>-calibration-1.0.csv`; the paper reports none)", "", *calibration_table(slow), ""]
     if not fixed.empty:
         out += ["### Fixed rollout (`morfic diagnose --fixed-rollout ROBOT`: the film actor frozen, every critic "
                 "scored on its one rollout)", "", *fixed_table(fixed), "", *sample_note(results, fixed)]
@@ -350,11 +355,13 @@ def walk_table(results: Path) -> list[str]:
 def bundle_table(bundles: Path) -> list[str]:
     """The shipped bundles under ``bundles``: one row per tar (its path, what it ships, MiB), then the totals.
 
-    ``<run>.tar`` directly under ``bundles`` ships a run's weights (seed 0, ``--without-trainer-state``),
-    ``results/<run>.tar`` its results only, ``partial/<run>.tar`` an unfinished run with its trainer state. Sizes are
-    the files' own, in MiB (2^20 bytes), so the total is what git carries.
+    ``<run>.tar`` directly under ``bundles`` ships a seed-0 run's weights (``--without-trainer-state``; what
+    ``reproduce --preset shipped`` imports), ``weights/<run>.tar`` another seed's weights the same way,
+    ``results/<run>.tar`` a run's results only, ``partial/<run>.tar`` an unfinished run with its trainer state. Sizes
+    are the files' own, in MiB (2^20 bytes), so the total is what git carries.
     """
-    kinds = (("", "weights-only"), ("results/", "results only"), ("partial/", "partial, with trainer state"))
+    kinds = (("", "weights-only"), ("weights/", "weights-only (seed >= 1)"), ("results/", "results only"),
+             ("partial/", "partial, with trainer state"))
     rows, totals = [], {}
     for sub, kind in kinds:
         for tar in sorted((bundles / sub).glob("*.tar")):
@@ -370,35 +377,46 @@ def bundle_table(bundles: Path) -> list[str]:
 
 
 # ----------------------------------------------------------------------------------------------- claims
-#: The extra eval files the claims read beside ``<run>-eval.csv``: ``<run>-eval-<vx>.csv``, a run evaluated at another
-#: command (same columns, ``command_vx`` = vx; the trained regime at 1.0 m/s).
+#: The extra eval and diagnosis files the claims read beside ``<run>-eval.csv`` and ``<run>-calibration.csv``:
+#: ``<run>-<kind>-<vx>.csv``, a run evaluated or diagnosed at another command (same columns, ``command_vx`` = vx; the
+#: trained regime at 1.0 m/s). Their ids are the ``<kind>-<vx>`` entries of ``<run>-artifacts.json``.
 EXTRA_EVALS: tuple[str, ...] = ("eval-1.0",)
+EXTRA_CALIBRATIONS: tuple[str, ...] = ("calibration-1.0",)
+
+
+def _load_all(results: Path, kinds: tuple[str, ...]) -> pd.DataFrame:
+    frames = [f for f in (load(results, kind) for kind in kinds) if not f.empty]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
 def load_evals(results: Path) -> pd.DataFrame:
     """Every run's eval rows: ``<run>-eval.csv`` and each of :data:`EXTRA_EVALS` (``<run>-eval-1.0.csv``)."""
-    frames = [f for f in (load(results, kind) for kind in ("eval", *EXTRA_EVALS)) if not f.empty]
-    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    return _load_all(results, ("eval", *EXTRA_EVALS))
+
+
+def load_calibrations(results: Path) -> pd.DataFrame:
+    """Every run's diagnosis rows: ``<run>-calibration.csv`` and each of :data:`EXTRA_CALIBRATIONS`."""
+    return _load_all(results, ("calibration", *EXTRA_CALIBRATIONS))
 
 
 def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
     """The eval, calibration and fixed-rollout rows as ``check_claims`` reads them, each with its ``artifact`` id.
 
-    The eval rows are :func:`load_evals`'s (2.0 / 2.5 m/s and, where a run has it, 1.0 m/s); a 1.0 m/s row's id is
-    the ``eval-1.0`` entry of the run's ``<run>-artifacts.json``, else the file it came from.
+    The eval and calibration rows are :func:`load_evals`' and :func:`load_calibrations`' (2.0 / 2.5 m/s and, where a
+    run has them, 1.0 m/s); a 1.0 m/s row's id is the ``eval-1.0`` (``diagnosis-1.0``) entry of the run's
+    ``<run>-artifacts.json``, else the file it came from.
     """
     ids = load_artifacts(results)
-    ev, cal, fixed = load_evals(results), load(results, "calibration"), load_fixed(results)
+    ev, cal, fixed = load_evals(results), load_calibrations(results), load_fixed(results)
 
     def records(frame: pd.DataFrame, key: str) -> list[dict]:
         if frame.empty:
             return []
         out = frame.to_dict("records")
         for r in out:
-            k = key
-            if key == "eval" and abs(float(r.get("command_vx", 2.0)) - 1.0) < 1e-9:
-                k = "eval-1.0"
-            r["artifact"] = ids.get(r["run"], {}).get(k) or f"{r['run']}-{k}.csv"
+            k = f"{key}-1.0" if abs(float(r.get("command_vx", 2.0)) - 1.0) < 1e-9 else key
+            file = {"eval": "eval", "diagnosis": "calibration"}[key] + k[len(key):]
+            r["artifact"] = ids.get(r["run"], {}).get(k) or f"{r['run']}-{file}.csv"
         return out
 
     fixed_rows = []

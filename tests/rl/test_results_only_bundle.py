@@ -21,13 +21,17 @@ RUN = "runs/film-smoke-s1"
 HEAVY = ("model.pt", "rollout.mcap", "obs.npz")
 
 
-def _reproduce(store: Store, seeds: int) -> None:
+def _pipeline(store: Store, seeds: int):
     from morfic_cli.pipeline import Pipeline, ReproduceCfg
 
     cfg = ReproduceCfg(preset="smoke", variants=("film",), seeds=seeds, robots=("go2", "aliengo"), command_vx=(2.0,),
                        modes=("descriptor",), eval_envs=2, eval_steps=5, diagnose_envs=2, diagnose_steps=80,
                        trunc_eps=0.5, fixed_rollout_robots=("aliengo",), torch_threads=1)
-    assert not Pipeline(store, cfg).run().interrupted
+    return Pipeline(store, cfg)
+
+
+def _reproduce(store: Store, seeds: int) -> None:
+    assert not _pipeline(store, seeds).run().interrupted
 
 
 @pytest.fixture(scope="module")
@@ -211,3 +215,32 @@ def test_reuse_false_scores_the_critics_again_as_a_new_analysis(bundles, tmp_pat
     rows = [store.read_file(i, "fixed_rollout.csv").decode().splitlines() for i in (skipped.id, again.id)]
     first = [r.split(",")[:6] for r in rows[0][1:]]
     assert [r.split(",")[:6] for r in rows[1][1:]] == first
+
+
+def test_the_1_0_diagnosis_needs_the_weights_and_is_found_once_made(bundles, tmp_path, capsys):
+    """scripts/experiment_tables.py's 1.0 m/s diagnosis: none from a results-only import, made once the weights are
+    in, then found in the store (the same artifact) instead of made again."""
+    import csv
+    import importlib.util
+    import io
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "experiment_tables.py"
+    spec = importlib.util.spec_from_file_location("experiment_tables", path)
+    et = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(et)
+    _, results, weights, _ = bundles
+    store = _imported(tmp_path, results)
+    pipe = _pipeline(store, 2)
+    ids: dict[str, str] = {}
+    et.write_trained_regime_diagnosis(store, pipe, RUN, "film-smoke-s1", tmp_path, ids, run_missing=True)
+    assert ids == {} and not (tmp_path / "film-smoke-s1-calibration-1.0.csv").exists()
+    assert "no 1.0 m/s diagnosis of runs/film-smoke-s1" in capsys.readouterr().err
+    store.import_tar(weights.path)
+    assert et.trained_regime_diagnosis(store, pipe, RUN, run_missing=False) is None  # not made without --run-missing
+    et.write_trained_regime_diagnosis(store, pipe, RUN, "film-smoke-s1", tmp_path, ids, run_missing=True)
+    made = ids["diagnosis-1.0"]
+    assert et.trained_regime_diagnosis(store, pipe, RUN, run_missing=True) == made
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "film-smoke-s1-calibration-1.0.csv").read_text())))
+    assert [(r["run"], r["robot"], float(r["command_vx"])) for r in rows] == [
+        ("film-smoke-s1", "go2", 1.0), ("film-smoke-s1", "aliengo", 1.0)]

@@ -85,6 +85,32 @@ def test_claims_are_judged_at_2_and_at_1_m_s_from_the_eval_1_0_files(tmp_path):
     assert "`ffffffffffff`" in at1 and "`film-cpu-s1-eval-1.0.csv`" in at1 and "eeeeeeeeeeee" not in at1
 
 
+def test_claim_a_is_judged_at_1_m_s_from_the_calibration_1_0_files(tmp_path):
+    """Two seeds alike (a point interval): on AlienGo film's EV 0.6 against concat's 0.2 at 1.0 m/s -> +0.40."""
+    _runs(tmp_path)
+    head = "robot,command_vx,ev,abs_nvb,nve,asa\n"
+    for seed in (0, 1):
+        for run, ev in (("film", 0.6), ("concat", 0.2)):
+            (tmp_path / f"{run}-cpu-s{seed}-calibration-1.0.csv").write_text(head + f"aliengo,1.0,{ev},0.1,0.9,0.8\n")
+    (tmp_path / "film-cpu-s0-artifacts.json").write_text(json.dumps({"diagnosis-1.0": "d" * 64}))
+    # the claims are judged at the commands of the evals (check_claims)
+    (tmp_path / "film-cpu-s0-eval-1.0.csv").write_text(EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.9,0.1,1.0,walks\n")
+    # the 2.0 m/s table and figures read <run>-calibration.csv only; the claims both
+    assert set(rt.load(tmp_path, "calibration")["robot"]) == {"go2"}
+    assert len(rt.load_calibrations(tmp_path)) == 5
+    _, cal, _ = rt.claim_rows(tmp_path)
+    ids = {(r["run"], r["robot"]): r["artifact"] for r in cal}
+    assert ids[("film-cpu-s0", "aliengo")] == "d" * 64  # its artifact id, else the file it came from
+    assert ids[("concat-cpu-s1", "aliengo")] == "concat-cpu-s1-calibration-1.0.csv"
+    assert ids[("film-cpu-s0", "go2")] == "film-cpu-s0-calibration.csv"
+    at1 = rt.render_claims(tmp_path).split("### At 1.0 m/s")[1]
+    assert "aliengo: EV multiplicative - additive +0.40 [+0.40, +0.40] (n 2 vs 2, p 0.33)" in at1
+    assert "`dddddddddddd`" in at1
+    block = rt.render(tmp_path)  # a table of its own, after the 2.0 m/s one
+    assert block.index("### Critic calibration (") < block.index("### Critic calibration at 1.0 m/s")
+    assert "| aliengo | 0.200 ± 0.000 (n=2) | 0.600 ± 0.000 (n=2) |" in block.split("at 1.0 m/s")[1]
+
+
 def test_calibration_table_and_the_marked_block(tmp_path):
     block = rt.render(_runs(tmp_path))
     assert "| go2 | 0.373 | 0.333/0.859/0.531 | 1.768/1.943/0.771 |" in block  # paper film on Go2
@@ -206,19 +232,36 @@ def test_seed0_critics_with_weights_are_rescored_on_other_samples(tmp_path):
 
 
 def test_bundle_table_sizes_every_tar_from_the_files(tmp_path):
-    """Sizes in MiB from the files themselves: 3 MiB + 1.5 MiB weights, 0.25 MiB results -> 4.75 in all."""
+    """Sizes in MiB from the files themselves: 3 + 1.5 MiB seed-0 weights, 0.75 MiB a seed's weights, 0.25 MiB
+    results -> 5.5 in all."""
     bundles = tmp_path / "bundles"
     (bundles / "results").mkdir(parents=True)
+    (bundles / "weights").mkdir()
     (bundles / "film-cpu-s0.tar").write_bytes(b"\0" * (3 * rt.MIB))
     (bundles / "ppo-cpu-s0.tar").write_bytes(b"\0" * (3 * rt.MIB // 2))
+    (bundles / "weights" / "film-cpu-s1.tar").write_bytes(b"\0" * (3 * rt.MIB // 4))
     (bundles / "results" / "film-cpu-s1.tar").write_bytes(b"\0" * (rt.MIB // 4))
     (bundles / "notes.txt").write_text("not a bundle")
     lines = rt.bundle_table(bundles)
     assert lines[2] == f"| `{(bundles / 'film-cpu-s0.tar').as_posix()}` | weights-only | 3.0 |"
     assert lines[3] == f"| `{(bundles / 'ppo-cpu-s0.tar').as_posix()}` | weights-only | 1.5 |"
-    assert lines[4] == f"| `{(bundles / 'results' / 'film-cpu-s1.tar').as_posix()}` | results only | 0.2 |"
-    assert lines[-1] == "| 3 tars | weights-only 4.5, results only 0.2 | **4.8** |"
+    assert lines[4] == f"| `{(bundles / 'weights' / 'film-cpu-s1.tar').as_posix()}` | weights-only (seed >= 1) | 0.8 |"
+    assert lines[5] == f"| `{(bundles / 'results' / 'film-cpu-s1.tar').as_posix()}` | results only | 0.2 |"
+    assert lines[-1] == "| 4 tars | weights-only 4.5, weights-only (seed >= 1) 0.8, results only 0.2 | **5.5** |"
     assert rt.bundle_table(tmp_path / "none") == [f"No bundle under {tmp_path / 'none'}."]
+
+
+def test_the_1_0_diagnosis_is_the_papers_protocol_at_one_metre_per_second(tmp_path):
+    # written out by hand: the paper's diagnosis (every robot in the paper's order, descriptor mode, 64 envs x 800
+    # steps, eps 0.05) with the command alone changed
+    from morfic_cli.diagnostics.samples import diagnose_config
+    from morfic_cli.store import Store
+
+    pipe = et.one_run_pipeline(Store(tmp_path / "store"), "concat", 1, "runs/concat-cpu-s1")
+    paper = {"robots": ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c"), "mode": "descriptor",
+             "command_vx": 2.0, "num_envs": 64, "steps": 800, "seed": 0, "trunc_eps": 0.05, "sigma_eps": 1e-08}
+    assert diagnose_config(pipe.diagnose_cfg(pipe.cfg.robots)) == paper
+    assert diagnose_config(et.trained_regime_diagnose_cfg(pipe)) == {**paper, "command_vx": 1.0}
 
 
 def test_the_queue_evaluates_at_one_metre_per_second_as_the_seed0_runs_were():
