@@ -191,7 +191,8 @@ def write_trained_regime_diagnosis(store, pipe, spec: str, run: str, out: Path, 
     found = trained_regime_diagnosis(store, pipe, spec, run_missing)
     if found is None:
         print(f"note: no 1.0 m/s diagnosis of {spec} in {store.root} (it needs the run's weights: import its bundle "
-              "and rerun with --run-missing); claim (a) at 1.0 m/s reads the runs that have one", file=sys.stderr)
+              "and its weights bundle, then rerun with --run-missing or --diagnosis-1.0-only); claim (a) at 1.0 m/s "
+              "reads the runs that have one", file=sys.stderr)
         return
     path = out / f"{run}-calibration-1.0.csv"
     path.write_bytes(store.read_file(found, "calibration.csv"))
