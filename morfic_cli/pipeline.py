@@ -472,23 +472,29 @@ class Pipeline:
         return EvalCfg(robots=c.robots, modes=c.modes, command_vx=c.command_vx, num_envs=c.eval_envs,
                        steps=c.eval_steps, seed=0, batch_robots=c.batch_robots)
 
-    def stored_eval(self, spec: str) -> StepResult | None:
-        """The skipped result when the store holds this evaluation of ``spec``'s checkpoint, else None."""
+    def stored_eval(self, spec: str, cfg=None) -> StepResult | None:
+        """The skipped result when the store holds this evaluation of ``spec``'s checkpoint, else None.
+
+        ``cfg``: another evaluation config than :meth:`eval_cfg` (another command, say); the same by default.
+        """
         if not self.store.has_ref(spec):
             return None
         from morfic_cli.evaluation.protocol import eval_config
 
-        config = _json(eval_config(spec, self.eval_cfg()))
+        config = _json(eval_config(spec, cfg or self.eval_cfg()))
         found = find_manifest(self.store, "eval", config, inputs_subset={"checkpoint": self.store.resolve(spec)},
                               files=("eval.csv",))
         return StepResult("eval", spec, "skipped", found) if found else None
 
-    def evaluate(self, spec: str) -> StepResult:
-        """Evaluate a run's checkpoint on every robot, mode and command (skip when stored)."""
+    def evaluate(self, spec: str, cfg=None) -> StepResult:
+        """Evaluate a run's checkpoint on every robot, mode and command (skip when stored).
+
+        ``cfg``: as in :meth:`stored_eval`.
+        """
         from morfic_cli.evaluation.protocol import evaluate
 
-        cfg = self.eval_cfg()
-        found = self.stored_eval(spec)
+        cfg = cfg or self.eval_cfg()
+        found = self.stored_eval(spec, cfg)
         if found is not None:
             return found
         units = len(cfg.robots) * len(cfg.modes) * len(cfg.command_vx) * cfg.steps
@@ -511,24 +517,27 @@ class Pipeline:
                            steps=c.diagnose_steps, seed=0, trunc_eps=c.trunc_eps,
                            batch=c.robots if c.batch_robots else ())
 
-    def stored_diagnosis(self, spec: str) -> StepResult | None:
-        """The skipped result when the store holds this diagnosis of ``spec``'s checkpoint, else None."""
+    def stored_diagnosis(self, spec: str, cfg=None) -> StepResult | None:
+        """The skipped result when the store holds this diagnosis of ``spec``'s checkpoint, else None.
+
+        ``cfg``: another diagnosis config than :meth:`diagnose_cfg` of every robot (another command, say).
+        """
         if not self.store.has_ref(spec):
             return None
         from morfic_cli.diagnostics.samples import diagnose_config
 
-        config = _json({"specs": [spec], **diagnose_config(self.diagnose_cfg(self.cfg.robots))})
+        config = _json({"specs": [spec], **diagnose_config(cfg or self.diagnose_cfg(self.cfg.robots))})
         found = find_manifest(self.store, "diagnosis", config,
                               inputs_subset={f"checkpoint/{spec}": self.store.resolve(spec)},
                               files=("calibration.csv",))
         return StepResult("diagnose", spec, "skipped", found) if found else None
 
-    def diagnose(self, spec: str) -> StepResult:
-        """Critic calibration of a run on every robot (skip when stored)."""
+    def diagnose(self, spec: str, cfg=None) -> StepResult:
+        """Critic calibration of a run on every robot (skip when stored); ``cfg`` as in :meth:`stored_diagnosis`."""
         from morfic_cli.diagnostics.calibration import diagnose_runs
 
-        cfg = self.diagnose_cfg(self.cfg.robots)
-        found = self.stored_diagnosis(spec)
+        cfg = cfg or self.diagnose_cfg(self.cfg.robots)
+        found = self.stored_diagnosis(spec, cfg)
         if found is not None:
             return found
         self._start("diagnose", spec, len(cfg.robots) * cfg.steps, "steps")

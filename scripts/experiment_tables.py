@@ -139,23 +139,18 @@ def trained_regime_cfg():
     return EvalCfg(robots=tuple(parse_robot_list("all")), modes=("descriptor",), command_vx=(TRAINED_REGIME_VX,))
 
 
-def trained_regime_eval(store, spec: str, run_missing: bool) -> str | None:
+def trained_regime_eval(pipe, spec: str, run_missing: bool) -> str | None:
     """The id of the stored 1.0 m/s eval of ``spec``'s checkpoint (:func:`trained_regime_cfg`).
 
     Run first when ``run_missing`` and the store lacks it; None when it lacks it otherwise.
     """
-    from morfic_cli.evaluation.protocol import eval_config, evaluate
-    from morfic_cli.pipeline import _json
-    from morfic_cli.store.publish import find_manifest
-
     cfg = trained_regime_cfg()
-    found = find_manifest(store, "eval", _json(eval_config(spec, cfg)),
-                          inputs_subset={"checkpoint": store.resolve(spec)}, files=("eval.csv",))
-    if found is None and run_missing:
+    step = pipe.stored_eval(spec, cfg)
+    if step is None and run_missing:
         start = time.monotonic()
-        found = evaluate(store, spec, cfg).id
+        step = pipe.evaluate(spec, cfg)
         print(f"eval {spec} at 1.0 m/s: done in {time.monotonic() - start:.0f} s", file=sys.stderr)
-    return found
+    return step.id if step else None
 
 
 def trained_regime_diagnose_cfg(pipe):
@@ -170,20 +165,13 @@ def trained_regime_diagnosis(store, pipe, spec: str, run_missing: bool) -> str |
 
     Run first when ``run_missing``, the store lacks it and holds the run's weights; None when it lacks it otherwise.
     """
-    from morfic_cli.diagnostics.calibration import diagnose_runs
-    from morfic_cli.diagnostics.samples import diagnose_config
-    from morfic_cli.pipeline import _json
-    from morfic_cli.store.publish import find_manifest
-
     cfg = trained_regime_diagnose_cfg(pipe)
-    checkpoint = store.resolve(spec)
-    found = find_manifest(store, "diagnosis", _json({"specs": [spec], **diagnose_config(cfg)}),
-                          inputs_subset={f"checkpoint/{spec}": checkpoint}, files=("calibration.csv",))
-    if found is None and run_missing and "model.pt" not in store.omitted_files(store.read_manifest(checkpoint)):
+    step = pipe.stored_diagnosis(spec, cfg)
+    if step is None and run_missing and "model.pt" not in store.omitted_files(store.read_manifest(spec)):
         start = time.monotonic()
-        found = diagnose_runs(store, [spec], cfg).id
+        step = pipe.diagnose(spec, cfg)
         print(f"diagnose {spec} at 1.0 m/s: done in {time.monotonic() - start:.0f} s", file=sys.stderr)
-    return found
+    return step.id if step else None
 
 
 def write_trained_regime_diagnosis(store, pipe, spec: str, run: str, out: Path, ids: dict, run_missing: bool) -> None:
@@ -262,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
             path.write_bytes(store.read_file(step.id, file))
             ids[what] = step.id
             print(f"{path} (artifact {step.id[:12]})")
-        slow = trained_regime_eval(store, spec, args.run_missing)
+        slow = trained_regime_eval(pipe, spec, args.run_missing)
         if slow is None:
             print(f"Error: no 1.0 m/s eval of {spec} in {store.root}; rerun with --run-missing (or `morfic eval "
                   f"{spec} --command-vx 1.0`) first.", file=sys.stderr)

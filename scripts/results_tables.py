@@ -403,20 +403,19 @@ def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
     """The eval, calibration and fixed-rollout rows as ``check_claims`` reads them, each with its ``artifact`` id.
 
     The eval and calibration rows are :func:`load_evals`' and :func:`load_calibrations`' (2.0 / 2.5 m/s and, where a
-    run has them, 1.0 m/s); a 1.0 m/s row's id is the ``eval-1.0`` (``diagnosis-1.0``) entry of the run's
-    ``<run>-artifacts.json``, else the file it came from.
+    run has them, 1.0 m/s); a row's id is the run's ``<run>-artifacts.json`` entry of the file it came from
+    (``<run>-eval-1.0.csv``: ``eval-1.0``; ``<run>-calibration-1.0.csv``: ``diagnosis-1.0``), else that file's name.
     """
     ids = load_artifacts(results)
-    ev, cal, fixed = load_evals(results), load_calibrations(results), load_fixed(results)
+    fixed = load_fixed(results)
 
-    def records(frame: pd.DataFrame, key: str) -> list[dict]:
-        if frame.empty:
-            return []
-        out = frame.to_dict("records")
-        for r in out:
-            k = f"{key}-1.0" if abs(float(r.get("command_vx", 2.0)) - 1.0) < 1e-9 else key
-            file = {"eval": "eval", "diagnosis": "calibration"}[key] + k[len(key):]
-            r["artifact"] = ids.get(r["run"], {}).get(k) or f"{r['run']}-{file}.csv"
+    def records(kinds: tuple[str, ...]) -> list[dict]:
+        out = []
+        for kind in kinds:
+            key = kind.replace("calibration", "diagnosis")  # artifacts.json names a diagnosis's id "diagnosis"
+            for r in load(results, kind).to_dict("records"):
+                r["artifact"] = ids.get(r["run"], {}).get(key) or f"{r['run']}-{kind}.csv"
+                out.append(r)
         return out
 
     fixed_rows = []
@@ -426,7 +425,7 @@ def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
             r["artifact"] = (ids.get(owner, {}).get("fixed_rollout", {}).get(r["robot"])
                              or f"fixed-rollout-{r['robot']}.csv")
             fixed_rows.append(r)
-    return records(ev, "eval"), records(cal, "diagnosis"), fixed_rows
+    return records(("eval", *EXTRA_EVALS)), records(("calibration", *EXTRA_CALIBRATIONS)), fixed_rows
 
 
 def _short(artifact: str) -> str:
