@@ -253,6 +253,10 @@ def _say_user_variants(bundle: str, needed: dict[str, list[str]]) -> None:
 @app.command("import")
 def import_(
     paths: Annotated[list[Path], typer.Argument(help="Tar files made by `morfic store export`, one or more.")],
+    append: Annotated[bool, typer.Option(
+        "--append", help="A ref this store holds with another history (a shared log such as diagnoses/calibration, "
+                         "from bundles of different stores) gets the import's versions it never pointed at "
+                         "appended after its own, instead of being refused as diverged.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
@@ -266,6 +270,11 @@ def import_(
     with their refs and whether you trust it (`morfic trust`); commands import it only with your consent. A
     bundle naming a variant that is not a well-formed name is refused.
 
+    Bundles of one store merge in any order. Bundles of different stores (the shipped results bundles come
+    from two) can each hold their own history of a shared ref such as diagnoses/calibration; a history that is
+    not a prefix of the store's is refused as diverged unless --append adds its versions after the store's
+    (results are found by their manifests, so only the version numbers differ with the import order; reports cite ids).
+
     Example: morfic store import artifacts/bundles/*.tar --store artifacts
     """
     import os
@@ -275,7 +284,7 @@ def import_(
     failed: list[str] = []
     for path in paths:
         try:
-            report = st.import_tar(path)
+            report = st.import_tar(path, append=append)
         except MorficError as exc:
             if len(paths) == 1 or os.environ.get("MORFIC_DEBUG", "") not in ("", "0"):
                 raise

@@ -198,7 +198,9 @@ def merge_status(name: str, local: list[RefEntry], incoming: list[RefEntry]) -> 
         if a != b:
             raise StoreError(
                 f"ref '{name}' has diverged: version {a.version} is {a.id[:12]} here but {b.id[:12]} in the "
-                "import. Nothing was imported; rename the local ref or import into another store."
+                "import. Nothing was imported; rename the local ref, import into another store, or, for a ref "
+                "that logs the results of several runs (diagnoses/calibration, say), `morfic store import "
+                "--append` adds the import's versions after this store's."
             )
     return "extended" if len(incoming) > len(local) else "unchanged"
 

@@ -237,6 +237,32 @@ def test_import_of_several_tars_imports_each_and_names_the_bad_one(run_cli, fill
     assert code == 0 and [r["status"] for r in json.loads(stdout)] == ["unchanged", "unchanged"]
 
 
+def test_bundles_of_two_stores_with_a_shared_ref_import_together_with_append(run_cli, tmp_path):
+    """Two stores each log version 1 of diagnoses/calibration: without --append the second tar is refused with a
+    pointer to --append and nothing of it lands; with it, its version goes after the first (README's import of the
+    shipped results bundles, which come from two stores)."""
+    ids, tars = [], []
+    for i in (1, 2):
+        src = Store(tmp_path / f"src{i}")
+        ids.append(src.put_manifest("diagnosis", files={"calibration.csv": f"run {i}".encode()}))
+        src.set_ref("diagnoses/calibration", ids[-1])
+        src.set_ref(f"runs/film-s{i}", src.put_manifest("checkpoint", files={"model.pt": f"w{i}".encode()}))
+        tars.append(tmp_path / f"b{i}.tar")
+        src.export_tar(["diagnoses/calibration", f"runs/film-s{i}"], tars[-1])
+    dst = tmp_path / "dst"
+    code, _, err = run_cli("store", "import", *map(str, tars), "--store", str(dst))
+    assert code == 1 and "ref 'diagnoses/calibration' has diverged" in err and "--append" in err
+    assert sorted(Store(dst).list_refs()) == ["diagnoses/calibration", "runs/film-s1"]  # b2.tar: nothing
+    code, stdout, err = run_cli("store", "import", "--append", *map(str, tars), "--store", str(dst), "-f", "json")
+    assert code == 0, err
+    assert {(r["bundle"], r["ref"]): r["status"] for r in json.loads(stdout)} == {
+        ("b1.tar", "diagnoses/calibration"): "unchanged", ("b1.tar", "runs/film-s1"): "unchanged",
+        ("b2.tar", "diagnoses/calibration"): "extended", ("b2.tar", "runs/film-s2"): "created"}
+    dst_store = Store(dst)
+    assert [(e.version, e.id) for e in dst_store.ref_history("diagnoses/calibration")] == [(1, ids[0]), (2, ids[1])]
+    assert dst_store.verify().ok
+
+
 def test_import_of_a_non_export_is_error(run_cli, tmp_path):
     bogus = tmp_path / "x.tar"
     bogus.write_text("hello")
