@@ -13,7 +13,7 @@ from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, Stor
 from morfic_cli.cli._render import Column, emit_object, emit_rows, err_console, info
 from morfic_cli.errors import MorficError, StoreError
 from morfic_cli.store import MANIFEST_KINDS, Store
-from morfic_cli.store.transfer import export_path
+from morfic_cli.store.transfer import appends_results, export_path
 from morfic_cli.validation import check_args
 
 app = typer.Typer(
@@ -254,9 +254,10 @@ def _say_user_variants(bundle: str, needed: dict[str, list[str]]) -> None:
 def import_(
     paths: Annotated[list[Path], typer.Argument(help="Tar files made by `morfic store export`, one or more.")],
     append: Annotated[bool, typer.Option(
-        "--append", help="A ref this store holds with another history (a shared log such as diagnoses/calibration, "
-                         "from bundles of different stores) gets the import's versions it never pointed at "
-                         "appended after its own, instead of being refused as diverged.")] = False,
+        "--append", help="A result ref this store holds with another history (a shared log such as "
+                         "diagnoses/calibration, from bundles of different stores) gets the import's versions it "
+                         "never pointed at appended after its own, instead of being refused as diverged. A run's "
+                         "ref (runs/NAME) is never appended to: a diverged one is another run of that name.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
@@ -284,7 +285,7 @@ def import_(
     failed: list[str] = []
     for path in paths:
         try:
-            report = st.import_tar(path, append=append)
+            report = st.import_tar(path, append=appends_results if append else False)
         except MorficError as exc:
             if len(paths) == 1 or os.environ.get("MORFIC_DEBUG", "") not in ("", "0"):
                 raise

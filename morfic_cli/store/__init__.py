@@ -50,7 +50,7 @@ from morfic_cli.store.objects import ObjectDB, store_os_error
 from morfic_cli.store.publish import Published, publish
 from morfic_cli.store.refs import ANY, RefDB, RefEntry, RefMovedError, check_ref_name, pick_version, split_spec
 from morfic_cli.store.shallow import OMITTABLE_FILES, OMITTABLE_ROLES, OmittedIndex
-from morfic_cli.store.transfer import ExportReport, ImportReport, export_tar, import_tar
+from morfic_cli.store.transfer import AppendRule, ExportReport, ImportReport, export_tar, import_tar
 
 __all__ = [
     "MANIFEST_KINDS",
@@ -475,7 +475,7 @@ class Store:
         return export_tar(self, refs, Path(out), latest=latest, without_trainer_state=without_trainer_state,
                           results_only=results_only)
 
-    def import_tar(self, path: Path, *, append: bool = False) -> ImportReport:
+    def import_tar(self, path: Path, *, append: AppendRule = False) -> ImportReport:
         """Import a tar made by :meth:`export_tar`; idempotent (see :class:`ImportReport`; ``append``: there)."""
         return import_tar(self, Path(path), append=append)
 

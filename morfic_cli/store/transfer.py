@@ -36,7 +36,7 @@ import shutil
 import tarfile
 import tempfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +45,7 @@ from typing import IO, TYPE_CHECKING
 from morfic_cli import __version__
 from morfic_cli.errors import ArtifactNotFoundError, MorficError, StoreError
 from morfic_cli.rl.variants import STOCK, stored_variants
+from morfic_cli.runs import RUNS_PREFIX
 from morfic_cli.store.gc import walk
 from morfic_cli.store.manifest import MAX_MANIFEST_BYTES, parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, is_object_id, object_relpath, store_os_error, unlink_quiet
@@ -493,12 +494,31 @@ class _Plan:
     """Manifest id -> the user variants it names (checked well-formed, never imported)."""
 
 
-def import_tar(store: Store, path: Path, *, append: bool = False) -> ImportReport:
+#: Which refs an import appends to instead of merging: all (``True``), none (``False``), or those a predicate names.
+AppendRule = bool | Callable[[str], bool]
+
+
+def appends_results(name: str) -> bool:
+    """Every ref but a run's: ``morfic store import --append``'s rule.
+
+    A result ref (``evals/NAME``, ``diagnoses/calibration``) is a log that bundles of several stores may each have
+    begun; a run's history (``runs/NAME``) is one training, and a diverged one is another run of that name, which
+    an import still refuses.
+    """
+    return not name.startswith(RUNS_PREFIX)
+
+
+def _appends(append: AppendRule, name: str) -> bool:
+    return append(name) if callable(append) else append
+
+
+def import_tar(store: Store, path: Path, *, append: AppendRule = False) -> ImportReport:
     """Import an export tar, all or nothing.
 
     With ``append``, a ref's history is not merged but extended: the import's versions whose ids this ref
     never pointed at are appended, in the import's order (how ``reproduce --executor ray`` brings home jobs
-    that each add one version to a ref all of them share, such as ``diagnoses/calibration``).
+    that each add one version to a ref all of them share, such as ``diagnoses/calibration``). ``True``: every
+    ref; a predicate (:func:`appends_results`): the refs it names, the others merged.
 
     Everything is checked before anything becomes visible: the header, every object against its
     hash and declared size (objects this store already has are rehashed, and a corrupt local copy is
@@ -528,7 +548,7 @@ def import_tar(store: Store, path: Path, *, append: bool = False) -> ImportRepor
 
 
 def _checked_stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
-                   append: bool = False) -> _Plan:
+                   append: AppendRule = False) -> _Plan:
     try:
         return _stage(store, tar, path, staging, append)
     except _READ_ERRORS as exc:
@@ -538,7 +558,8 @@ def _checked_stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path
         raise store_os_error(exc, f"reading {path}", store.root) from exc
 
 
-def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None, append: bool = False) -> _Plan:
+def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
+           append: AppendRule = False) -> _Plan:
     """Read and check the whole tar; stage the objects this store lacks or has corrupt (none without ``staging``)."""
     members = _classify(tar, path)
     header = _read_header(tar, members, path)
@@ -599,7 +620,7 @@ def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
                          f"{sorted(plan.histories)[:5]}; nothing was imported. Re-export it.")
     _check_ref_folders(store, sorted(plan.histories), path)
     for name, history in plan.histories.items():
-        if not append:
+        if not _appends(append, name):
             merge_status(name, store.refs.history(name), history)  # diverged: refuse before writing anything
     return plan
 
@@ -753,12 +774,12 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
     return named
 
 
-def _commit(store: Store, plan: _Plan, report: ImportReport, append: bool = False) -> None:
+def _commit(store: Store, plan: _Plan, report: ImportReport, append: AppendRule = False) -> None:
     """Make a checked import visible: objects, then index markers, then refs (rolled back on failure)."""
     with store.refs.locked():
         previous = {name: store.refs.history(name) for name in plan.histories}
-        if append:
-            plan.histories = {name: _appended(previous[name], hist) for name, hist in plan.histories.items()}
+        plan.histories = {name: _appended(previous[name], hist) if _appends(append, name) else hist
+                          for name, hist in plan.histories.items()}
         statuses = {name: merge_status(name, previous[name], hist) for name, hist in sorted(plan.histories.items())}
         try:
             for oid, tmp in sorted(plan.staged.items()):

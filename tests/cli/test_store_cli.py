@@ -261,6 +261,13 @@ def test_bundles_of_two_stores_with_a_shared_ref_import_together_with_append(run
     dst_store = Store(dst)
     assert [(e.version, e.id) for e in dst_store.ref_history("diagnoses/calibration")] == [(1, ids[0]), (2, ids[1])]
     assert dst_store.verify().ok
+    # a run of the same name from another store is another run: refused even with --append, nothing of it lands
+    other = Store(tmp_path / "other")
+    other.set_ref("runs/film-s1", other.put_manifest("checkpoint", files={"model.pt": b"someone else's"}))
+    other.export_tar(["runs/film-s1"], tmp_path / "other.tar")
+    code, _, err = run_cli("store", "import", "--append", str(tmp_path / "other.tar"), "--store", str(dst))
+    assert code == 1 and "ref 'runs/film-s1' has diverged" in err
+    assert [e.id for e in dst_store.ref_history("runs/film-s1")] == [Store(tmp_path / "src1").resolve("runs/film-s1")]
 
 
 def test_import_of_a_non_export_is_error(run_cli, tmp_path):
