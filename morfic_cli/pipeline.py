@@ -25,6 +25,7 @@ from typing import Any, Protocol
 
 from morfic_cli.errors import MorficError
 from morfic_cli.report.build import ReportCfg, ReportResult, build_report
+from morfic_cli.report.claims import PAPER_COMMAND
 from morfic_cli.report.paper import ROBOTS
 from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, VARIANTS, resolve_variant
 from morfic_cli.runs import RUNS_PREFIX, run_name, run_of
@@ -504,8 +505,8 @@ class Pipeline:
                        on_step=lambda _t: self.progress.step_advance(advance=1))
         return StepResult("eval", spec, "done", res.id, f"{res.ref}@{res.version}")
 
-    def diagnose_cfg(self, robots: tuple[str, ...]):
-        """The diagnosis config (the paper's: descriptor mode, 2.0 m/s).
+    def diagnose_cfg(self, robots: tuple[str, ...], command_vx: float = PAPER_COMMAND):
+        """The diagnosis config (the paper's: descriptor mode, 2.0 m/s; ``command_vx`` another command).
 
         With ``batch_robots`` every robot's rollout is its slice of one env of all ``cfg.robots``, in the
         fixed-rollout analysis too (so it reuses the diagnosis's rollouts of its actor).
@@ -513,7 +514,7 @@ class Pipeline:
         from morfic_cli.diagnostics.samples import DiagnoseCfg
 
         c = self.cfg
-        return DiagnoseCfg(robots=robots, mode="descriptor", command_vx=2.0, num_envs=c.diagnose_envs,
+        return DiagnoseCfg(robots=robots, mode="descriptor", command_vx=command_vx, num_envs=c.diagnose_envs,
                            steps=c.diagnose_steps, seed=0, trunc_eps=c.trunc_eps,
                            batch=c.robots if c.batch_robots else ())
 
@@ -565,22 +566,23 @@ class Pipeline:
         return (f"its frozen actor {actor} is neither reproduced here nor in the store; add "
                 f"{self.cfg.actor_variant} to --variants or import its run's bundle")
 
-    def stored_fixed_rollout(self, robot: str) -> StepResult | None:
-        """The skipped result when the store holds this fixed-rollout analysis on ``robot``, else None."""
+    def stored_fixed_rollout(self, robot: str, command_vx: float = PAPER_COMMAND) -> StepResult | None:
+        """The skipped result when the store holds this fixed-rollout analysis (robot, command), else None."""
         actor, critics = self.fixed_rollout_models()
         if not all(self.store.has_ref(spec) for spec in (actor, *critics)):
             return None
         from morfic_cli.diagnostics.samples import diagnose_config
 
-        config = {"robot": robot, "actor": actor, "critics": critics, **diagnose_config(self.diagnose_cfg((robot,)))}
+        cfg = self.diagnose_cfg((robot,), command_vx)
+        config = {"robot": robot, "actor": actor, "critics": critics, **diagnose_config(cfg)}
         config.pop("robots")
         subset = {"actor": self.store.resolve(actor), **{f"critic/{c}": self.store.resolve(c) for c in critics}}
         found = find_manifest(self.store, "diagnosis", _json(config), inputs_subset=subset,
                               files=("fixed_rollout.csv",))
         return StepResult("fixed-rollout", robot, "skipped", found) if found else None
 
-    def fixed_rollout(self, robot: str, *, reuse: bool = True) -> StepResult:
-        """One frozen actor (the seed-0 run of ``actor_variant``), every run's critic, on ``robot``.
+    def fixed_rollout(self, robot: str, *, reuse: bool = True, command_vx: float = PAPER_COMMAND) -> StepResult:
+        """One frozen actor (the seed-0 run of ``actor_variant``), every run's critic, on ``robot`` at ``command_vx``.
 
         With ``reuse`` False the critics are scored again even where the store holds the analysis (on the rollout
         this store holds or collects, which may be other samples than the stored analysis's).
@@ -588,8 +590,8 @@ class Pipeline:
         from morfic_cli.diagnostics.fixed_rollout import fixed_rollout, load_models
 
         actor, critics = self.fixed_rollout_models()
-        cfg = self.diagnose_cfg((robot,))
-        found = self.stored_fixed_rollout(robot) if reuse else None
+        cfg = self.diagnose_cfg((robot,), command_vx)
+        found = self.stored_fixed_rollout(robot, command_vx) if reuse else None
         if found is not None:
             return found
         why = self.fixed_rollout_unavailable()

@@ -44,6 +44,18 @@ import sys
 import time
 from pathlib import Path
 
+from morfic_cli.report.claims import PAPER_COMMAND, TRAINED_COMMAND, command_suffix
+
+
+def fixed_rollout_path(out: Path, robot: str, command_vx: float = PAPER_COMMAND) -> Path:
+    """``out/fixed-rollout-<robot>.csv`` (the paper's 2.0 m/s), ``out/fixed-rollout-1.0-<robot>.csv`` at 1.0 m/s."""
+    return out / f"fixed-rollout{command_suffix(command_vx)}-{robot}.csv"
+
+
+def fixed_rollout_key(command_vx: float = PAPER_COMMAND) -> str:
+    """The ``<run>-artifacts.json`` key of its fixed-rollout analyses: ``fixed_rollout``, ``fixed_rollout-1.0``."""
+    return f"fixed_rollout{command_suffix(command_vx)}"
+
 
 def merge_fixed_rows(path: Path, new_rows: list[dict[str, str]], columns: list[str],
                      samples: str, same_weights: frozenset[str] = frozenset()) -> list[dict[str, str]]:
@@ -123,10 +135,6 @@ def one_run_pipeline(store, variant: str, seed: int, spec: str):
     return OneRun(store, reproduce_cfg("cpu", variants=(variant,), seeds=seed + 1))
 
 
-#: The trained regime's command (m/s): where every run but adaln walks on its own template.
-TRAINED_REGIME_VX = 1.0
-
-
 def trained_regime_cfg():
     """The 1.0 m/s evaluation (``morfic eval RUN --command-vx 1.0``: descriptor mode, the paper's 64 envs x 500 steps).
 
@@ -136,7 +144,7 @@ def trained_regime_cfg():
     from morfic_cli.evaluation.protocol import EvalCfg
     from morfic_cli.morphology.distance import parse_robot_list
 
-    return EvalCfg(robots=tuple(parse_robot_list("all")), modes=("descriptor",), command_vx=(TRAINED_REGIME_VX,))
+    return EvalCfg(robots=tuple(parse_robot_list("all")), modes=("descriptor",), command_vx=(TRAINED_COMMAND,))
 
 
 def trained_regime_eval(pipe, spec: str, run_missing: bool) -> str | None:
@@ -157,7 +165,7 @@ def trained_regime_diagnose_cfg(pipe):
     """``pipe``'s diagnosis config (the paper's: every robot, descriptor mode, 64 envs x 800 steps) at 1.0 m/s."""
     import dataclasses
 
-    return dataclasses.replace(pipe.diagnose_cfg(pipe.cfg.robots), command_vx=TRAINED_REGIME_VX)
+    return dataclasses.replace(pipe.diagnose_cfg(pipe.cfg.robots), command_vx=TRAINED_COMMAND)
 
 
 def trained_regime_diagnosis(store, pipe, spec: str, run_missing: bool) -> str | None:
@@ -188,9 +196,52 @@ def write_trained_regime_diagnosis(store, pipe, spec: str, run: str, out: Path, 
     print(f"{path} (artifact {found[:12]})")
 
 
+def has_weights(store, spec: str) -> bool:
+    """Whether ``store`` holds ``spec``'s weights (a run imported from a results-only bundle does not)."""
+    return "model.pt" not in store.omitted_files(store.read_manifest(spec))
+
+
+def write_fixed_rollout(store, pipe, spec: str, out: Path, ids: dict, same_weights: frozenset[str],
+                        command_vx: float, *, run_it: bool, rescore: bool) -> dict[str, str] | str:
+    """Write RUN's rows of the fixed-rollout analysis at ``command_vx`` into :func:`fixed_rollout_path` per robot.
+
+    Each robot's analysis is the store's, or run first when ``run_it`` (``rescore``: run again on the rollout this
+    store holds or collects even where it holds one); its id goes under :func:`fixed_rollout_key` in ``ids``.
+    Returns robot -> the samples RUN's critic was scored on (for :func:`seed0_to_rescore`), or why a robot has none.
+    """
+    from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS
+
+    run = spec.removeprefix("runs/")
+    key = fixed_rollout_key(command_vx)
+    fixed_ids = ids.setdefault(key, {})
+    used: dict[str, str] = {}  # robot -> the samples RUN's critic was scored on here
+    for robot in pipe.cfg.fixed_rollout_robots:
+        step = None if rescore else pipe.stored_fixed_rollout(robot, command_vx)
+        if step is None and (run_it or rescore):
+            step = pipe.fixed_rollout(robot, reuse=not rescore, command_vx=command_vx)
+        if step is None or step.id is None:
+            why = pipe.fixed_rollout_unavailable()
+            return f"no fixed-rollout analysis at {command_vx:.1f} m/s of {spec}'s critic on {robot}" + (
+                f": {why}" if why else "")
+        rows = list(csv.DictReader(io.StringIO(store.read_file(step.id, "fixed_rollout.csv").decode())))
+        mine = [r for r in rows if r["critic"] in ("MC", run)]
+        samples = store.read_manifest(mine[0]["rollout"]).files["obs.npz"].id
+        path = fixed_rollout_path(out, robot, command_vx)
+        columns = [*FIXED_ROLLOUT_COLUMNS, "samples"]
+        merged = merge_fixed_rows(path, mine, columns, samples, same_weights)
+        write_csv(path, merged, columns)
+        used[robot] = samples
+        reference = json.loads(path.with_suffix(".json").read_text())["samples"]
+        if samples == reference or not any(r["critic"] == run and r["samples"] == reference for r in merged):
+            fixed_ids[robot] = step.id  # the analysis of the row the claims read
+        else:  # this run has a row on the reference samples: its analysis on these is kept aside
+            ids.setdefault(f"{key}_other_samples", {}).setdefault(robot, {})[samples[:12]] = step.id
+        print(f"{path}: {run}'s critic (artifact {step.id[:12]})")
+    return used
+
+
 def main(argv: list[str] | None = None) -> int:
     """Write the tables; 1 with ``Error:`` when the store has no paper-protocol result of the run."""
-    from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS
     from morfic_cli.store import Store
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -200,16 +251,22 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--run-missing", action="store_true",
                    help="first evaluate, diagnose and score the run's critic on the film actor's rollouts (each "
                         "with the paper's protocol, skipped when the store holds it)")
-    p.add_argument("--fixed-rollout-only", action="store_true",
-                   help="only the fixed-rollout rows; run the analysis (film actor frozen) if the store lacks it")
-    p.add_argument("--diagnosis-1.0-only", dest="diagnosis_only", action="store_true",
-                   help="only the 1.0 m/s diagnosis (run if the store lacks it and holds the run's weights)")
+    only = p.add_mutually_exclusive_group()
+    only.add_argument("--fixed-rollout-only", action="store_true",
+                      help="only the fixed-rollout rows; run the analysis (film actor frozen) if the store lacks it")
+    only.add_argument("--fixed-rollout-1.0-only", dest="fixed_slow_only", action="store_true",
+                      help="only the fixed-rollout rows at 1.0 m/s; run the analysis if the store lacks it (it "
+                           "needs the run's and the frozen actor's weights)")
+    only.add_argument("--diagnosis-1.0-only", dest="diagnosis_only", action="store_true",
+                      help="only the 1.0 m/s diagnosis (run if the store lacks it and holds the run's weights)")
     p.add_argument("--rescore", action="store_true",
-                   help="with --fixed-rollout-only: score the critic again on the film actor's rollout this store "
-                        "holds or collects, even where it holds the analysis (on other samples)")
+                   help="with --fixed-rollout-only or --fixed-rollout-1.0-only: score the critic again on the film "
+                        "actor's rollout this store holds or collects, even where it holds the analysis (on other "
+                        "samples)")
     args = p.parse_args(argv)
-    if args.diagnosis_only and (args.fixed_rollout_only or args.rescore):
-        p.error("--diagnosis-1.0-only goes alone: not with --fixed-rollout-only or --rescore")
+    if args.rescore and not (args.fixed_rollout_only or args.fixed_slow_only):
+        p.error("--rescore goes with --fixed-rollout-only or --fixed-rollout-1.0-only")
+    only_fixed = args.fixed_rollout_only or args.fixed_slow_only
     store = Store(args.store)
     spec = f"runs/{args.run}"
     manifest = store.read_manifest(spec)
@@ -233,12 +290,12 @@ def main(argv: list[str] | None = None) -> int:
         write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, run_missing=True)
         ids_path.write_text(json.dumps(ids, indent=1) + "\n")
         return 0
-    if args.run_missing and not args.fixed_rollout_only:
+    if args.run_missing and not only_fixed:
         for step in (pipe.evaluate, pipe.diagnose):
             start = time.monotonic()
             result = step(spec)
             print(f"{result.kind} {spec}: {result.status} in {time.monotonic() - start:.0f} s", file=sys.stderr)
-    if not args.fixed_rollout_only:
+    if not only_fixed:
         found = {"eval": (pipe.stored_eval(spec), "eval.csv"),
                  "diagnosis": (pipe.stored_diagnosis(spec), "calibration.csv")}
         for what, (step, file) in found.items():
@@ -260,52 +317,59 @@ def main(argv: list[str] | None = None) -> int:
         ids["eval-1.0"] = slow
         print(f"{path} (artifact {slow[:12]})")
         write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, args.run_missing)
-    fixed_ids = ids.setdefault("fixed_rollout", {})
-    used: dict[str, str] = {}  # robot -> the samples RUN's critic was scored on here
-    for robot in pipe.cfg.fixed_rollout_robots:
-        step = None if args.rescore else pipe.stored_fixed_rollout(robot)
-        if step is None and (args.fixed_rollout_only or args.run_missing or args.rescore):
-            step = pipe.fixed_rollout(robot, reuse=not args.rescore)
-        if step is None or step.id is None:
-            why = pipe.fixed_rollout_unavailable() or "rerun with --run-missing or --fixed-rollout-only"
-            print(f"Error: no fixed-rollout analysis of {spec}'s critic on {robot} in {store.root}: {why}.",
-                  file=sys.stderr)
+    rescore: dict[float, dict[str, str]] = {}  # command -> robot -> the samples RUN's critic was scored on
+    if not args.fixed_slow_only:
+        used = write_fixed_rollout(store, pipe, spec, args.out, ids, same_weights, PAPER_COMMAND,
+                                   run_it=args.fixed_rollout_only or args.run_missing, rescore=args.rescore)
+        if isinstance(used, str):
+            print(f"Error: {used} in {store.root}; rerun with --run-missing or --fixed-rollout-only.", file=sys.stderr)
             return 1
-        rows = list(csv.DictReader(io.StringIO(store.read_file(step.id, "fixed_rollout.csv").decode())))
-        mine = [r for r in rows if r["critic"] in ("MC", args.run)]
-        samples = store.read_manifest(mine[0]["rollout"]).files["obs.npz"].id
-        path = args.out / f"fixed-rollout-{robot}.csv"
-        columns = [*FIXED_ROLLOUT_COLUMNS, "samples"]
-        merged = merge_fixed_rows(path, mine, columns, samples, same_weights)
-        write_csv(path, merged, columns)
-        used[robot] = samples
-        reference = json.loads(path.with_suffix(".json").read_text())["samples"]
-        if samples == reference or not any(r["critic"] == args.run and r["samples"] == reference for r in merged):
-            fixed_ids[robot] = step.id  # the analysis of the row the claims read
-        else:  # this run has a row on the reference samples: its analysis on these is kept aside
-            ids.setdefault("fixed_rollout_other_samples", {}).setdefault(robot, {})[samples[:12]] = step.id
-        print(f"{path}: {args.run}'s critic (artifact {step.id[:12]})")
+        rescore[PAPER_COMMAND] = used
+    if not args.fixed_rollout_only:
+        # At 1.0 m/s the analysis is new (the bundles shipped before it lack it): it needs the frozen actor's and
+        # RUN's weights, which a results-only bundle leaves out, so there it is a note, not an error.
+        actor, _ = pipe.fixed_rollout_models()
+        at_hand = all(store.has_ref(s) and has_weights(store, s) for s in (actor, spec))
+        hint = (f"it needs {spec}'s and {actor}'s weights (import their bundles and weights bundles), then "
+                "--run-missing or --fixed-rollout-1.0-only")
+        if args.fixed_slow_only and not at_hand:
+            print(f"Error: {store.root} lacks {spec}'s or {actor}'s weights for the fixed-rollout analysis at 1.0 "
+                  f"m/s; {hint}.", file=sys.stderr)
+            return 1
+        slow = write_fixed_rollout(store, pipe, spec, args.out, ids, same_weights, TRAINED_COMMAND,
+                                   run_it=at_hand and (args.fixed_slow_only or args.run_missing), rescore=args.rescore)
+        if isinstance(slow, str) and args.fixed_slow_only:
+            print(f"Error: {slow} in {store.root}.", file=sys.stderr)
+            return 1
+        if isinstance(slow, str):
+            print(f"note: {slow} in {store.root} ({hint}); claim (c) at 1.0 m/s reads the critics that have one",
+                  file=sys.stderr)
+        else:
+            rescore[TRAINED_COMMAND] = slow
     ids_path.write_text(json.dumps(ids, indent=1) + "\n")
-    if args.run_missing and not args.fixed_rollout_only:
-        for run in seed0_to_rescore(store, args.out, used):
-            print(f"{run}: rescored on the new samples (what they change, beside the reference rows)")
-            main([run, "--fixed-rollout-only", "--rescore", "--out", str(args.out), "--store", str(args.store)])
+    if args.run_missing:
+        for command_vx, used in rescore.items():
+            flag = "--fixed-rollout-only" if command_vx == PAPER_COMMAND else "--fixed-rollout-1.0-only"
+            for run in seed0_to_rescore(store, args.out, used, command_vx):
+                print(f"{run}: rescored on the new samples at {command_vx:.1f} m/s (what they change, beside the "
+                      "reference rows)")
+                main([run, flag, "--rescore", "--out", str(args.out), "--store", str(args.store)])
     return 0
 
 
-def seed0_to_rescore(store, out: Path, used: dict[str, str]) -> list[str]:
+def seed0_to_rescore(store, out: Path, used: dict[str, str], command_vx: float = PAPER_COMMAND) -> list[str]:
     """The seed-0 runs to score on the fixed rollout's other samples, so that what those change is measured.
 
-    ``used`` maps each robot to the samples a critic was just scored on (the rollout ``store`` holds). Where those
-    are not the reference samples of ``out/fixed-rollout-<robot>.csv``: every seed-0 run with results in ``out``
-    (``<run>-artifacts.json``) that has a reference row, no row on those samples, and its weights in ``store``.
+    ``used`` maps each robot to the samples a critic was just scored on at ``command_vx`` (the rollout ``store``
+    holds). Where those are not the reference samples of :func:`fixed_rollout_path`: every seed-0 run with results in
+    ``out`` (``<run>-artifacts.json``) that has a reference row, no row on those samples, and its weights in ``store``.
     """
     from morfic_cli.errors import MorficError
 
     todo: list[str] = []
     seed0 = sorted(p.name[: -len("-artifacts.json")] for p in out.glob("*-cpu-s0-artifacts.json"))
     for robot, samples in used.items():
-        path = out / f"fixed-rollout-{robot}.csv"
+        path = fixed_rollout_path(out, robot, command_vx)
         reference = json.loads(path.with_suffix(".json").read_text())["samples"]
         if samples == reference:
             continue
@@ -314,11 +378,10 @@ def seed0_to_rescore(store, out: Path, used: dict[str, str]) -> list[str]:
             if (run, reference) not in scored or (run, samples) in scored or run in todo:
                 continue
             try:
-                manifest = store.read_manifest(f"runs/{run}")
+                if has_weights(store, f"runs/{run}"):
+                    todo.append(run)
             except MorficError:
                 continue
-            if "model.pt" not in store.omitted_files(manifest):
-                todo.append(run)
     return todo
 
 

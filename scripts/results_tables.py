@@ -4,14 +4,15 @@ Inputs (written by scripts/experiment_tables.py from the experiment store, each 
 ``<run>-eval.csv``, ``<run>-calibration.csv``, their 1.0 m/s counterparts ``<run>-eval-1.0.csv`` and (where the
 run's weights were at hand) ``<run>-calibration-1.0.csv``, ``<run>-artifacts.json`` (the ids of the run's checkpoint,
 evals, diagnoses and fixed-rollout analyses) and ``fixed-rollout-<robot>.csv`` (every critic scored on the frozen film
-actor's one rollout of the robot).
+actor's one rollout of the robot at 2.0 m/s; ``fixed-rollout-1.0-<robot>.csv`` the same at 1.0 m/s, the critics whose
+weights a store held).
 
 Outputs:
 
 - the transfer and calibration tables: one column per variant (the paper's order), its seeds pooled: with one seed
   the run's own cell (v̄x ± σ over the alive env-steps / S), with several the mean ± std over the seeds of each
   number (n = seeds); then the paper's columns for each trained variant it reports;
-- the fixed-rollout table (Flip / Cos per critic, beside the paper's);
+- the fixed-rollout tables (Flip / Cos per critic, beside the paper's at 2.0 m/s; then at 1.0 m/s);
 - every run's walking check (``<run>-walk.json``: Go2 at 1.0 m/s, bar v_x >= 0.8 m/s and S >= 0.9) and when its
   command curriculum opened (from ``<run>-curve.csv``);
 - the paper's claims (a)-(e), computed by ``morfic_cli.report.claims.check_claims`` from the same rows (never
@@ -42,6 +43,8 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+
+from morfic_cli.report.claims import PAPER_COMMAND, TRAINED_COMMAND, command_suffix
 
 BEGIN, END = "<!-- results-tables:begin -->", "<!-- results-tables:end -->"
 CLAIMS_BEGIN, CLAIMS_END = "<!-- results-claims:begin -->", "<!-- results-claims:end -->"
@@ -92,11 +95,11 @@ def load_artifacts(results: Path) -> dict[str, dict[str, Any]]:
 
 
 def load_fixed_all(results: Path) -> pd.DataFrame:
-    """Every row of every ``fixed-rollout-<robot>.csv``, with ``samples``, ``reference`` and ``seed``.
+    """Every row of every ``fixed-rollout-[1.0-]<robot>.csv``, with ``samples``, ``reference``, ``seed`` and command.
 
     ``samples``: the content id of the samples a row was scored on (rows written before that column: the reference
-    samples of the sidecar ``fixed-rollout-<robot>.json``); ``reference``: scored on those; ``seed``: the critic
-    run's.
+    samples of the file's sidecar ``.json``); ``reference``: scored on those; ``seed``: the critic run's;
+    ``command_vx``: the rollout's command (rows written before that column: the paper's 2.0 m/s).
     """
     frames = []
     for p in sorted(results.glob("fixed-rollout-*.csv")):
@@ -105,6 +108,7 @@ def load_fixed_all(results: Path) -> pd.DataFrame:
         ref = json.loads(side.read_text())["samples"] if side.is_file() else ""
         frame["samples"] = frame["samples"].fillna(ref) if "samples" in frame else ref
         frame["reference"] = frame["samples"] == ref
+        frame["command_vx"] = frame["command_vx"].fillna(PAPER_COMMAND) if "command_vx" in frame else PAPER_COMMAND
         frames.append(frame)
     if not frames:
         return pd.DataFrame()
@@ -114,7 +118,7 @@ def load_fixed_all(results: Path) -> pd.DataFrame:
 
 
 def load_fixed(results: Path) -> pd.DataFrame:
-    """One row per (robot, critic) and the MC reference, the row on the reference samples where there is one.
+    """One row per (command, robot, critic) and the MC reference, the row on the reference samples where there is one.
 
     A critic without one keeps its row on other samples (``reference`` False: the frozen actor's rollout collected
     again where the reference samples were not at hand).
@@ -123,24 +127,26 @@ def load_fixed(results: Path) -> pd.DataFrame:
     if rows.empty:
         return rows
     rows = rows.sort_values("reference", ascending=False, kind="stable")
-    mc = rows[rows["variant"] == "mc"].drop_duplicates(["robot"])  # Flip 0, Cos 1 on any samples
-    critics = rows[rows["variant"] != "mc"].drop_duplicates(["robot", "critic"])
+    mc = rows[rows["variant"] == "mc"].drop_duplicates(["command_vx", "robot"])  # Flip 0, Cos 1 on any samples
+    critics = rows[rows["variant"] != "mc"].drop_duplicates(["command_vx", "robot", "critic"])
     return pd.concat([mc, critics]).sort_index()
 
 
 def sample_effect(results: Path) -> pd.DataFrame:
     """What collecting the frozen actor's rollout again changes, from the critics scored on both samples.
 
-    One row per critic and other samples: robot, critic, samples, ``d_flip`` and ``d_cos`` (other minus reference).
+    One row per critic and other samples: command_vx, robot, critic, samples, ``d_flip`` and ``d_cos`` (other minus
+    reference, at the same command).
     """
     rows = load_fixed_all(results)
     if rows.empty:
         return rows
     rows = rows[rows["variant"] != "mc"]
-    both = rows[~rows["reference"]].merge(rows[rows["reference"]], on=["robot", "critic"], suffixes=("", "_ref"))
+    both = rows[~rows["reference"]].merge(rows[rows["reference"]], on=["command_vx", "robot", "critic"],
+                                          suffixes=("", "_ref"))
     both["d_flip"] = both["flip"] - both["flip_ref"]
     both["d_cos"] = both["cos_grad"] - both["cos_grad_ref"]
-    return both[["robot", "critic", "samples", "d_flip", "d_cos"]]
+    return both[["command_vx", "robot", "critic", "samples", "d_flip", "d_cos"]]
 
 
 # ----------------------------------------------------------------------------------------------- pooled cells
@@ -186,7 +192,7 @@ def transfer_table(ev: pd.DataFrame, mode: str, command_vx: float) -> list[str]:
     """Robots x variants (ours, seeds pooled), then the paper's columns in descriptor mode."""
     from morfic_cli.report.paper import transfer_values
 
-    rows = ev[(ev["mode"] == mode) & ((ev["command_vx"] - command_vx).abs() < 1e-9)]
+    rows = frame_at(ev[ev["mode"] == mode], command_vx)
     variants = list(dict.fromkeys(rows["variant"]))
     paper = [v for v in variants if mode == "descriptor" and any(
         transfer_values(v, r, command_vx)["vx"] is not None for r in ROBOTS)]
@@ -234,15 +240,24 @@ def calibration_table(cal: pd.DataFrame) -> list[str]:
     return lines
 
 
-def fixed_table(fixed: pd.DataFrame) -> list[str]:
-    """Critics x robots: Flip / Cos on the frozen film actor's rollout (seeds pooled), beside the paper's."""
+def frame_at(frame: pd.DataFrame, command_vx: float) -> pd.DataFrame:
+    """The rows of ``frame`` at ``command_vx`` (m/s)."""
+    return frame[(frame["command_vx"] - command_vx).abs() < 1e-9]
+
+
+def fixed_table(fixed: pd.DataFrame, command_vx: float = PAPER_COMMAND) -> list[str]:
+    """Critics x robots: Flip / Cos on the frozen film actor's rollout at ``command_vx`` (seeds pooled).
+
+    At the paper's command the paper's Flip / Cos follow (it reports none at another).
+    """
     from morfic_cli.report.paper import fixed_rollout_values
     from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, variant_order
 
-    rows = fixed[fixed["actor_variant"] == FIXED_ROLLOUT_ACTOR]
+    rows = frame_at(fixed[fixed["actor_variant"] == FIXED_ROLLOUT_ACTOR], command_vx)
     variants = sorted(dict.fromkeys(rows["variant"]), key=lambda v: (v != "mc", variant_order(v)))
     robots = [r for r in FIXED_ROBOTS if r in set(rows["robot"])]
-    head = ["critic", *[f"{r} Flip / Cos" for r in robots], *[f"paper {r}" for r in robots]]
+    paper = robots if abs(command_vx - PAPER_COMMAND) < 1e-9 else []
+    head = ["critic", *[f"{r} Flip / Cos" for r in robots], *[f"paper {r}" for r in paper]]
     lines = ["| " + " | ".join(head) + " |", "|---|" + "---|" * (len(head) - 1)]
     for v in variants:
         cells = []
@@ -253,7 +268,7 @@ def fixed_table(fixed: pd.DataFrame) -> list[str]:
             else:
                 mark = "" if mine["reference"].all() else " †" * (v != "mc")
                 cells.append(f"{_pooled(mine['flip'], 3)} / {_pooled(mine['cos_grad'], 3)}{_n(mine)}{mark}")
-        for robot in robots:
+        for robot in paper:
             p = fixed_rollout_values(v, robot)
             cells.append("-" if p.get("flip") is None else f"{p['flip']:.3f} / {p['cos_grad']:.3f}")
         name = "MC (reference)" if v == "mc" else _seeds_label(rows, v)
@@ -271,6 +286,7 @@ def sample_note(results: Path, fixed: pd.DataFrame) -> list[str]:
     if other.empty:
         return []
     effect = sample_effect(results)
+    effect = effect[effect["command_vx"].isin(set(other["command_vx"]))] if not effect.empty else effect
     who = ", ".join(f"`{c}` ({', '.join(sorted(set(g['robot'])))})" for c, g in other.groupby("critic", sort=True))
     text = (f"† scored on another rollout of the same frozen actor (same config, collected again on another machine: "
             f"the reference rollout's log is not shipped and another CPU's rounding does not reproduce it): {who}.")
@@ -280,6 +296,13 @@ def sample_note(results: Path, fixed: pd.DataFrame) -> list[str]:
     if parts:
         text += " Scored on both, a critic's Flip changes " + "; ".join(parts) + "."
     return [text, ""]
+
+
+#: The fixed-rollout tables' titles, per command (m/s).
+FIXED_TITLES = {PAPER_COMMAND: "Fixed rollout (`morfic diagnose --fixed-rollout ROBOT`: the film actor frozen, every "
+                               "critic scored on its one rollout), 2.0 m/s",
+                TRAINED_COMMAND: "Fixed rollout at 1.0 m/s (the trained regime; the critics whose weights a store "
+                                 "held, `fixed-rollout-1.0-<robot>.csv`; the paper reports none)"}
 
 
 def render(results: Path) -> str:
@@ -303,8 +326,9 @@ def render(results: Path) -> str:
         out += ["### Critic calibration at 1.0 m/s (the trained regime; the runs whose weights a store held, "
                 "`<run>-calibration-1.0.csv`; the paper reports none)", "", *calibration_table(slow), ""]
     if not fixed.empty:
-        out += ["### Fixed rollout (`morfic diagnose --fixed-rollout ROBOT`: the film actor frozen, every critic "
-                "scored on its one rollout)", "", *fixed_table(fixed), "", *sample_note(results, fixed)]
+        for vx, title in FIXED_TITLES.items():
+            if not frame_at(fixed, vx).empty:
+                out += [f"### {title}", "", *fixed_table(fixed, vx), "", *sample_note(results, frame_at(fixed, vx))]
     return "\n".join(out).rstrip() + "\n"
 
 
@@ -422,8 +446,9 @@ def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
     if not fixed.empty:
         for r in fixed.to_dict("records"):
             owner = r["critic"] if r["variant"] != "mc" else str(r["actor"])
-            r["artifact"] = (ids.get(owner, {}).get("fixed_rollout", {}).get(r["robot"])
-                             or f"fixed-rollout-{r['robot']}.csv")
+            suffix = command_suffix(float(r["command_vx"]))  # the 1.0 m/s analyses: fixed_rollout-1.0, ...-1.0-<robot>
+            r["artifact"] = (ids.get(owner, {}).get(f"fixed_rollout{suffix}", {}).get(r["robot"])
+                             or f"fixed-rollout{suffix}-{r['robot']}.csv")
             fixed_rows.append(r)
     return records(("eval", *EXTRA_EVALS)), records(("calibration", *EXTRA_CALIBRATIONS)), fixed_rows
 

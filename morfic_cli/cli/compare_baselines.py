@@ -27,9 +27,9 @@ def _pm(key: str, d: int = 3):
 
 def _columns(table: str, with_paper: bool) -> list[Column]:
     head = [Column("preset", "preset"), Column("variant", "variant")]
+    command = Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:g}", justify="right")
     if table == "transfer":
-        cols = [*head, Column("robot", "robot"), Column("mode", "mode"),
-                Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:g}", justify="right"),
+        cols = [*head, Column("robot", "robot"), Column("mode", "mode"), command,
                 Column("n_seeds", "seeds", justify="right"), Column("cell", "v_x ± σ / S", justify="right"),
                 Column("vx_seed_std", "σ seeds", fmt=lambda v: _n(v, 2), justify="right"),
                 Column("vx_peak_1s", "peak 1 s", fmt=lambda v: _n(v, 2), justify="right")]
@@ -40,7 +40,7 @@ def _columns(table: str, with_paper: bool) -> list[Column]:
                      Column("paper_survival", "paper S", fmt=lambda v: _n(v, 3), justify="right")]
         return cols
     if table == "calibration":
-        cols = [*head, Column("robot", "robot"), Column("n_seeds", "seeds", justify="right"), _pm("ev"),
+        cols = [*head, Column("robot", "robot"), command, Column("n_seeds", "seeds", justify="right"), _pm("ev"),
                 Column("cell", "|NVB|/NVE/ASA", justify="right"), _pm("flip"), _pm("cos_grad")]
         if with_paper:
             cols += [Column("paper_abs_nvb", "paper |NVB|", fmt=_n, justify="right"),
@@ -48,7 +48,7 @@ def _columns(table: str, with_paper: bool) -> list[Column]:
                      Column("paper_asa", "paper ASA", fmt=_n, justify="right")]
         return cols
     if table == "fixed_rollout":
-        cols = [*head, Column("robot", "robot"), Column("n_seeds", "critics", justify="right"), _pm("flip"),
+        cols = [*head, Column("robot", "robot"), command, Column("n_seeds", "critics", justify="right"), _pm("flip"),
                 _pm("cos_grad")]
         if with_paper:
             cols += [Column("paper_flip", "paper Flip", fmt=_n, justify="right"),

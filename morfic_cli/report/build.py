@@ -15,7 +15,7 @@ differently builds it anew instead of finding the old one.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,7 +23,7 @@ from typing import Any
 from morfic_cli import __version__
 from morfic_cli.report import paper
 from morfic_cli.report import tables as T
-from morfic_cli.report.claims import Claim, check_claims
+from morfic_cli.report.claims import PAPER_COMMAND, Claim, at_command, check_claims, row_command
 from morfic_cli.report.compare import COMPARE_REF, compare_tables, store_comparison
 from morfic_cli.report.gather import Provenance, StoreData, filter_presets, gather, read_csv_rows, resolve_runs
 from morfic_cli.report.model import Table
@@ -129,6 +129,11 @@ class ReportResult:
     pdf_error: str | None = None
 
 
+def _other_commands(rows: Sequence[dict[str, Any]]) -> list[float]:
+    """The commands (m/s) of ``rows`` other than the paper's, ascending: each gets its own tables after the paper's."""
+    return sorted({round(row_command(r), 6) for r in rows} - {PAPER_COMMAND})
+
+
 @dataclass
 class _Section:
     heading: str
@@ -181,13 +186,19 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
                             "The paper applies each target's 11-D descriptor to the Go2 template (descriptor mode); "
                             "here the policy runs on the target's own MJCF model (full mode)."))
 
+    # ours at the paper's command, the paper's, then ours at each other command (a run's diagnoses at 2.0 and 1.0 m/s
+    # are separate rows, never two seeds of one)
     crit = [t for t in (T.ev_table(calib), T.critic_table(calib)) if t]
-    out.append(_Section("Critic diagnostics", crit + P(paper.CRITIC_METRICS_VARIANTS, paper.CRITIC_METRICS_EXTERNAL),
-                        "" if crit else "No calibration diagnoses of these runs in the store (`morfic diagnose`)."))
-    fx = T.fixed_rollout_table(fixed)
-    out.append(_Section("Fixed-rollout diagnostic", [t for t in [fx] if t] + P(paper.CAUSAL_ADV_ALL),
-                        "" if fx else "No fixed-rollout diagnoses with these runs' critics in the store "
-                                      "(`morfic diagnose --fixed-rollout aliengo`)."))
+    crit_other = [t for c in _other_commands(calib)
+                  for t in (T.ev_table(calib, command_vx=c), T.critic_table(calib, command_vx=c)) if t]
+    out.append(_Section("Critic diagnostics", crit + P(paper.CRITIC_METRICS_VARIANTS, paper.CRITIC_METRICS_EXTERNAL)
+                        + crit_other, "" if crit or crit_other else "No calibration diagnoses of these runs in the "
+                                                                    "store (`morfic diagnose`)."))
+    fx = [t for t in [T.fixed_rollout_table(fixed)] if t]
+    fx_other = [t for t in (T.fixed_rollout_table(fixed, command_vx=c) for c in _other_commands(fixed)) if t]
+    out.append(_Section("Fixed-rollout diagnostic", fx + P(paper.CAUSAL_ADV_ALL) + fx_other,
+                        "" if fx or fx_other else "No fixed-rollout diagnoses with these runs' critics in the store "
+                                                  "(`morfic diagnose --fixed-rollout aliengo`)."))
     if data.study:
         from morfic_cli.report.study import study_tables, study_text
 
@@ -299,10 +310,11 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
     return files
 
 
-REPORT_LAYOUT = 4
+REPORT_LAYOUT = 5
 """The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
 shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor. 3: training curves as the mean
-and min-max band over seeds, legends off the data. 4: the critic-study section."""
+and min-max band over seeds, legends off the data. 4: the critic-study section. 5: a run's diagnoses at two
+commands are separate rows, never two seeds (the critic and fixed-rollout tables at 2.0 m/s, then at 1.0 m/s)."""
 
 
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:
@@ -348,7 +360,7 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
             from morfic_cli.report import figures as F
 
             figures = {
-                "ev": F.ev_figure(tables.get("calibration", [])),
+                "ev": F.ev_figure(at_command(tables.get("calibration", []), PAPER_COMMAND)),
                 "distance": F.distance_figure(tables.get("transfer", []), with_paper=cfg.with_paper),
                 "compute": F.compute_figure(tables.get("compute", []), with_paper=cfg.with_paper),
                 "curves": F.curves_figure(data.curves, {r.name: r.variant for r in runs},

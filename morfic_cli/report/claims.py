@@ -63,9 +63,21 @@ BASELINES: tuple[str, ...] = ("ppo", "actor-only", "concat")
 SIMILAR_VX: float = 0.3
 #: The paper's evaluation command (m/s): its numbers, and the command every claim is judged at.
 PAPER_COMMAND: float = 2.0
+#: The trained regime's command (m/s): where every run but adaln walks on its own template (Go2).
+TRAINED_COMMAND: float = 1.0
 #: The commands the claims are judged at, in the order they are reported: the paper's, then the trained regime
-#: (1.0 m/s, where most variants walk on Go2), the latter only where the store has results at it.
-JUDGED_COMMANDS: tuple[float, ...] = (PAPER_COMMAND, 1.0)
+#: (:data:`TRAINED_COMMAND`), the latter only where the store has results at it.
+JUDGED_COMMANDS: tuple[float, ...] = (PAPER_COMMAND, TRAINED_COMMAND)
+
+
+def command_suffix(command_vx: float) -> str:
+    """How a result at ``command_vx`` is named beside the paper's: ``""`` at 2.0 m/s, ``"-1.0"`` at 1.0 m/s.
+
+    docs/results/ names a run's results at another command than the paper's ``<run>-eval-1.0.csv``,
+    ``<run>-calibration-1.0.csv`` and ``fixed-rollout-1.0-<robot>.csv``, their ids ``eval-1.0``, ``diagnosis-1.0``
+    and ``fixed_rollout-1.0`` in ``<run>-artifacts.json``.
+    """
+    return "" if abs(command_vx - PAPER_COMMAND) < 1e-9 else f"-{command_vx:.1f}"
 
 #: Each claim in a few words (a verdict table's rows).
 SHORT: dict[str, str] = {

@@ -9,16 +9,21 @@ flat rows with a ``table`` key (so the CSV of all of them is one file):
   ``vx_peak_1s`` (mean over seeds of the best 1 s moving average, morfic's extra); ``survival`` (mean over seeds)
   and ``survival_seed_std``; ``cell`` = "v ± σ / S". The paper's v_x^max (its 2.5 m/s table) is the v_x of the
   2.5 m/s rows. Evaluations stored before σ was taken over steps (no ``vx_env_std`` column) leave σ empty.
-- ``calibration``: per (preset, variant, robot): EV, |NVB|, NVE, ASA, Flip, CosGrad, each mean and ``_seed_std``.
-- ``fixed_rollout``: per (preset, frozen actor's variant, robot, critic variant): Flip and Cos. over the critics
-  (seeds); critics scored on different actors' rollouts are never averaged together.
+- ``calibration``: per (preset, variant, robot, mode, command): EV, |NVB|, NVE, ASA, Flip, CosGrad, each mean and
+  ``_seed_std``.
+- ``fixed_rollout``: per (preset, frozen actor's variant, robot, critic variant, command): Flip and Cos. over the
+  critics (seeds); critics scored on different actors' rollouts are never averaged together.
 - ``compute``: per (preset, variant): transitions, iterations, s/iter, device-hours, hours per 400M transitions.
+
+Seeds are pooled within one command only: a run diagnosed at 2.0 and at 1.0 m/s is one seed in a row at each
+command (``command_vx``; a diagnosis that records none is at the paper's 2.0 m/s), never two seeds of one row.
 
 ``--with-paper`` adds ``paper_*`` columns (and ``paper_table``, the paper table they come from) taken from
 :mod:`morfic_cli.report.paper`; the paper's numbers are in the descriptor mode of the protocol, so only
 descriptor-mode transfer rows get them. A transfer row's ``paper_vx`` / ``paper_vx_std`` hold the paper's speed
 for that command, ``paper_quantity`` says which it is (``v_x`` at 2.0 m/s, ``v_x^max`` at 2.5 m/s, the same
-quantity under the higher command). A number the paper does not print stays empty.
+quantity under the higher command). The paper diagnoses its critics at 2.0 m/s only, so only calibration and
+fixed-rollout rows at that command get its numbers. A number the paper does not print stays empty.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from morfic_cli.report import paper
+from morfic_cli.report.claims import PAPER_COMMAND, row_command
 from morfic_cli.report.gather import StoreData
 from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, variant_order
 
@@ -144,24 +150,28 @@ def transfer_rows(data: StoreData) -> list[dict[str, Any]]:
 
 
 def calibration_rows(data: StoreData) -> list[dict[str, Any]]:
-    """The ``calibration`` table: critic metrics per (preset, variant, robot), mean and std over seeds."""
-    groups = _group(data.calibration, lambda r: (r["preset"], r["variant"], r["robot"], r["mode"]))
+    """The ``calibration`` table: critic metrics per (preset, variant, robot, mode, command), mean and std over seeds.
+
+    A run diagnosed at two commands is one seed in the row of each: seeds are pooled within one command only.
+    """
+    groups = _group(data.calibration, lambda r: (r["preset"], r["variant"], r["robot"], r["mode"], row_command(r)))
     out = []
-    for (preset, variant, robot, mode), rows in groups.items():
+    for (preset, variant, robot, mode, command_vx), rows in groups.items():
         row: dict[str, Any] = {"table": "calibration", "preset": preset, "variant": variant, "robot": robot,
-                               "mode": mode, "d": rows[0].get("d"), "n_seeds": len(rows),
+                               "mode": mode, "command_vx": command_vx, "d": rows[0].get("d"), "n_seeds": len(rows),
                                "runs": ";".join(sorted(r["run"] for r in rows))}
         for m in CALIBRATION_METRICS:
             row[m] = mean(r[m] for r in rows)
             row[f"{m}_seed_std"] = seed_std(r[m] for r in rows)
         row["cell"] = "/".join(_num(row[m], 3) for m in ("abs_nvb", "nve", "asa"))
         out.append(row)
-    out.sort(key=lambda r: (r["preset"], r["mode"], variant_order(r["variant"]), robot_order(r["robot"])))
+    out.sort(key=lambda r: (r["preset"], r["mode"], r["command_vx"], variant_order(r["variant"]),
+                            robot_order(r["robot"])))
     return out
 
 
 def fixed_rollout_rows(data: StoreData) -> list[dict[str, Any]]:
-    """The ``fixed_rollout`` table: Flip and Cos. per (preset, actor variant, robot, critic variant).
+    """The ``fixed_rollout`` table: Flip and Cos. per (preset, actor variant, robot, critic variant, command).
 
     ``mc`` is the reference. The actor's variant is the row's ``actor_variant`` (older CSVs: looked up from its
     checkpoint).
@@ -170,18 +180,19 @@ def fixed_rollout_rows(data: StoreData) -> list[dict[str, Any]]:
     variant_of = {r.checkpoint: r.variant for r in data.runs}
     groups = _group(data.fixed, lambda r: (preset_of.get(r["actor_checkpoint"], r.get("preset") or "?"),
                                            r.get("actor_variant") or variant_of.get(r["actor_checkpoint"], "?"),
-                                           r["robot"], r["variant"]))
+                                           r["robot"], r["variant"], row_command(r)))
     out = []
-    for (preset, actor_variant, robot, variant), rows in groups.items():
+    for (preset, actor_variant, robot, variant, command_vx), rows in groups.items():
         row: dict[str, Any] = {"table": "fixed_rollout", "preset": preset, "actor_variant": actor_variant,
-                               "variant": variant, "robot": robot, "mode": rows[0].get("mode"), "n_seeds": len(rows),
+                               "variant": variant, "robot": robot, "mode": rows[0].get("mode"),
+                               "command_vx": command_vx, "n_seeds": len(rows),
                                "runs": ";".join(sorted(str(r["run"]) for r in rows)),
                                "actors": ";".join(sorted({str(r["actor"]) for r in rows}))}
         for m in ("flip", "cos_grad", "asa", "ev"):
             row[m] = mean(r[m] for r in rows)
             row[f"{m}_seed_std"] = seed_std(r[m] for r in rows)
         out.append(row)
-    out.sort(key=lambda r: (r["preset"], r["actor_variant"] != FIXED_ROLLOUT_ACTOR, r["actor_variant"],
+    out.sort(key=lambda r: (r["preset"], r["command_vx"], r["actor_variant"] != FIXED_ROLLOUT_ACTOR, r["actor_variant"],
                             robot_order(r["robot"]), -1 if r["variant"] == "mc" else variant_order(r["variant"])))
     return out
 
@@ -210,8 +221,17 @@ def compute_rows(data: StoreData) -> list[dict[str, Any]]:
     return out
 
 
+def at_paper_command(row: dict[str, Any]) -> bool:
+    """Whether ``row`` is at the paper's command, :data:`~morfic_cli.report.claims.PAPER_COMMAND` (2.0 m/s)."""
+    return abs(row_command(row) - PAPER_COMMAND) < 1e-9
+
+
 def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Each row with the paper's numbers for the same variant, robot (and command) in ``paper_*`` columns."""
+    """Each row with the paper's numbers for the same variant, robot (and command) in ``paper_*`` columns.
+
+    Calibration and fixed-rollout rows at another command than the paper's get the columns, empty: the paper
+    diagnoses its critics at 2.0 m/s only.
+    """
     out = []
     for row in rows:
         extra: dict[str, Any] = {}
@@ -225,11 +245,13 @@ def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             extra["paper_table"] = src.label if found else None
         elif table == "calibration":
             values = paper.critic_values(row["variant"], row["robot"])
+            values = values if at_paper_command(row) else dict.fromkeys(values)
             extra = {f"paper_{k}": v for k, v in values.items()}
             extra["paper_table"] = paper.CRITIC_METRICS_VARIANTS.label if any(
                 v is not None for v in values.values()) else None
         elif table == "fixed_rollout":
             values = paper.fixed_rollout_values(row["variant"], row["robot"])
+            values = values if at_paper_command(row) else dict.fromkeys(values)
             extra = {f"paper_{k}": v for k, v in values.items()}
             extra["paper_table"] = paper.CAUSAL_ADV_ALL.label if any(v is not None for v in values.values()) else None
         elif table == "compute":
@@ -268,10 +290,16 @@ def flat_rows(tables: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
     return [{c: row.get(c) for c in columns} for row in rows]
 
 
+COMPARE_LAYOUT = 2
+"""The comparison's layout (its tables' rows and columns); bump it with any change to what a comparison of the same
+results holds, so that one stored by an older morfic is not reused. 1 (no ``layout`` key): a run's diagnoses at two
+commands pooled as two seeds; 2: calibration and fixed-rollout rows per command (``command_vx``)."""
+
+
 def compare_config(data: StoreData, with_paper: bool) -> dict[str, Any]:
-    """The config of a stored comparison: which runs, and whether the paper's columns are in."""
+    """The config of a stored comparison: which runs, whether the paper's columns are in, :data:`COMPARE_LAYOUT`."""
     return json.loads(json.dumps({"table": "compare-baselines", "runs": sorted(r.spec for r in data.runs),
-                                  "with_paper": with_paper}))
+                                  "with_paper": with_paper, "layout": COMPARE_LAYOUT}))
 
 
 COMPARE_REF = "tables/compare-baselines"

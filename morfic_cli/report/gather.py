@@ -3,9 +3,12 @@
 Nothing here trains or simulates. A run is a ref ``runs/NAME`` (or a checkpoint id) and stands for its checkpoint;
 the results of that checkpoint are found by content, not by name: every ``eval`` manifest whose input
 ``checkpoint`` is it, every ``diagnosis`` whose ``calibration.csv`` rows or fixed-rollout critics name it. Where
-several artifacts hold the same row (the same robot, mode and command of a checkpoint), the one measured on the
-most samples (envs x steps) wins, and among equals the newest: a quick ``morfic eval --envs 2`` never hides the
-protocol's 64 x 500. Each artifact a row came from is recorded in :attr:`StoreData.provenance`.
+several artifacts hold the same row (the same robot, mode and command of a checkpoint; of a fixed-rollout row, the
+same robot, frozen actor, critic, mode and command), the one measured on the most samples (envs x steps) wins, and
+among equals the newest: a quick ``morfic eval --envs 2`` never hides the protocol's 64 x 500, and a run's diagnosis
+at 1.0 m/s never hides its diagnosis at 2.0 m/s (a row that records no command is at the paper's 2.0 m/s,
+:func:`~morfic_cli.report.claims.row_command`). Each artifact a row came from is recorded in
+:attr:`StoreData.provenance`.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from morfic_cli.errors import MorficError
+from morfic_cli.report.claims import row_command
 from morfic_cli.runs import RUNS_PREFIX, run_of
 from morfic_cli.store import Store
 
@@ -243,7 +247,7 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                     run = by_ckpt.get(str(row.get("checkpoint")))
                     if run is None:
                         continue
-                    key = (run.checkpoint, row["robot"], row["mode"], float(row["command_vx"]))
+                    key = (run.checkpoint, row["robot"], row["mode"], row_command(row))
                     _keep(calib, key, {**row, **_run_keys(run), "artifact": manifest.id})
             elif kind == "diagnosis" and "critic_study.csv" in manifest.files:
                 if manifest.inputs.get("actor") in by_ckpt:  # oldest first: the newest study wins
@@ -260,7 +264,7 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                     critic = str(row.get("checkpoint")) if row.get("checkpoint") else "mc"
                     if critic != "mc" and critic not in by_ckpt:
                         continue
-                    key = (row["robot"], actor, critic, row["mode"])
+                    key = (row["robot"], actor, critic, row["mode"], row_command(row))
                     extra = _run_keys(by_ckpt[critic]) if critic != "mc" else {"run": "MC", "variant": "mc"}
                     _keep(fixed, key, {**row, **extra, "actor_checkpoint": actor, "artifact": manifest.id})
 

@@ -5,6 +5,10 @@ value of each row (or column) in bold as the paper does: transfer tables bold th
 of each robot independently; critic tables the lowest |NVB| and NVE and the highest ASA; the fixed-rollout table the
 best learned critic per robot and metric (the Monte-Carlo row is the reference, never bold); the compute table the
 cheapest entry per column. A builder returns None when the store has nothing for it.
+
+The critic and fixed-rollout builders take the command the diagnoses were run at (``command_vx``, the paper's 2.0
+m/s by default) and show the rows at that command only: a run diagnosed at two commands is never pooled over them.
+At another command than the paper's the table's key and title carry it (:func:`_command_key`).
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from morfic_cli.report import paper
+from morfic_cli.report.claims import PAPER_COMMAND, at_command
 from morfic_cli.report.compare import robot_order
 from morfic_cli.report.model import Part, Row, Table, bold_best
 from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, table_variants, variant_order
@@ -39,6 +44,17 @@ def _columns(rows: Sequence[dict[str, Any]], variants: Sequence[str] | None) -> 
     pairs = {(r["preset"], r["variant"]) for r in rows if variants is None or r["variant"] in variants}
     order = (lambda v: list(variants).index(v)) if variants is not None else variant_order  # noqa: E731
     return sorted(pairs, key=lambda p: (p[0], order(p[1])))
+
+
+def _command_key(key: str, title: str, command_vx: float) -> tuple[str, str]:
+    """A table's (key, title) at ``command_vx``: as given at the paper's command, else naming the command.
+
+    Example: ``("critic_ev", "Explained variance of the critics")`` at 1.0 m/s is ``("critic_ev_1_0", "Explained
+    variance of the critics at 1.0 m/s")``; at 2.0 m/s it is unchanged.
+    """
+    if abs(command_vx - PAPER_COMMAND) < 1e-9:
+        return key, title
+    return f"{key}_{command_vx:.1f}".replace(".", "_"), f"{title} at {command_vx:.1f} m/s"
 
 
 def _seed_note(rows: Sequence[dict[str, Any]], pooled: bool = False) -> str:
@@ -101,9 +117,13 @@ def protocol_text(rows: Sequence[dict[str, Any]]) -> str:
     return f"a reduced protocol: {shown}; the paper's is {paper[0]} x {paper[1]}"
 
 
-def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor") -> Table | None:
-    """Robots x variants, cells ``|NVB|/NVE/ASA``; bold lowest |NVB| and NVE, highest ASA per robot."""
-    sel = [r for r in rows if r["mode"] == mode]
+def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
+                 command_vx: float = PAPER_COMMAND) -> Table | None:
+    """Robots x variants, cells ``|NVB|/NVE/ASA``; bold lowest |NVB| and NVE, highest ASA per robot.
+
+    Only the diagnoses at ``command_vx`` (m/s) are shown.
+    """
+    sel = at_command(rows, command_vx, mode)
     cols = _columns(sel, None)
     if not cols:
         return None
@@ -121,13 +141,18 @@ def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor") -> Ta
     caption = (r"Each cell is $|\mathrm{NVB}|$/NVE/ASA of the critic against Monte-Carlo returns on its own "
                "actor's rollouts; "
                r"lower $|\mathrm{NVB}|$ and NVE, higher ASA are better; bold: best per robot and metric.")
-    return Table("critic_metrics_variants", "Critic calibration diagnostics", caption, "Target",
+    key, title = _command_key("critic_metrics_variants", "Critic calibration diagnostics", command_vx)
+    return Table(key, title, caption, "Target",
                  tuple(method_label(v, p, multi) for p, v in cols), tuple(out_rows), notes=(_seed_note(sel),))
 
 
-def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor") -> Table | None:
-    """Robots x variants, explained variance EV (higher is better; 1 is perfect)."""
-    sel = [r for r in rows if r["mode"] == mode]
+def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
+             command_vx: float = PAPER_COMMAND) -> Table | None:
+    """Robots x variants, explained variance EV (higher is better; 1 is perfect).
+
+    Only the diagnoses at ``command_vx`` (m/s) are shown.
+    """
+    sel = at_command(rows, command_vx, mode)
     cols = _columns(sel, None)
     if not cols:
         return None
@@ -142,16 +167,19 @@ def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor") -> Table 
                                                                                                    strict=True))))
     caption = (r"$\mathrm{EV} = 1 - \mathrm{Var}(G - V) / \mathrm{Var}(G)$ over $I_\epsilon$ (± std over seeds "
                "where there are several); bold: best.")
-    return Table("critic_ev", "Explained variance of the critics", caption, "Target",
+    key, title = _command_key("critic_ev", "Explained variance of the critics", command_vx)
+    return Table(key, title, caption, "Target",
                  tuple(method_label(v, p, multi) for p, v in cols), tuple(out_rows), notes=(_seed_note(sel),))
 
 
-def fixed_rollout_table(rows: Sequence[dict[str, Any]]) -> Table | None:
+def fixed_rollout_table(rows: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) -> Table | None:
     """Critic sources x (robot: Flip, Cos.); MC first; bold the best learned critic per robot and metric.
 
-    A source is (frozen actor's variant, preset, critic variant): critics are compared only on the same actor's
-    rollouts, so with several actors each gets its own block of rows (its label names the actor) and its own bold.
+    Only the rollouts at ``command_vx`` (m/s) are shown. A source is (frozen actor's variant, preset, critic
+    variant): critics are compared only on the same actor's rollouts, so with several actors each gets its own block
+    of rows (its label names the actor) and its own bold.
     """
+    rows = at_command(rows, command_vx)
     if not rows:
         return None
     robots = sorted({r["robot"] for r in rows}, key=robot_order)
@@ -187,7 +215,8 @@ def fixed_rollout_table(rows: Sequence[dict[str, Any]]) -> Table | None:
     if len(actors) > 1:
         caption += " Several actors were frozen: each block of rows is one actor's rollout, bold within the block."
     runs = sorted({a for r in rows for a in str(r.get("actors", "")).split(";") if a and a != "None"})
-    return Table("causal_adv_all", "Fixed-rollout critic diagnostic", caption, "Src.", ("Flip", "Cos.") * len(robots),
+    key, title = _command_key("causal_adv_all", "Fixed-rollout critic diagnostic", command_vx)
+    return Table(key, title, caption, "Src.", ("Flip", "Cos.") * len(robots),
                  tuple(out_rows), groups=tuple((robot_label(r), 2) for r in robots), math=False,
                  notes=(f"Frozen actor(s): {', '.join(runs) or '-'}.",))
 

@@ -228,3 +228,74 @@ def test_longtable_is_pandas_styler_with_escaped_cells_and_the_header_on_every_p
     assert "\\endfirsthead" in tex and "\\endhead" in tex and "\\bottomrule" in tex
     assert "eval & evals/film\\_cpu \\\\" in tex and "table & \\texttt{x} \\& y \\\\" in tex
     assert "- & - \\\\" in longtable_latex(("kind", "ref"), [], "ll")  # an empty list still has a row
+
+
+def test_a_runs_diagnoses_at_two_commands_are_never_pooled_as_seeds(tmp_path):
+    """Every run is diagnosed at 2.0 and 1.0 m/s: hyper-cpu-s1 on AlienGo read 2 seeds, EV -0.256 (the mean of -0.535
+    at 2.0 and 0.023 at 1.0), and the newer fixed-rollout analysis at 1.0 hid the one at 2.0."""
+    from morfic_cli.recording.tables import rows_to_csv
+    from morfic_cli.report.build import _sections
+    from morfic_cli.report.claims import at_command
+    from morfic_cli.report.compare import compare_tables
+    from morfic_cli.report.gather import gather, resolve_runs
+    from morfic_cli.store import Store
+
+    store = Store(tmp_path / "store")
+    keys = {"variant": "film", "seed": 0, "preset": "cpu"}
+    ckpt = store.put_manifest("checkpoint", config=keys, meta=keys, files={"model.pt": b"weights"})
+    store.set_ref("runs/film-cpu-s0", ckpt)
+
+    def csv(rows):
+        return rows_to_csv(rows, list(dict.fromkeys(k for r in rows for k in r)))
+
+    def diagnose(command_vx, ev, flip):  # one calibration and one fixed-rollout diagnosis at the command
+        base = {"robot": "aliengo", "mode": "descriptor", "command_vx": command_vx, "num_envs": 64, "steps": 500,
+                "actor": "runs/film-cpu-s0", "actor_variant": "film", "asa": 0.6, "ev": ev}
+        calib = {**base, "checkpoint": ckpt, "abs_nvb": 0.1, "nve": 0.5, "flip": flip, "cos_grad": 0.3, "d": 0.4}
+        store.put_manifest("diagnosis", inputs={"checkpoint": ckpt}, files={"calibration.csv": csv([calib])})
+        fixed = [{**base, "critic": "mc", "variant": "mc", "checkpoint": None, "flip": 0.0, "cos_grad": 1.0},
+                 {**base, "critic": "runs/film-cpu-s0", "variant": "film", "checkpoint": ckpt, "flip": flip,
+                  "cos_grad": 0.4}]
+        store.put_manifest("diagnosis", inputs={"actor": ckpt}, files={"fixed_rollout.csv": csv(fixed)})
+
+    diagnose(2.0, -0.535, 0.31)
+    diagnose(1.0, 0.023, 0.12)  # newer: it used to hide the fixed-rollout analysis at 2.0
+    data = gather(store, resolve_runs(store, None), curves=False)
+    tables = compare_tables(data, with_paper=True)
+    calib = {r["command_vx"]: r for r in tables["calibration"]}
+    assert sorted(calib) == [1.0, 2.0]
+    assert [(calib[c]["n_seeds"], calib[c]["runs"]) for c in (2.0, 1.0)] == [(1, "film-cpu-s0")] * 2
+    assert calib[2.0]["ev"] == pytest.approx(-0.535) and calib[1.0]["ev"] == pytest.approx(0.023)  # not -0.256
+    # the paper's numbers are at 2.0 m/s (AlienGo, MorFiC-F: |NVB| 0.048); it reports none at 1.0
+    assert calib[2.0]["paper_abs_nvb"] == 0.048 and calib[2.0]["paper_table"] == "tab:critic_metrics_variants"
+    assert calib[1.0]["paper_abs_nvb"] is None and calib[1.0]["paper_table"] is None
+    film = {r["command_vx"]: r for r in tables["fixed_rollout"] if r["variant"] == "film"}
+    assert {c: (r["n_seeds"], r["flip"]) for c, r in film.items()} == {2.0: (1, 0.31), 1.0: (1, 0.12)}
+    assert film[2.0]["paper_flip"] == 0.255 and film[1.0]["paper_flip"] is None
+
+    def section(sections, heading):
+        (sec,) = [s for s in sections if s.heading == heading]
+        return {t.key: t for t in sec.tables if t.source == "store"}, [(t.key, t.source) for t in sec.tables]
+
+    sections = _sections(data, tables, [], True)
+    crit, order = section(sections, "Critic diagnostics")
+    assert [k for k, src in order if src == "store"] == ["critic_ev", "critic_metrics_variants", "critic_ev_1_0",
+                                                         "critic_metrics_variants_1_0"]
+    assert order.index(("critic_ev_1_0", "store")) > max(i for i, (_, src) in enumerate(order) if src == "paper")
+    assert crit["critic_ev"].title == "Explained variance of the critics"  # the paper's command: as before
+    assert crit["critic_ev_1_0"].title == "Explained variance of the critics at 1.0 m/s"
+    assert crit["critic_ev"].rows[0].cells[0][0].value == pytest.approx(-0.535)
+    assert crit["critic_ev_1_0"].rows[0].cells[0][0].value == pytest.approx(0.023)
+    assert crit["critic_ev"].notes == crit["critic_ev_1_0"].notes == (
+        "Mean over 1 seed per cell; numbers from the artifacts listed under Provenance.",)
+    fx, order = section(sections, "Fixed-rollout diagnostic")
+    assert [k for k, src in order] == ["causal_adv_all", "causal_adv_all", "causal_adv_all_1_0"]  # ours, paper's, ours
+    assert fx["causal_adv_all"].title == "Fixed-rollout critic diagnostic"
+    film_flip = {k: next(r for r in t.rows if r.label == "MorFiC-F").cells[0][0].value for k, t in fx.items()}
+    assert film_flip == {"causal_adv_all": 0.31, "causal_adv_all_1_0": 0.12}
+    # a store with diagnoses at 2.0 m/s only renders as it always did: no table at another command
+    only = StoreData(runs=data.runs, calibration=at_command(data.calibration, 2.0), fixed=at_command(data.fixed, 2.0))
+    tables_2 = compare_tables(only)
+    assert [section(_sections(only, tables_2, [], False), h)[1] for h in ("Critic diagnostics",
+                                                                         "Fixed-rollout diagnostic")] == [
+        [("critic_ev", "store"), ("critic_metrics_variants", "store")], [("causal_adv_all", "store")]]

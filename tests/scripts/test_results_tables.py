@@ -293,3 +293,64 @@ def test_a_run_retrained_under_its_name_replaces_the_lost_runs_rows_unless_its_w
     merged = et.merge_fixed_rows(path, [row("MC", 0, ""), row("ppo-cpu-s0", 0.36, "p0b")], cols, "intel",
                                  same_weights=frozenset({"p0"}))
     assert ("ppo-cpu-s0", "p0", "amd") in [(r["critic"], r["checkpoint"], r["samples"]) for r in merged]
+
+
+def test_claim_c_is_judged_at_1_m_s_from_the_fixed_rollout_1_0_files(tmp_path):
+    """Two seeds alike (a point interval) at each command: film beats ppo at 1.0 m/s, loses at 2.0 m/s on AlienGo."""
+    _runs(tmp_path)
+    (tmp_path / "film-cpu-s0-eval-1.0.csv").write_text(EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.9,0.1,1.0,walks\n")
+    cols = ["critic", "variant", "robot", "actor", "actor_variant", "flip", "cos_grad", "command_vx", "rollout"]
+    # (flip, cos) per variant: 2.0 m/s film 0.40/0.30, ppo 0.45/0.20; 1.0 m/s film 0.20/0.70, ppo 0.30/0.50
+    for vx, values in ((2.0, {"film": (0.40, 0.30), "ppo": (0.45, 0.20)}),
+                       (1.0, {"film": (0.20, 0.70), "ppo": (0.30, 0.50)})):
+        rows = [{"critic": "MC", "variant": "mc", "flip": 0.0, "cos_grad": 1.0}]
+        rows += [{"critic": f"{v}-cpu-s{s}", "variant": v, "flip": f, "cos_grad": c}
+                 for v, (f, c) in values.items() for s in (0, 1)]
+        rows = [{**r, "robot": "aliengo", "actor": "film-cpu-s0", "actor_variant": "film", "command_vx": vx,
+                 "rollout": "r"} for r in rows]
+        et.write_csv(et.fixed_rollout_path(tmp_path, "aliengo", vx), rows, cols)
+    assert [p.name for p in sorted(tmp_path.glob("fixed-rollout-*.csv"))] == [
+        "fixed-rollout-1.0-aliengo.csv", "fixed-rollout-aliengo.csv"]
+    (tmp_path / "film-cpu-s1-artifacts.json").write_text(json.dumps(
+        {"fixed_rollout": {"aliengo": "a" * 64}, et.fixed_rollout_key(1.0): {"aliengo": "b" * 64}}))
+    fixed = rt.load_fixed(tmp_path)  # one row per command, robot and critic: MC and four critics at each command
+    assert sorted(fixed.groupby("command_vx").size().to_dict().items()) == [(1.0, 5), (2.0, 5)]
+    # each command's table pools its own seeds; the paper's columns at 2.0 only
+    at2, at1 = rt.fixed_table(fixed, 2.0), rt.fixed_table(fixed, 1.0)
+    assert at2[0] == "| critic | aliengo Flip / Cos | paper aliengo |"
+    assert "| `film` (n=2) | 0.400 ± 0.000 / 0.300 ± 0.000 (n=2) | 0.255 / 0.366 |" in at2
+    assert at1[0] == "| critic | aliengo Flip / Cos |"
+    assert "| `film` (n=2) | 0.200 ± 0.000 / 0.700 ± 0.000 (n=2) |" in at1
+    block = rt.render(tmp_path)
+    assert block.index("### Fixed rollout (") < block.index("### Fixed rollout at 1.0 m/s")
+    # each row's id from its command's entry of artifacts.json, else its command's file
+    _, _, rows = rt.claim_rows(tmp_path)
+    ids = {(r["critic"], r["command_vx"]): r["artifact"] for r in rows}
+    assert ids[("film-cpu-s1", 2.0)] == "a" * 64 and ids[("film-cpu-s1", 1.0)] == "b" * 64
+    assert ids[("ppo-cpu-s1", 1.0)] == "fixed-rollout-1.0-aliengo.csv"
+    text = rt.render_claims(tmp_path)
+    on2, on1 = text.split("### At 2.0 m/s")[1].split("### At 1.0 m/s")
+    # 2.0: 0.40 - 0.45 = -0.05 Flip, 0.30 - 0.20 = +0.10 Cos; 1.0: 0.20 - 0.30 = -0.10, 0.70 - 0.50 = +0.20
+    assert "aliengo: film - ppo Flip -0.050 [-0.050, -0.050] (n 2 vs 2, p 0.33), Cos +0.100" in on2
+    assert "aliengo: film - ppo Flip -0.100 [-0.100, -0.100] (n 2 vs 2, p 0.33), Cos +0.200" in on1
+    assert "`bbbbbbbbbbbb`" in on1 and "aaaaaaaaaaaa" not in on1
+
+
+def test_the_1_0_fixed_rollout_is_the_papers_analysis_at_one_metre_per_second_and_its_flags_go_alone(tmp_path):
+    from morfic_cli.diagnostics.samples import diagnose_config
+    from morfic_cli.store import Store
+
+    pipe = et.one_run_pipeline(Store(tmp_path / "store"), "concat", 1, "runs/concat-cpu-s1")
+    # written out by hand: the paper's analysis on one robot (64 envs x 800 steps, eps 0.05), the command changed
+    paper = {"robots": ("aliengo",), "mode": "descriptor", "command_vx": 2.0, "num_envs": 64, "steps": 800,
+             "seed": 0, "trunc_eps": 0.05, "sigma_eps": 1e-08}
+    assert diagnose_config(pipe.diagnose_cfg(("aliengo",))) == paper
+    assert diagnose_config(pipe.diagnose_cfg(("aliengo",), 1.0)) == {**paper, "command_vx": 1.0}
+    assert et.fixed_rollout_path(tmp_path, "b1").name == "fixed-rollout-b1.csv"
+    assert et.fixed_rollout_path(tmp_path, "b1", 1.0).name == "fixed-rollout-1.0-b1.csv"
+    assert (et.fixed_rollout_key(), et.fixed_rollout_key(1.0)) == ("fixed_rollout", "fixed_rollout-1.0")
+    for argv in (["--fixed-rollout-only", "--fixed-rollout-1.0-only"], ["--diagnosis-1.0-only", "--rescore"],
+                 ["--rescore"], ["--run-missing", "--rescore"]):
+        with pytest.raises(SystemExit) as exit_:
+            et.main(["concat-cpu-s1", *argv, "--store", str(tmp_path / "store")])
+        assert exit_.value.code == 2, argv
