@@ -15,22 +15,27 @@ so a table is never another run's):
   (``<out>/fixed-rollout-<robot>.json``); a store that lacks them (a results-only bundle leaves rollout logs out, and
   another CPU does not reproduce them bit for bit) scores on a new rollout, whose rows go in beside the reference
   rows (:func:`merge_fixed_rows`);
+- ``<out>/fixed-rollout-1.0-<robot>.csv``: the same at 1.0 m/s (:func:`fixed_rollout_path`: the frozen film actor's
+  rollout at the trained regime's command), when the store holds that analysis or both runs' weights to make it (a
+  run imported from a results-only bundle has none: left out, with a note);
 - ``<out>/RUN-curve.csv``: the training curve's main columns (:data:`CURVE_COLUMNS`);
 - ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, 1.0 m/s eval (``eval-1.0``), diagnosis, 1.0 m/s
-  diagnosis (``diagnosis-1.0``) and fixed-rollout analyses.
+  diagnosis (``diagnosis-1.0``) and fixed-rollout analyses (``fixed_rollout``, at 1.0 m/s ``fixed_rollout-1.0``).
 
 With ``--run-missing`` the run is first evaluated (at 2.0/2.5 and at 1.0 m/s), diagnosed (at 2.0 and 1.0 m/s) and
-its critic scored in the fixed-rollout analysis, each step with the paper's protocol (``morfic reproduce --preset
-cpu``'s configs) and skipped when the store holds it: the experiment queue's evaluation of a run, without
-re-evaluating the variant's other seeds. With ``--fixed-rollout-only`` only the fixed-rollout rows are written
-(the analysis run first when the store lacks it); with ``--diagnosis-1.0-only`` only the 1.0 m/s diagnosis (run
-first when the store lacks it and holds the weights), for a run whose other tables are in ``--out`` already.
+its critic scored in the fixed-rollout analysis (at 2.0 and, with both runs' weights at hand, 1.0 m/s), each step
+with the paper's protocol (``morfic reproduce --preset cpu``'s configs) and skipped when the store holds it: the
+experiment queue's evaluation of a run, without re-evaluating the variant's other seeds. With
+``--fixed-rollout-only`` only the fixed-rollout rows are written (the analysis run first when the store lacks it);
+with ``--diagnosis-1.0-only`` only the 1.0 m/s diagnosis (run first when the store lacks it and holds the weights),
+with ``--fixed-rollout-1.0-only`` only the 1.0 m/s fixed-rollout rows (likewise), for a run whose other tables are
+in ``--out`` already.
 When RUN's critic had to be scored on other samples than the reference (:func:`merge_fixed_rows`), ``--run-missing``
 also scores every seed-0 critic whose weights the store holds on those samples (:func:`seed0_to_rescore`), which
 measures what the other samples change.
 
 Usage: python scripts/experiment_tables.py RUN_NAME [--out docs/results] [--store STORE] [--run-missing]
-       [--fixed-rollout-only [--rescore] | --diagnosis-1.0-only]
+       [--fixed-rollout-only [--rescore] | --fixed-rollout-1.0-only [--rescore] | --diagnosis-1.0-only]
 """
 
 from __future__ import annotations
@@ -213,7 +218,6 @@ def write_fixed_rollout(store, pipe, spec: str, out: Path, ids: dict, same_weigh
 
     run = spec.removeprefix("runs/")
     key = fixed_rollout_key(command_vx)
-    fixed_ids = ids.setdefault(key, {})
     used: dict[str, str] = {}  # robot -> the samples RUN's critic was scored on here
     for robot in pipe.cfg.fixed_rollout_robots:
         step = None if rescore else pipe.stored_fixed_rollout(robot, command_vx)
@@ -233,7 +237,7 @@ def write_fixed_rollout(store, pipe, spec: str, out: Path, ids: dict, same_weigh
         used[robot] = samples
         reference = json.loads(path.with_suffix(".json").read_text())["samples"]
         if samples == reference or not any(r["critic"] == run and r["samples"] == reference for r in merged):
-            fixed_ids[robot] = step.id  # the analysis of the row the claims read
+            ids.setdefault(key, {})[robot] = step.id  # the analysis of the row the claims read
         else:  # this run has a row on the reference samples: its analysis on these is kept aside
             ids.setdefault(f"{key}_other_samples", {}).setdefault(robot, {})[samples[:12]] = step.id
         print(f"{path}: {run}'s critic (artifact {step.id[:12]})")
@@ -254,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     only = p.add_mutually_exclusive_group()
     only.add_argument("--fixed-rollout-only", action="store_true",
                       help="only the fixed-rollout rows; run the analysis (film actor frozen) if the store lacks it")
-    only.add_argument("--fixed-rollout-1.0-only", dest="fixed_slow_only", action="store_true",
+    only.add_argument("--fixed-rollout-1.0-only", dest="fixed_1_0_only", action="store_true",
                       help="only the fixed-rollout rows at 1.0 m/s; run the analysis if the store lacks it (it "
                            "needs the run's and the frozen actor's weights)")
     only.add_argument("--diagnosis-1.0-only", dest="diagnosis_only", action="store_true",
@@ -264,9 +268,9 @@ def main(argv: list[str] | None = None) -> int:
                         "actor's rollout this store holds or collects, even where it holds the analysis (on other "
                         "samples)")
     args = p.parse_args(argv)
-    if args.rescore and not (args.fixed_rollout_only or args.fixed_slow_only):
+    if args.rescore and not (args.fixed_rollout_only or args.fixed_1_0_only):
         p.error("--rescore goes with --fixed-rollout-only or --fixed-rollout-1.0-only")
-    only_fixed = args.fixed_rollout_only or args.fixed_slow_only
+    only_fixed = args.fixed_rollout_only or args.fixed_1_0_only
     store = Store(args.store)
     spec = f"runs/{args.run}"
     manifest = store.read_manifest(spec)
@@ -318,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{path} (artifact {slow[:12]})")
         write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, args.run_missing)
     rescore: dict[float, dict[str, str]] = {}  # command -> robot -> the samples RUN's critic was scored on
-    if not args.fixed_slow_only:
+    if not args.fixed_1_0_only:
         used = write_fixed_rollout(store, pipe, spec, args.out, ids, same_weights, PAPER_COMMAND,
                                    run_it=args.fixed_rollout_only or args.run_missing, rescore=args.rescore)
         if isinstance(used, str):
@@ -332,13 +336,13 @@ def main(argv: list[str] | None = None) -> int:
         at_hand = all(store.has_ref(s) and has_weights(store, s) for s in (actor, spec))
         hint = (f"it needs {spec}'s and {actor}'s weights (import their bundles and weights bundles), then "
                 "--run-missing or --fixed-rollout-1.0-only")
-        if args.fixed_slow_only and not at_hand:
+        if args.fixed_1_0_only and not at_hand:
             print(f"Error: {store.root} lacks {spec}'s or {actor}'s weights for the fixed-rollout analysis at 1.0 "
                   f"m/s; {hint}.", file=sys.stderr)
             return 1
         slow = write_fixed_rollout(store, pipe, spec, args.out, ids, same_weights, TRAINED_COMMAND,
-                                   run_it=at_hand and (args.fixed_slow_only or args.run_missing), rescore=args.rescore)
-        if isinstance(slow, str) and args.fixed_slow_only:
+                                   run_it=at_hand and (args.fixed_1_0_only or args.run_missing), rescore=args.rescore)
+        if isinstance(slow, str) and args.fixed_1_0_only:
             print(f"Error: {slow} in {store.root}.", file=sys.stderr)
             return 1
         if isinstance(slow, str):
