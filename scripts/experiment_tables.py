@@ -168,9 +168,12 @@ def trained_regime_eval(pipe, spec: str, run_missing: bool) -> str | None:
 
 def trained_regime_diagnose_cfg(pipe):
     """``pipe``'s diagnosis config (the paper's: every robot, descriptor mode, 64 envs x 800 steps) at 1.0 m/s."""
-    import dataclasses
+    return pipe.diagnose_cfg(pipe.cfg.robots, TRAINED_COMMAND)
 
-    return dataclasses.replace(pipe.diagnose_cfg(pipe.cfg.robots), command_vx=TRAINED_COMMAND)
+
+def has_weights(store, spec: str) -> bool:
+    """Whether ``store`` holds ``spec``'s weights (a run imported from a results-only bundle does not)."""
+    return "model.pt" not in store.omitted_files(store.read_manifest(spec))
 
 
 def trained_regime_diagnosis(store, pipe, spec: str, run_missing: bool) -> str | None:
@@ -180,7 +183,7 @@ def trained_regime_diagnosis(store, pipe, spec: str, run_missing: bool) -> str |
     """
     cfg = trained_regime_diagnose_cfg(pipe)
     step = pipe.stored_diagnosis(spec, cfg)
-    if step is None and run_missing and "model.pt" not in store.omitted_files(store.read_manifest(spec)):
+    if step is None and run_missing and has_weights(store, spec):
         start = time.monotonic()
         step = pipe.diagnose(spec, cfg)
         print(f"diagnose {spec} at 1.0 m/s: done in {time.monotonic() - start:.0f} s", file=sys.stderr)
@@ -199,11 +202,6 @@ def write_trained_regime_diagnosis(store, pipe, spec: str, run: str, out: Path, 
     path.write_bytes(store.read_file(found, "calibration.csv"))
     ids["diagnosis-1.0"] = found
     print(f"{path} (artifact {found[:12]})")
-
-
-def has_weights(store, spec: str) -> bool:
-    """Whether ``store`` holds ``spec``'s weights (a run imported from a results-only bundle does not)."""
-    return "model.pt" not in store.omitted_files(store.read_manifest(spec))
 
 
 def write_fixed_rollout(store, pipe, spec: str, out: Path, ids: dict, same_weights: frozenset[str],

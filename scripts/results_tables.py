@@ -44,7 +44,7 @@ from typing import Any
 
 import pandas as pd
 
-from morfic_cli.report.claims import PAPER_COMMAND, TRAINED_COMMAND, command_suffix
+from morfic_cli.report.claims import PAPER_COMMAND, TRAINED_COMMAND, command_suffix, is_paper_command
 
 BEGIN, END = "<!-- results-tables:begin -->", "<!-- results-tables:end -->"
 CLAIMS_BEGIN, CLAIMS_END = "<!-- results-claims:begin -->", "<!-- results-claims:end -->"
@@ -256,7 +256,7 @@ def fixed_table(fixed: pd.DataFrame, command_vx: float = PAPER_COMMAND) -> list[
     rows = frame_at(fixed[fixed["actor_variant"] == FIXED_ROLLOUT_ACTOR], command_vx)
     variants = sorted(dict.fromkeys(rows["variant"]), key=lambda v: (v != "mc", variant_order(v)))
     robots = [r for r in FIXED_ROBOTS if r in set(rows["robot"])]
-    paper = robots if abs(command_vx - PAPER_COMMAND) < 1e-9 else []
+    paper = robots if is_paper_command(command_vx) else []
     head = ["critic", *[f"{r} Flip / Cos" for r in robots], *[f"paper {r}" for r in paper]]
     lines = ["| " + " | ".join(head) + " |", "|---|" + "---|" * (len(head) - 1)]
     for v in variants:

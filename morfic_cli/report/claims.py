@@ -70,6 +70,11 @@ TRAINED_COMMAND: float = 1.0
 JUDGED_COMMANDS: tuple[float, ...] = (PAPER_COMMAND, TRAINED_COMMAND)
 
 
+def is_paper_command(command_vx: float) -> bool:
+    """Whether ``command_vx`` (m/s) is :data:`PAPER_COMMAND`, the one command the paper reports numbers at."""
+    return abs(command_vx - PAPER_COMMAND) < 1e-9
+
+
 def command_suffix(command_vx: float) -> str:
     """How a result at ``command_vx`` is named beside the paper's: ``""`` at 2.0 m/s, ``"-1.0"`` at 1.0 m/s.
 
@@ -77,7 +82,8 @@ def command_suffix(command_vx: float) -> str:
     ``<run>-calibration-1.0.csv`` and ``fixed-rollout-1.0-<robot>.csv``, their ids ``eval-1.0``, ``diagnosis-1.0``
     and ``fixed_rollout-1.0`` in ``<run>-artifacts.json``.
     """
-    return "" if abs(command_vx - PAPER_COMMAND) < 1e-9 else f"-{command_vx:.1f}"
+    return "" if is_paper_command(command_vx) else f"-{command_vx:.1f}"
+
 
 #: Each claim in a few words (a verdict table's rows).
 SHORT: dict[str, str] = {

@@ -35,7 +35,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from morfic_cli.report import paper
-from morfic_cli.report.claims import PAPER_COMMAND, row_command
+from morfic_cli.report.claims import is_paper_command, row_command
 from morfic_cli.report.gather import StoreData
 from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, variant_order
 
@@ -221,11 +221,6 @@ def compute_rows(data: StoreData) -> list[dict[str, Any]]:
     return out
 
 
-def at_paper_command(row: dict[str, Any]) -> bool:
-    """Whether ``row`` is at the paper's command, :data:`~morfic_cli.report.claims.PAPER_COMMAND` (2.0 m/s)."""
-    return abs(row_command(row) - PAPER_COMMAND) < 1e-9
-
-
 def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Each row with the paper's numbers for the same variant, robot (and command) in ``paper_*`` columns.
 
@@ -245,13 +240,13 @@ def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             extra["paper_table"] = src.label if found else None
         elif table == "calibration":
             values = paper.critic_values(row["variant"], row["robot"])
-            values = values if at_paper_command(row) else dict.fromkeys(values)
+            values = values if is_paper_command(row_command(row)) else dict.fromkeys(values)
             extra = {f"paper_{k}": v for k, v in values.items()}
             extra["paper_table"] = paper.CRITIC_METRICS_VARIANTS.label if any(
                 v is not None for v in values.values()) else None
         elif table == "fixed_rollout":
             values = paper.fixed_rollout_values(row["variant"], row["robot"])
-            values = values if at_paper_command(row) else dict.fromkeys(values)
+            values = values if is_paper_command(row_command(row)) else dict.fromkeys(values)
             extra = {f"paper_{k}": v for k, v in values.items()}
             extra["paper_table"] = paper.CAUSAL_ADV_ALL.label if any(v is not None for v in values.values()) else None
         elif table == "compute":

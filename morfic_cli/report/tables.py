@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from morfic_cli.report import paper
-from morfic_cli.report.claims import PAPER_COMMAND, at_command
+from morfic_cli.report.claims import PAPER_COMMAND, at_command, is_paper_command
 from morfic_cli.report.compare import robot_order
 from morfic_cli.report.model import Part, Row, Table, bold_best
 from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, table_variants, variant_order
@@ -52,7 +52,7 @@ def _command_key(key: str, title: str, command_vx: float) -> tuple[str, str]:
     Example: ``("critic_ev", "Explained variance of the critics")`` at 1.0 m/s is ``("critic_ev_1_0", "Explained
     variance of the critics at 1.0 m/s")``; at 2.0 m/s it is unchanged.
     """
-    if abs(command_vx - PAPER_COMMAND) < 1e-9:
+    if is_paper_command(command_vx):
         return key, title
     return f"{key}_{command_vx:.1f}".replace(".", "_"), f"{title} at {command_vx:.1f} m/s"
 
