@@ -66,6 +66,12 @@ finished() {  # 0 when runs/$1 is a finished run in the store
   python3 -c "import json,sys; sys.exit(0 if json.loads(sys.argv[1])['meta'].get('finished') else 1)" "$doc"
 }
 
+results_only() {  # 0 when runs/$1 is in the store without its weights (imported from a results-only bundle)
+  local doc
+  doc=$(morfic store show "runs/$1" -f json 2>/dev/null) || return 1
+  python3 -c "import json,sys; sys.exit(0 if 'model.pt' in json.loads(sys.argv[1]).get('omitted_files', {}) else 1)" "$doc"
+}
+
 seconds_until() {  # seconds until the next time $1 (UTC; past midnight when the queue starts late), or a large number when $1 is empty
   [ -n "$1" ] || { echo 999999; return; }
   echo $(( $(date -u -d "$1" +%s) + DAY_SHIFT["$1"] - $(date -u +%s) ))
@@ -74,6 +80,16 @@ seconds_left() { seconds_until "$STOP_AT"; }
 
 for item in "$@"; do
   [[ "$item" =~ ^[a-z][a-z0-9_-]*:[0-9]+$ ]] || { echo "Error: '$item' is not VARIANT:SEED (e.g. concat:1)" >&2; exit 1; }
+done
+for item in "$@"; do
+  name="${item%:*}-cpu-s${item#*:}"
+  if finished "$name" && results_only "$name"; then
+    echo "Error: runs/$name in $MORFIC_STORE was imported from a results-only bundle (no weights): the queue can" \
+         "neither train nor evaluate it. To retrain it, use a store without $BUNDLES/results/$name.tar" \
+         "(docs/results.md, \"Retrained seeds\"); to evaluate it again, import its weights bundle" \
+         "($BUNDLES/weights/$name.tar) and run scripts/experiment_tables.py $name --run-missing" >&2
+    exit 1
+  fi
 done
 for item in "$@"; do
   variant=${item%:*}; seed=${item#*:}; name="$variant-cpu-s$seed"
@@ -103,7 +119,9 @@ for item in "$@"; do
     wait "$pid"
   fi
   echo "== $(date -u +%T) evaluate and diagnose $name"
-  morfic eval "runs/$name" --robots go2 --command-vx 1.0 --envs 16 --steps 250 -f json -q > "$RESULTS/$name-walk.json"
+  # through a temporary file: a failed eval leaves the last walk.json as it was
+  morfic eval "runs/$name" --robots go2 --command-vx 1.0 --envs 16 --steps 250 -f json -q > "$RESULTS/$name-walk.json.tmp"
+  mv "$RESULTS/$name-walk.json.tmp" "$RESULTS/$name-walk.json"
   # the paper's protocol for this run alone (`morfic reproduce --preset cpu`'s configs; the variant's other seeds are
   # not re-evaluated), its critic scored on the frozen film actor's rollouts, the tables copied with their ids
   python scripts/experiment_tables.py "$name" --run-missing --out "$RESULTS"

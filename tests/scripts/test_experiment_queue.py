@@ -1,0 +1,54 @@
+"""scripts/experiment_queue.sh refuses a run imported results-only before it touches anything.
+
+Such a run is finished in the store but has no weights: the queue used to skip its training and then fail in its
+first eval, after the shell had already truncated ``docs/results/<run>-walk.json``. The script runs here from a
+copy under a temporary directory (it works relative to its own folder), on a hand-made store.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+from morfic_cli.store import Store
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _finished_run(store: Store, name: str) -> None:
+    """runs/<name>: a finished checkpoint with weights and a curve, and evals/<name> of it."""
+    ckpt = store.put_manifest("checkpoint", config={"variant": "film"}, meta={"finished": True},
+                              files={"model.pt": name.encode() * 1000, "curve.csv": f"it,{name}".encode()})
+    store.set_ref(f"runs/{name}", ckpt)
+    store.set_ref(f"evals/{name}", store.put_manifest("eval", config={"run": name}, inputs={"checkpoint": ckpt},
+                                                       files={"eval.csv": f"robot\ngo2,{name}".encode()}))
+
+
+def test_a_results_only_run_stops_the_queue_before_anything_is_written(tmp_path):
+    src = Store(tmp_path / "src")
+    _finished_run(src, "film-cpu-s1")
+    _finished_run(src, "ppo-cpu-s2")
+    dst = Store(tmp_path / "dst")
+    dst.import_tar(src.export_tar(["runs/film-cpu-s1"], tmp_path / "r.tar", results_only=True).path)
+    dst.import_tar(src.export_tar(["runs/ppo-cpu-s2"], tmp_path / "w.tar", latest=True).path, append=True)
+    assert "model.pt" in dst.omitted_files(dst.read_manifest("runs/film-cpu-s1"))
+    assert not dst.omitted_files(dst.read_manifest("runs/ppo-cpu-s2"))
+
+    repo = tmp_path / "repo"
+    (repo / "scripts").mkdir(parents=True)
+    shutil.copy(ROOT / "scripts" / "experiment_queue.sh", repo / "scripts")
+    walk = repo / "docs" / "results" / "film-cpu-s1-walk.json"
+    walk.parent.mkdir(parents=True)
+    walk.write_text('{"kept": true}')
+    env = {**os.environ, "MORFIC_STORE": str(dst.root)}
+    # the run with weights first: every item is checked before the first is trained or evaluated
+    got = subprocess.run(["bash", str(repo / "scripts" / "experiment_queue.sh"), "ppo:2", "film:1"], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert got.returncode == 1, got.stdout + got.stderr
+    assert got.stderr.startswith("Error: runs/film-cpu-s1 ") and "results-only bundle" in got.stderr
+    assert "artifacts/bundles/results/film-cpu-s1.tar" in got.stderr
+    assert "evaluate" not in got.stdout and "train" not in got.stdout
+    assert walk.read_text() == '{"kept": true}'
+    assert sorted(p.name for p in walk.parent.iterdir()) == ["film-cpu-s1-walk.json"]
