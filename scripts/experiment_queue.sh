@@ -119,8 +119,9 @@ for item in "$@"; do
     wait "$pid"
   fi
   echo "== $(date -u +%T) evaluate and diagnose $name"
-  # through a temporary file: a failed eval leaves the last walk.json as it was
-  morfic eval "runs/$name" --robots go2 --command-vx 1.0 --envs 16 --steps 250 -f json -q > "$RESULTS/$name-walk.json.tmp"
+  # through a temporary file: a failed eval leaves the last walk.json as it was (and no temporary file)
+  morfic eval "runs/$name" --robots go2 --command-vx 1.0 --envs 16 --steps 250 -f json -q > "$RESULTS/$name-walk.json.tmp" \
+    || { rm -f "$RESULTS/$name-walk.json.tmp"; exit 1; }
   mv "$RESULTS/$name-walk.json.tmp" "$RESULTS/$name-walk.json"
   # the paper's protocol for this run alone (`morfic reproduce --preset cpu`'s configs; the variant's other seeds are
   # not re-evaluated), its critic scored on the frozen film actor's rollouts, the tables copied with their ids
