@@ -460,7 +460,7 @@ def _short(artifact: str) -> str:
 
 #: The title of each command's block of claims.
 COMMAND_TITLES = {2.0: "At 2.0 m/s (the paper's command)", 1.0: "At 1.0 m/s (the trained regime, where every run but "
-                  "adaln's seed 0 walks on Go2; the paper reports no numbers there)"}
+                  "adaln's seeds 0 and 2 walks on Go2; the paper reports no numbers there)"}
 
 
 def render_claims(results: Path) -> str:

@@ -63,7 +63,7 @@ BASELINES: tuple[str, ...] = ("ppo", "actor-only", "concat")
 SIMILAR_VX: float = 0.3
 #: The paper's evaluation command (m/s): its numbers, and the command every claim is judged at.
 PAPER_COMMAND: float = 2.0
-#: The trained regime's command (m/s): where every run but adaln's seed 0 walks on its own template (Go2).
+#: The trained regime's command (m/s): where every run but adaln's seeds 0 and 2 walks on its own template (Go2).
 TRAINED_COMMAND: float = 1.0
 #: The commands the claims are judged at, in the order they are reported: the paper's, then the trained regime
 #: (:data:`TRAINED_COMMAND`), the latter only where the store has results at it.
