@@ -60,16 +60,11 @@ RESULTS=docs/results
 BUNDLES=artifacts/bundles
 mkdir -p "$RESULTS" "$BUNDLES" "$BUNDLES/partial" "$BUNDLES/results" "$BUNDLES/weights"
 
-finished() {  # 0 when runs/$1 is a finished run in the store
+run_state() {  # what the store holds of runs/$1: missing, unfinished, finished, or results-only (finished, no weights)
   local doc
-  doc=$(morfic store show "runs/$1" -f json 2>/dev/null) || return 1
-  python3 -c "import json,sys; sys.exit(0 if json.loads(sys.argv[1])['meta'].get('finished') else 1)" "$doc"
-}
-
-results_only() {  # 0 when runs/$1 is in the store without its weights (imported from a results-only bundle)
-  local doc
-  doc=$(morfic store show "runs/$1" -f json 2>/dev/null) || return 1
-  python3 -c "import json,sys; sys.exit(0 if 'model.pt' in json.loads(sys.argv[1]).get('omitted_files', {}) else 1)" "$doc"
+  doc=$(morfic store show "runs/$1" -f json 2>/dev/null) || { echo missing; return; }
+  python3 -c "import json,sys; d=json.loads(sys.argv[1]); done=d['meta'].get('finished')
+print('unfinished' if not done else 'results-only' if 'model.pt' in d.get('omitted_files', {}) else 'finished')" "$doc"
 }
 
 seconds_until() {  # seconds until the next time $1 (UTC; past midnight when the queue starts late), or a large number when $1 is empty
@@ -83,7 +78,7 @@ for item in "$@"; do
 done
 for item in "$@"; do
   name="${item%:*}-cpu-s${item#*:}"
-  if finished "$name" && results_only "$name"; then
+  if [ "$(run_state "$name")" = results-only ]; then
     echo "Error: runs/$name in $MORFIC_STORE was imported from a results-only bundle (no weights): the queue can" \
          "neither train nor evaluate it. To retrain it, use a store without $BUNDLES/results/$name.tar" \
          "(docs/results.md, \"Retrained seeds\"); to evaluate it again, import its weights bundle" \
@@ -94,11 +89,12 @@ done
 for item in "$@"; do
   variant=${item%:*}; seed=${item#*:}; name="$variant-cpu-s$seed"
   if [ "$(seconds_left)" -le 0 ]; then echo "== $(date -u +%T) stop time reached before $name"; exit 0; fi
-  if ! finished "$name"; then
+  state=$(run_state "$name")
+  if [ "$state" != finished ]; then
     if [ "$(seconds_until "$LAST_START")" -le 0 ]; then
       echo "== $(date -u +%T) last start time $LAST_START passed: $name is not begun; the queue stops"; exit 0
     fi
-    if morfic store show "runs/$name" >/dev/null 2>&1; then
+    if [ "$state" = unfinished ]; then
       args=(--resume "runs/$name")
     else
       args=(--variant "$variant" --preset cpu --seed "$seed" --name "$name")
