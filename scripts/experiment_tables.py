@@ -173,7 +173,7 @@ def trained_regime_diagnose_cfg(pipe):
 
 def has_weights(store, spec: str) -> bool:
     """Whether ``store`` holds ``spec``'s weights (a run imported from a results-only bundle does not)."""
-    return "model.pt" not in store.omitted_files(store.read_manifest(spec))
+    return not store.weights_omitted(store.read_manifest(spec))
 
 
 def trained_regime_diagnosis(store, pipe, spec: str, run_missing: bool) -> str | None:

@@ -486,8 +486,7 @@ def check_weights(store: Store, spec: str, manifest: Any) -> None:
     Raises:
         MorficError: ``model.pt`` of ``manifest`` is recorded as left out (``shallow/``); names the bundle to import.
     """
-    entry = manifest.files.get("model.pt")
-    if entry is not None and store.is_omitted(entry.id):
+    if store.weights_omitted(manifest):
         name = run_of(spec, manifest.meta)
         raise MorficError(f"{spec} was imported from a results-only bundle: its weights (model.pt) and trainer state "
                           "were left out, so it cannot be evaluated, played, exported, diagnosed or resumed (its "

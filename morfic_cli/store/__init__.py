@@ -49,6 +49,7 @@ from morfic_cli.store.manifest import (
 from morfic_cli.store.objects import ObjectDB, store_os_error
 from morfic_cli.store.publish import Published, publish
 from morfic_cli.store.refs import ANY, RefDB, RefEntry, RefMovedError, check_ref_name, pick_version, split_spec
+from morfic_cli.store.results import RUN_FILE
 from morfic_cli.store.shallow import OMITTABLE_FILES, OMITTABLE_ROLES, OmittedIndex
 from morfic_cli.store.transfer import AppendRule, ExportReport, ImportReport, export_tar, import_tar
 
@@ -176,6 +177,13 @@ class Store:
         """File name -> id of the files of ``manifest`` that a results-only import left out (weights, logs, curves)."""
         return {name: entry.id for name, entry in manifest.files.items()
                 if name in OMITTABLE_FILES and self.is_omitted(entry.id)}
+
+    def weights_omitted(self, manifest: Manifest) -> bool:
+        """Whether ``manifest``'s weights (``model.pt``) were left out (a run imported from a results-only bundle).
+
+        False for a manifest without ``model.pt`` (not a checkpoint): whether it is one is the caller's check.
+        """
+        return RUN_FILE in self.omitted_files(manifest)
 
     def object_path(self, oid: str) -> Path:
         """Path of object ``oid`` (read-only; never write to it)."""

@@ -195,7 +195,7 @@ def test_walk_table_checks_the_bar_and_finds_when_the_curriculum_opened(tmp_path
 
 
 class _Store:
-    """``read_manifest`` / ``omitted_files`` of a store holding ``runs`` (name -> its weights were left out)."""
+    """``read_manifest`` / ``weights_omitted`` of a store holding ``runs`` (name -> its weights were left out)."""
 
     def __init__(self, runs: dict[str, bool]):
         self.runs = runs
@@ -207,8 +207,8 @@ class _Store:
             raise ArtifactNotFoundError(spec)
         return spec
 
-    def omitted_files(self, spec):
-        return {"model.pt": "x"} if self.runs[spec[len("runs/"):]] else {}
+    def weights_omitted(self, spec):
+        return self.runs[spec[len("runs/"):]]
 
 
 def test_seed0_critics_with_weights_are_rescored_on_other_samples(tmp_path):

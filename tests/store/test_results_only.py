@@ -180,6 +180,17 @@ def test_import_gives_the_same_refs_and_ids_and_every_walk_knows_the_gaps(src, t
     assert again.path.read_bytes() == report.path.read_bytes()
 
 
+def test_weights_omitted_is_true_only_for_a_checkpoint_whose_model_pt_was_left_out(src, tmp_path):
+    dst = Store(tmp_path / "dst")
+    dst.import_tar(src.export_tar(["runs/b"], tmp_path / "b.tar", results_only=True).path)
+    assert dst.weights_omitted(dst.read_manifest("runs/b"))  # b's weights left out
+    assert dst.weights_omitted(dst.read_manifest(src.ids["a"]["ckpt"]))  # a's checkpoint, the fixed rollout's actor
+    assert not src.weights_omitted(src.read_manifest("runs/b"))  # the full store holds them
+    assert not dst.weights_omitted(dst.read_manifest("evals/b"))  # no model.pt: not a checkpoint
+    dst.import_tar(src.export_tar(["runs/b"], tmp_path / "w.tar", latest=True, without_trainer_state=True).path)
+    assert not dst.weights_omitted(dst.read_manifest("runs/b"))  # a weights-only bundle on top fills them
+
+
 def test_two_runs_bundles_import_in_either_order(src, tmp_path):
     paths = [src.export_tar([f"runs/{r}"], tmp_path / f"{r}.tar", results_only=True).path for r in "ab"]
     stores, statuses = [], []
