@@ -22,10 +22,13 @@
 # --train-at COMMIT: train with the training code of COMMIT (a git worktree of it under .train-worktrees/, put first
 # on PYTHONPATH; the run records that commit as meta.git_commit) and evaluate, diagnose and ship with this checkout's.
 # For seeds added to an experiment whose training code has since changed (docs/results.md, "One code for all runs").
-# Runs are done strictly one after another: two CPU-heavy jobs on 2 cores slow each other.
+# Runs are done strictly one after another: two CPU-heavy jobs on 2 cores slow each other. Two queues may run side by
+# side (each with its own store, from one checkout): their trainings share the cores well (1.3-1.4x the throughput
+# of one, docs/results.md "Retrained seeds"), their evaluations do not (4-5x slower each), and both write
+# docs/results/ and docs/results.md. So a run's evaluation-to-shipping stage holds an exclusive lock
+# (flock on $MORFIC_QUEUE_LOCK, default ${TMPDIR:-/tmp}/morfic-experiment-queue.lock): a second queue waits there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-: "${MORFIC_STORE:?set MORFIC_STORE to the experiment store (kept between runs)}"
 STOP_AT=""
 LAST_START=""
 TRAIN_AT=""
@@ -47,6 +50,7 @@ for t in "$STOP_AT" "$LAST_START"; do
   if [ $(( $(date -u +%s) - at )) -gt 43200 ]; then DAY_SHIFT["$t"]=86400; else DAY_SHIFT["$t"]=0; fi
 done
 [ $# -gt 0 ] || { echo "Error: name at least one run as VARIANT:SEED, e.g. concat:0" >&2; exit 1; }
+[ -n "${MORFIC_STORE:-}" ] || { echo "Error: set MORFIC_STORE to the experiment store (kept between runs)" >&2; exit 1; }
 TRAIN_ENV=()
 if [ -n "$TRAIN_AT" ]; then
   commit=$(git rev-parse --verify --quiet "$TRAIN_AT^{commit}") \
@@ -58,6 +62,8 @@ if [ -n "$TRAIN_AT" ]; then
 fi
 RESULTS=docs/results
 BUNDLES=artifacts/bundles
+LOCK=${MORFIC_QUEUE_LOCK:-${TMPDIR:-/tmp}/morfic-experiment-queue.lock}
+exec 9>>"$LOCK" || { echo "Error: cannot open the queue lock $LOCK; set MORFIC_QUEUE_LOCK to a writable file" >&2; exit 1; }
 mkdir -p "$RESULTS" "$BUNDLES" "$BUNDLES/partial" "$BUNDLES/results" "$BUNDLES/weights"
 
 run_state() {  # what the store holds of runs/$1: missing, unfinished, finished, or results-only (finished, no weights)
@@ -114,6 +120,10 @@ for item in "$@"; do
     done
     wait "$pid"
   fi
+  if ! flock -n 9; then
+    echo "== $(date -u +%T) $name waits for another queue's evaluation (lock $LOCK)"
+    flock 9
+  fi
   echo "== $(date -u +%T) evaluate and diagnose $name"
   # through a temporary file: a failed eval leaves the last walk.json as it was (and no temporary file)
   morfic eval "runs/$name" --robots go2 --command-vx 1.0 --envs 16 --steps 250 -f json -q > "$RESULTS/$name-walk.json.tmp" \
@@ -136,4 +146,5 @@ for item in "$@"; do
   echo "== $(date -u +%T) done $name: $RESULTS/$name-{walk.json,eval.csv,eval-1.0.csv,calibration.csv," \
        "calibration-1.0.csv,curve.csv,artifacts.json}," \
        "docs/results.md's tables and claims, docs/img/results-*.png and $shipped"
+  flock -u 9
 done

@@ -1,4 +1,5 @@
-"""scripts/experiment_queue.sh refuses a run imported results-only before it touches anything.
+"""scripts/experiment_queue.sh refuses a run imported results-only before it touches anything, and evaluates one
+run at a time across queues (a lock).
 
 Such a run is finished in the store but has no weights: the queue used to skip its training and then fail in its
 first eval, after the shell had already truncated ``docs/results/<run>-walk.json``. The script runs here from a
@@ -7,9 +8,11 @@ copy under a temporary directory (it works relative to its own folder), on a han
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import subprocess
+import time
 from pathlib import Path
 
 from morfic_cli.store import Store
@@ -52,3 +55,27 @@ def test_a_results_only_run_stops_the_queue_before_anything_is_written(tmp_path)
     assert "evaluate" not in got.stdout and "train" not in got.stdout
     assert walk.read_text() == '{"kept": true}'
     assert sorted(p.name for p in walk.parent.iterdir()) == ["film-cpu-s1-walk.json"]
+
+
+def test_a_second_queue_waits_for_the_evaluation_lock_before_it_evaluates(tmp_path):
+    """Two queues side by side: one evaluates (holds the lock), the other waits, then goes on when it is released."""
+    store = Store(tmp_path / "store")
+    _finished_run(store, "ppo-cpu-s2")  # finished: the queue goes straight to its evaluation
+    repo = tmp_path / "repo"
+    (repo / "scripts").mkdir(parents=True)
+    shutil.copy(ROOT / "scripts" / "experiment_queue.sh", repo / "scripts")
+    lock = tmp_path / "queue.lock"
+    env = {**os.environ, "MORFIC_STORE": str(store.root), "MORFIC_QUEUE_LOCK": str(lock)}
+    with lock.open("a") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)  # the other queue's evaluation
+        queue = subprocess.Popen(["bash", str(repo / "scripts" / "experiment_queue.sh"), "ppo:2"], env=env,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        first = queue.stdout.readline()
+        assert "ppo-cpu-s2 waits for another queue's evaluation" in first and str(lock) in first
+        time.sleep(1.0)
+        assert queue.poll() is None and not (repo / "docs" / "results" / "ppo-cpu-s2-walk.json.tmp").exists()
+        fcntl.flock(held, fcntl.LOCK_UN)
+        out, err = queue.communicate(timeout=120)
+    # released: it evaluates (and fails there, on this hand-made checkpoint), leaving no temporary file
+    assert "evaluate and diagnose ppo-cpu-s2" in out, out + err
+    assert queue.returncode == 1 and not (repo / "docs" / "results" / "ppo-cpu-s2-walk.json.tmp").exists()
