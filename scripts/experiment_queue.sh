@@ -3,11 +3,11 @@
 # evaluate and diagnose it with the paper's protocol (scripts/experiment_tables.py --run-missing: `morfic reproduce
 # --preset cpu`'s steps for this run, skipped where the store holds them, its critic scored on the frozen film actor's
 # rollouts, evaluated and diagnosed at 1.0 m/s too), copy its result tables under docs/results/, regenerate
-# docs/results.md's tables, claims and figures (scripts/results_tables.py) and ship it: a seed-0 run as a
-# weights-only bundle (artifacts/bundles/<run>.tar, what `reproduce --preset shipped` imports), any other seed as a
-# results-only bundle (artifacts/bundles/results/<run>.tar: its evals and diagnoses without weights, logs or other
-# runs' curves; `morfic store import` it, then `morfic report runs/<run>`) and a weights-only one
-# (artifacts/bundles/weights/<run>.tar, ~7 MiB: import it on top to evaluate or diagnose the run again).
+# docs/results.md's tables, claims and figures (scripts/results_tables.py) and ship it as a results-only bundle
+# (artifacts/bundles/results/<run>.tar: its evals and diagnoses without weights, logs or other runs' curves; `morfic
+# store import` it, then `morfic report runs/<run>`) and a weights-only one (~7 MiB: import it on top to evaluate or
+# diagnose the run again): a seed-0 run's at artifacts/bundles/<run>.tar (what `reproduce --preset shipped` imports),
+# any other seed's at artifacts/bundles/weights/<run>.tar.
 #
 # Usage: scripts/experiment_queue.sh [--stop-at HH:MM] [--last-start HH:MM] [--train-at COMMIT] VARIANT:SEED ...
 #   e.g.  MORFIC_STORE=/work/stores/exp nohup scripts/experiment_queue.sh --stop-at 23:05 concat:0 actor-only:0 \
@@ -132,14 +132,11 @@ for item in "$@"; do
   # the paper's protocol for this run alone (`morfic reproduce --preset cpu`'s configs; the variant's other seeds are
   # not re-evaluated), its critic scored on the frozen film actor's rollouts, the tables copied with their ids
   python scripts/experiment_tables.py "$name" --run-missing --out "$RESULTS"
-  if [ "$seed" = 0 ]; then
-    shipped="$BUNDLES/$name.tar"
-    morfic store export "runs/$name" --latest --without-trainer-state --out "$BUNDLES" --force
-  else
-    shipped="$BUNDLES/results/$name.tar and $BUNDLES/weights/$name.tar"
-    morfic store export "runs/$name" --results-only --out "$BUNDLES/results" --force
-    morfic store export "runs/$name" --latest --without-trainer-state --out "$BUNDLES/weights" --force
-  fi
+  # seed 0's weights go where `reproduce --preset shipped` imports them, other seeds' under weights/
+  weights_dir="$BUNDLES/weights"; [ "$seed" = 0 ] && weights_dir="$BUNDLES"
+  shipped="$BUNDLES/results/$name.tar and $weights_dir/$name.tar"
+  morfic store export "runs/$name" --results-only --out "$BUNDLES/results" --force
+  morfic store export "runs/$name" --latest --without-trainer-state --out "$weights_dir" --force
   rm -f "$BUNDLES/partial/$name.tar"
   # after the export, so that the generated bundle weight counts this run's bundle
   python scripts/results_tables.py --write docs/results.md --figures docs/img
