@@ -272,7 +272,7 @@ def import_(
     bundle naming a variant that is not a well-formed name is refused.
 
     Bundles of one store merge in any order. Bundles of different stores (the shipped results bundles come
-    from two) can each hold their own history of a shared ref such as diagnoses/calibration; a history that is
+    from several) can each hold their own history of a shared ref such as diagnoses/calibration; a history that is
     not a prefix of the store's is refused as diverged unless --append adds its versions after the store's
     (results are found by their manifests, so only the version numbers differ with the import order; reports cite ids).
 

@@ -240,7 +240,7 @@ def test_import_of_several_tars_imports_each_and_names_the_bad_one(run_cli, fill
 def test_bundles_of_two_stores_with_a_shared_ref_import_together_with_append(run_cli, tmp_path):
     """Two stores each log version 1 of diagnoses/calibration: without --append the second tar is refused with a
     pointer to --append and nothing of it lands; with it, its version goes after the first (README's import of the
-    shipped results bundles, which come from two stores)."""
+    shipped results bundles, which come from several stores)."""
     ids, tars = [], []
     for i in (1, 2):
         src = Store(tmp_path / f"src{i}")

@@ -79,3 +79,49 @@ def test_a_second_queue_waits_for_the_evaluation_lock_before_it_evaluates(tmp_pa
     # released: it evaluates (and fails there, on this hand-made checkpoint), leaving no temporary file
     assert "evaluate and diagnose ppo-cpu-s2" in out, out + err
     assert queue.returncode == 1 and not (repo / "docs" / "results" / "ppo-cpu-s2-walk.json.tmp").exists()
+
+
+FAKE_MORFIC = r"""#!/usr/bin/env bash
+# a stand-in for morfic: every call logged; a finished run with weights; exports write an empty tar
+echo "$*" >> "$MORFIC_CALLS"
+case "$1 $2" in
+  "store show") echo '{"meta": {"finished": true}}' ;;
+  "store export")
+    out=""; prev=""
+    for a in "$@"; do [ "$prev" = --out ] && out=$a; prev=$a; done
+    mkdir -p "$out" && touch "$out/${3#runs/}.tar" ;;
+  eval*) echo '{}' ;;
+esac
+"""
+
+
+def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_path):
+    """Seed 0's weights go where `reproduce --preset shipped` imports them (artifacts/bundles/), other seeds' under
+    weights/; every seed's results-only bundle under results/ (the queue's shipping step, morfic stubbed out)."""
+    repo = tmp_path / "repo"
+    (repo / "scripts").mkdir(parents=True)
+    shutil.copy(ROOT / "scripts" / "experiment_queue.sh", repo / "scripts")
+    for stub in ("experiment_tables.py", "results_tables.py"):  # the tables' steps are not this test's
+        (repo / "scripts" / stub).write_text("")
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "morfic").write_text(FAKE_MORFIC)
+    (bin_dir / "morfic").chmod(0o755)
+    calls = tmp_path / "calls.txt"
+    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}", "MORFIC_CALLS": str(calls),
+           "MORFIC_STORE": str(tmp_path / "store"), "MORFIC_QUEUE_LOCK": str(tmp_path / "queue.lock")}
+    got = subprocess.run(["bash", str(repo / "scripts" / "experiment_queue.sh"), "film:0", "ppo:1"], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert got.returncode == 0, got.stdout + got.stderr
+    exports = [line for line in calls.read_text().splitlines() if line.startswith("store export")]
+    assert exports == [
+        "store export runs/film-cpu-s0 --results-only --out artifacts/bundles/results --force",
+        "store export runs/film-cpu-s0 --latest --without-trainer-state --out artifacts/bundles --force",
+        "store export runs/ppo-cpu-s1 --results-only --out artifacts/bundles/results --force",
+        "store export runs/ppo-cpu-s1 --latest --without-trainer-state --out artifacts/bundles/weights --force",
+    ]
+    bundles = repo / "artifacts" / "bundles"
+    assert sorted(str(p.relative_to(bundles)) for p in bundles.rglob("*.tar")) == [
+        "film-cpu-s0.tar", "results/film-cpu-s0.tar", "results/ppo-cpu-s1.tar", "weights/ppo-cpu-s1.tar"]
+    assert "done film-cpu-s0" in got.stdout and "artifacts/bundles/results/film-cpu-s0.tar and " \
+        "artifacts/bundles/film-cpu-s0.tar" in got.stdout
