@@ -1,5 +1,5 @@
-"""scripts/experiment_queue.sh refuses a run imported results-only before it touches anything, and evaluates one
-run at a time across queues (a lock).
+"""scripts/experiment_queue.sh refuses a run imported results-only before it touches anything, evaluates one
+run at a time across queues (a lock), and ships every seed results-only beside its weights.
 
 Such a run is finished in the store but has no weights: the queue used to skip its training and then fail in its
 first eval, after the shell had already truncated ``docs/results/<run>-walk.json``. The script runs here from a
