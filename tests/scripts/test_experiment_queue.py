@@ -20,6 +20,14 @@ from morfic_cli.store import Store
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def _repo_with_queue(tmp_path: Path) -> Path:
+    """A copy of scripts/experiment_queue.sh under tmp_path/repo (the script works relative to its own folder)."""
+    repo = tmp_path / "repo"
+    (repo / "scripts").mkdir(parents=True)
+    shutil.copy(ROOT / "scripts" / "experiment_queue.sh", repo / "scripts")
+    return repo
+
+
 def _finished_run(store: Store, name: str) -> None:
     """runs/<name>: a finished checkpoint with weights and a curve, and evals/<name> of it."""
     ckpt = store.put_manifest("checkpoint", config={"variant": "film"}, meta={"finished": True},
@@ -39,9 +47,7 @@ def test_a_results_only_run_stops_the_queue_before_anything_is_written(tmp_path)
     assert "model.pt" in dst.omitted_files(dst.read_manifest("runs/film-cpu-s1"))
     assert not dst.omitted_files(dst.read_manifest("runs/ppo-cpu-s2"))
 
-    repo = tmp_path / "repo"
-    (repo / "scripts").mkdir(parents=True)
-    shutil.copy(ROOT / "scripts" / "experiment_queue.sh", repo / "scripts")
+    repo = _repo_with_queue(tmp_path)
     walk = repo / "docs" / "results" / "film-cpu-s1-walk.json"
     walk.parent.mkdir(parents=True)
     walk.write_text('{"kept": true}')
@@ -61,9 +67,7 @@ def test_a_second_queue_waits_for_the_evaluation_lock_before_it_evaluates(tmp_pa
     """Two queues side by side: one evaluates (holds the lock), the other waits, then goes on when it is released."""
     store = Store(tmp_path / "store")
     _finished_run(store, "ppo-cpu-s2")  # finished: the queue goes straight to its evaluation
-    repo = tmp_path / "repo"
-    (repo / "scripts").mkdir(parents=True)
-    shutil.copy(ROOT / "scripts" / "experiment_queue.sh", repo / "scripts")
+    repo = _repo_with_queue(tmp_path)
     lock = tmp_path / "queue.lock"
     env = {**os.environ, "MORFIC_STORE": str(store.root), "MORFIC_QUEUE_LOCK": str(lock)}
     with lock.open("a") as held:
@@ -98,9 +102,7 @@ esac
 def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_path):
     """Seed 0's weights go where `reproduce --preset shipped` imports them (artifacts/bundles/), other seeds' under
     weights/; every seed's results-only bundle under results/ (the queue's shipping step, morfic stubbed out)."""
-    repo = tmp_path / "repo"
-    (repo / "scripts").mkdir(parents=True)
-    shutil.copy(ROOT / "scripts" / "experiment_queue.sh", repo / "scripts")
+    repo = _repo_with_queue(tmp_path)
     for stub in ("experiment_tables.py", "results_tables.py"):  # the tables' steps are not this test's
         (repo / "scripts" / stub).write_text("")
     bin_dir = tmp_path / "bin"
