@@ -9,10 +9,10 @@ with ``g_l`` a small MLP (z_m (64) -> 128 -> H_l) whose last layer starts at zer
 critic computes its unconditioned trunk at initialisation (as the paper's FiLM critic does). The actor is
 morfic's stock actor with z_m.
 
-Use it from the command line by import path, with this folder on PYTHONPATH (or the module in an installed
-package)::
+Install it as its own package (examples/pyproject.toml), then use it from the command line by import path::
 
-    PYTHONPATH=examples morfic train --variant custom_variant:GatedCritic --preset smoke
+    pip install -e examples/
+    morfic train --variant custom_variant:GatedCritic --preset smoke
     morfic eval runs/custom_variant.GatedCritic-smoke-s0 --robots go2
     morfic compare-baselines
 

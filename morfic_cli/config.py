@@ -1,10 +1,11 @@
 """The environment's configuration in one module: :class:`EnvCfg` and every part of it.
 
 Parts: simulation (:class:`SimCfg`), velocity commands and their curriculum (:class:`CommandCfg`), domain
-randomisation (:class:`DomainRandCfg`), observations (:class:`ObsCfg`), terminations (:class:`TerminationCfg`),
-the gait clock (:class:`GaitCfg`) and the reward weights and parameters (:class:`RewardCfg`; the terms that read
-them are the objects of :data:`morfic_cli.envs.rewards.TERMS`). Every config is a frozen dataclass with
-documented attributes (unit, default); this module imports nothing of morfic's, so every module may import it.
+randomisation (:class:`DomainRandCfg`, procedural geometry :class:`GeometryRandCfg`), observations
+(:class:`ObsCfg`), terminations (:class:`TerminationCfg`), the gait clock (:class:`GaitCfg`) and the reward weights
+and parameters (:class:`RewardCfg`; the terms that read them are the objects of :data:`morfic_cli.envs.rewards.TERMS`).
+Every config is a frozen dataclass with documented attributes (unit, default); this module imports nothing of
+morfic's, so every module may import it.
 The resolved config is serialised as sorted-key JSON into run manifests (:func:`to_dict`); training presets are
 factory functions in :mod:`morfic_cli.rl.config`, where ``--set`` overrides fail on unknown keys.
 """
@@ -69,6 +70,52 @@ class CommandCfg:
 
 
 @dataclass(frozen=True)
+class GeometryRandCfg:
+    """Procedural geometry: robots generated around the template (docs/robots.md, "Procedural geometry").
+
+    GenLoco's generator (Feng et al. 2022), by :mod:`morfic_cli.morphology.procedural`. Off by default. On
+    (training only, the CPU backend), ``pool_size`` robots are generated and compiled when the env is built and
+    every env draws one of them, uniformly, at each reset; the descriptor each env reports (and z_m) is its
+    robot's. Ranges are (low, high) factors, uniform; lengths are also multiplied by ``scale`` and
+    masses by ``scale``^3. The defaults are GenLoco's.
+    """
+
+    enabled: bool = False
+    """Generate robots (train mode with ``DomainRandCfg.enabled``; evaluation never does)."""
+    pool_size: int = 256
+    """K, the robots generated and compiled once per env construction."""
+    scale: tuple[float, float] = (0.8, 1.2)
+    """Global scale s of every length (GenLoco U(0.8, 1.2))."""
+    base_size: tuple[float, float] = (0.5, 1.5)
+    """Factor of each base box dimension, drawn per dimension (GenLoco: A1's box +-50 %)."""
+    base_density: tuple[float, float] = (0.5, 1.5)
+    """Factor of the base density; base mass = nominal x density factor x volume ratio (GenLoco +-50 %)."""
+    hip_pos: tuple[float, float] = (0.9, 1.1)
+    """Extra factor of the hip joints' x and y (which follow the box) and of the lateral hip-to-thigh offset
+    (GenLoco U(0.9, 1.1))."""
+    link_length: tuple[float, float] = (0.5, 1.5)
+    """Factor of the calf (lower leg) length (GenLoco +-50 %)."""
+    thigh_length_ratio: tuple[float, float] = (0.75, 1.25)
+    """Thigh length factor over the calf's (GenLoco: upper = lower x U(0.75, 1.25))."""
+    link_radius: tuple[float, float] = (0.5, 1.5)
+    """Factor of the calf capsule radius; the foot sphere follows it (GenLoco +-50 %)."""
+    thigh_radius_ratio: tuple[float, float] = (0.75, 1.25)
+    """Thigh radius factor over the calf's (GenLoco U(0.75, 1.25))."""
+    link_mass: tuple[float, float] = (0.5, 1.5)
+    """Factor of the hip, thigh, calf and foot masses, one per link type, before x scale^3 (GenLoco +-50 %)."""
+    gains_with_mass: bool = True
+    """Kp and Kd x total mass / nominal total mass, as GenLoco sets them (a deployer's rule)."""
+    torque_with_mass: bool = False
+    """Torque limits x total mass / nominal total mass too (GenLoco keeps the motors: off)."""
+    min_base_clearance: float = 0.05
+    """A robot whose base box bottom would stand lower than this above the ground (m) at the default pose is
+    drawn again (it would touch the ground and end every episode)."""
+    limits_from_support: bool = False
+    """Draw each env's joint limits from the paper's training support at every reset (as train mode does without
+    geometry); False keeps the template's limits (GenLoco)."""
+
+
+@dataclass(frozen=True)
 class DomainRandCfg:
     """Domain randomisation (docs/concepts.md; paper appendix "Domain Randomization")."""
 
@@ -99,6 +146,8 @@ class DomainRandCfg:
     random_reset_pose: bool = True
     """Apply ``init_joint_scale`` at reset even when ``enabled`` is off, so evaluation envs start apart (else
     the N envs of an evaluation would be identical copies and their spread meaningless)."""
+    geometry: GeometryRandCfg = field(default_factory=GeometryRandCfg)
+    """Procedural geometry (off by default)."""
 
 
 @dataclass(frozen=True)
@@ -126,6 +175,9 @@ class ObsCfg:
     with o_t the newest (morfic before this field; runs recorded without it read as True)."""
     clip: float = 100.0
     """Observations are clipped to [-clip, clip]."""
+    body_tokens: bool = False
+    """Also give URMA's per-joint and per-foot groups ``joint_description``, ``foot_description`` and ``foot_state``
+    (:mod:`morfic_cli.envs.observations`; variant ``urma`` turns it on; CPU backend only)."""
 
 
 @dataclass(frozen=True)

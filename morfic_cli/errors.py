@@ -7,6 +7,7 @@ with ``MORFIC_DEBUG=1``.
 
 from __future__ import annotations
 
+import unicodedata
 from collections.abc import Iterable
 
 
@@ -41,3 +42,18 @@ class DescriptorError(MorficError):
 
 class UntrustedVariantError(MorficError):
     """A user variant (code) a stored run names that the user has not consented to import (docs/extending.md)."""
+
+
+def printable(text: object, *, keep: str = "") -> str:
+    r"""``text`` with every control or format character (C0, C1, DEL, bidi overrides, zero-width) escaped.
+
+    The one helper for text a bundle supplies (a manifest's meta and config, a trainer state's values, file names)
+    on its way to a terminal: ESC ``[2J`` prints as the characters ``[2J``, never as an escape sequence.
+    ``keep``: characters left as they are (the CLI keeps the newline in multi-line messages).
+    Example: ``printable("a]0;pwned")`` -> ``a]0;pwned`` as plain, visible text.
+    """
+    text = str(text)
+    if text.isprintable() and text.isascii():
+        return text
+    return "".join(c if c in keep or unicodedata.category(c) not in ("Cc", "Cf", "Cs", "Co", "Zl", "Zp")
+                   else ascii(c)[1:-1] for c in text)

@@ -149,6 +149,11 @@ RULES: dict[str, Rule] = {
     "env.rand.push_interval_s": number(0, lo_open=True),
     "env.rand.push_vel": number(0),
     "env.rand.max_latency_steps": integer(0, 100),
+    "env.rand.geometry.pool_size": integer(1, 100_000),
+    **{f"env.rand.geometry.{key}": ordered_pair(0.01, 100) for key in (
+        "scale", "base_size", "base_density", "hip_pos", "link_length", "thigh_length_ratio", "link_radius",
+        "thigh_radius_ratio", "link_mass")},
+    "env.rand.geometry.min_base_clearance": number(0),
     "env.obs.history_len": integer(1, 1000),
     "env.obs.clip": number(0, lo_open=True),
     "env.gait.frequency": number(0, lo_open=True),
@@ -205,10 +210,7 @@ def validate_train_cfg(cfg: Any) -> None:
     values = flatten(dataclasses.asdict(cfg))
     problems = config_problems(values)
     if not problems:
-        batch = cfg.env.num_envs * cfg.num_steps_per_env
-        if cfg.ppo.num_mini_batches > batch:
-            problems.append(f"ppo.num_mini_batches = {cfg.ppo.num_mini_batches}: must be at most the "
-                            f"{batch} transitions of an iteration (env.num_envs x num_steps_per_env)")
+        problems += _joint_problems(cfg)
         if cfg.env.sim.backend == "cpu":
             memory = memory_problem(cfg.env.num_envs, TRAIN_BYTES_PER_ENV, "env.num_envs")
             if memory:
@@ -216,6 +218,91 @@ def validate_train_cfg(cfg: Any) -> None:
     if problems:
         raise MorficError("invalid training config: " + "; ".join(problems) + ". Fix the --set values "
                           "(docs/training.md lists every key).")
+
+
+#: Most weights one network's layers may have: its input layer (``env.obs.history_len`` frames of the policy
+#: observation, plus 128 for z_priv and z_m) and its hidden layers (2^26, 256 MiB in float32; the paper's largest
+#: network, film-scaled's critic, has 1.4 M). A config asking for more is refused before anything is allocated.
+MAX_NETWORK_WEIGHTS = 1 << 26
+
+
+def network_weights(history_len: int, widths: Iterable[int]) -> int:
+    """Weights of an MLP of hidden ``widths`` whose input is ``history_len`` policy frames plus 128 latent values.
+
+    Example: ``network_weights(16, [512, 256, 128])`` = (16 x 48 + 128) x 512 + 512 x 256 + 256 x 128 = 622592.
+    """
+    from morfic_cli.envs.observations import POLICY_DIM
+
+    dims = [history_len * POLICY_DIM + 128, *widths]
+    return sum(a * b for a, b in zip(dims, dims[1:], strict=False))
+
+
+def _joint_problems(cfg: Any) -> list[str]:
+    """The rules that tie fields together: mini-batches, procedural geometry's backend, the networks' size.
+
+    The mini-batches fit in a batch, procedural geometry runs on the cpu backend, the networks' size is bounded.
+    """
+    problems = []
+    batch = cfg.env.num_envs * cfg.num_steps_per_env
+    if cfg.ppo.num_mini_batches > batch:
+        problems.append(f"ppo.num_mini_batches = {cfg.ppo.num_mini_batches}: must be at most the "
+                        f"{batch} transitions of an iteration (env.num_envs x num_steps_per_env)")
+    if cfg.env.rand.geometry.enabled and cfg.env.sim.backend != "cpu":
+        problems.append(f"env.rand.geometry.enabled = true with env.sim.backend = '{cfg.env.sim.backend}': procedural "
+                        "geometry runs on the cpu backend only (set env.sim.backend=cpu, no --device cuda, or "
+                        "env.rand.geometry.enabled=false)")
+    for key in ("actor_hidden_dims", "critic_hidden_dims"):
+        widths = getattr(cfg.model, key) or ()
+        weights = network_weights(cfg.env.obs.history_len, widths)
+        if weights > MAX_NETWORK_WEIGHTS:
+            problems.append(f"model.{key} = {_show(widths)} with env.obs.history_len = {cfg.env.obs.history_len}: "
+                            f"{weights} weights, more than the {MAX_NETWORK_WEIGHTS} a network may have")
+    return problems
+
+
+def stored_cfg_problem(doc: Any) -> str | None:
+    """What is wrong with the training config a stored checkpoint records, or None (pure; imports no variant).
+
+    The same rules as a training config (:data:`RULES`, finiteness, the joint rules) after the config is rebuilt
+    with its types (:func:`~morfic_cli.rl.config.train_cfg_from_dict`: unknown keys, wrong types); not the memory
+    estimate (a command on a stored run builds its own envs). A bundle may come from anyone, so ``store import``
+    and every load of a run (:func:`check_stored_cfg`) check it before anything is built.
+    """
+    import dataclasses
+
+    from morfic_cli.rl.config import train_cfg_from_dict
+
+    if not isinstance(doc, dict):
+        return f"its config is {type(doc).__name__}, not an object"
+    try:
+        cfg = train_cfg_from_dict(doc)
+    except MorficError as exc:
+        return str(exc).rstrip(".")
+    except (TypeError, ValueError, AttributeError, KeyError, RecursionError) as exc:  # a type _coerce did not foresee
+        return f"its config does not fit the training config's types ({type(exc).__name__})"
+    problems = config_problems(flatten(dataclasses.asdict(cfg)))
+    if not problems:
+        problems = _joint_problems(cfg)
+    return "; ".join(problems) or None
+
+
+def check_stored_cfg(doc: Any, source: str) -> Any:
+    """The :class:`~morfic_cli.rl.config.TrainCfg` a stored run records, checked (:func:`stored_cfg_problem`).
+
+    ``source`` names the run (``runs/NAME``, ``runs/NAME@N`` or an id) in the message.
+
+    Raises:
+        MorficError: ``Error: run runs/x has an invalid stored config: model.actor_hidden_dims = [-5]: must be ...``.
+    """
+    from morfic_cli.errors import printable
+    from morfic_cli.rl.config import train_cfg_from_dict
+
+    problem = stored_cfg_problem(doc)
+    if problem is not None:
+        raise MorficError(f"run {printable(source)} has an invalid stored config: {printable(problem)}. morfic train "
+                          "never writes one: the run comes from a hand-made or edited bundle; drop it, or import "
+                          "it again from a bundle of the store that trained it.")
+    return train_cfg_from_dict(doc)
 
 
 def available_memory() -> int | None:

@@ -226,3 +226,53 @@ def member_header(name: str, size: int) -> bytes:
     info = tarfile.TarInfo(name)
     info.size = size
     return info.tobuf(tarfile.PAX_FORMAT)
+
+
+# ---------------------------------------------------------------------------------------------- runs (issue 53)
+
+def run_config(variant: str = "film", **changes: Any) -> dict:
+    """A run's stored training config (the smoke preset), with dotted ``changes`` (``{"env.obs.history_len": -3}``;
+    the value ``DROP`` removes a key)."""
+    import copy
+
+    from morfic_cli.rl.config import smoke_preset, train_cfg_to_dict
+
+    doc = copy.deepcopy(train_cfg_to_dict(smoke_preset("film")))
+    doc["variant"] = variant
+    for key, value in changes.items():
+        *parents, leaf = key.split(".")
+        node = doc
+        for part in parents:
+            node = node[part]
+        if value is DROP:
+            node.pop(leaf)
+        else:
+            node[leaf] = value
+    return doc
+
+
+DROP = object()
+
+
+def trainer_state(num_envs: int = 2, **changes: Any) -> dict:
+    """A trainer state of the structure ``morfic train`` writes (tiny tensors, ``num_envs`` rows), with top-level
+    ``changes``; what :func:`morfic_cli.rl.trainer_state.trainer_state_problems` accepts."""
+    import torch
+
+    from morfic_cli.envs.locomotion import LocomotionEnv
+
+    n = num_envs
+    rows = {"a": torch.zeros(n), "b": torch.zeros(n, 3)}
+    state = {
+        "iteration": 1, "learning_rate": 1e-3, "torch_rng": torch.get_rng_state(),
+        "alg": {"optimizer_state_dict": {"state": {}, "param_groups": [{"lr": 1e-3, "params": []}]}},
+        "env": {"num_envs": n, "mode": "train", "tensors": {k: torch.zeros(n) for k in LocomotionEnv._TENSORS},
+                "episode_sums": dict(rows), "obs": dict(rows), "params": dict(rows), "backend": dict(rows),
+                "counters": {"common_step_counter": 8, "nonfinite_resets": 0, "tracking_sum": 0.0,
+                             "tracking_count": 0},
+                "command_vx": (-1.0, 1.0), "generator": torch.Generator().manual_seed(0).get_state()},
+        "logger": {"rewbuffer": [1.5], "lenbuffer": [20.0], "cur_reward_sum": torch.zeros(n),
+                   "cur_episode_length": torch.zeros(n), "tot_timesteps": 64, "tot_time": 0.1, "wall_time_s": 1.0},
+    }
+    state.update(changes)
+    return state

@@ -40,7 +40,7 @@ from morfic_cli.cli import (
     train,
     trust,
 )
-from morfic_cli.errors import MorficError
+from morfic_cli.errors import MorficError, printable
 from morfic_cli.threads import configure_openmp
 
 app = typer.Typer(
@@ -142,7 +142,7 @@ typer.core.TyperOption.display_type_rich = _flag_type  # type: ignore[method-ass
 
 
 def _fail(message: str, code: int = 1) -> None:
-    sys.stderr.write(f"Error: {message}\n")
+    sys.stderr.write(f"Error: {printable(message, keep=chr(10))}\n")  # a bundle's text cannot drive the terminal
     sys.stderr.flush()
     sys.exit(code)
 

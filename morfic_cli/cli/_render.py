@@ -14,6 +14,7 @@ from rich.table import Table
 from rich.text import Text
 
 from morfic_cli.cli._options import OutputFormat
+from morfic_cli.errors import printable
 
 #: Human messages (progress, "wrote artifact ...") go here, never to stdout.
 err_console = Console(stderr=True, soft_wrap=True)  # messages are not hard-wrapped; the terminal wraps them
@@ -59,13 +60,14 @@ WHOLE_KEYS = frozenset({"ref", "id", "run", "name", "robot", "mode", "variant", 
 
 
 def _cell(value: Any, col: Column) -> str:
+    """A table cell's text; control characters escaped (:func:`~morfic_cli.errors.printable`: a bundle's meta)."""
     if col.fmt is not None:
-        return col.fmt(value)
+        return printable(col.fmt(value))
     if value is None:
         return "-"
     if isinstance(value, float):
         return f"{value:.3f}" if math.isfinite(value) else str(value)
-    return str(value)
+    return printable(value)
 
 
 def emit_rows(
@@ -221,12 +223,12 @@ def emit_object(obj: Any, fmt: OutputFormat, title: str | None = None) -> None:
         table.add_column("key", style="bold")
         table.add_column("value", overflow="fold")
         for key, value in flatten(obj):
-            table.add_row(Text(key), Text(_plain(value)))
+            table.add_row(Text(printable(key)), Text(printable(_plain(value))))
         out_console.print(table)
         return
     sys.stdout.write(json.dumps(obj, indent=2, default=str) + "\n")
 
 
 def info(message: str) -> None:
-    """A human message on stderr."""
-    err_console.print(message)
+    """A human message on stderr (control characters but newlines escaped: :func:`~morfic_cli.errors.printable`)."""
+    err_console.print(printable(message, keep="\n"))

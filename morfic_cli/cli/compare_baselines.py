@@ -14,6 +14,7 @@ _TITLES = {
     "calibration": "critic calibration (mean over seeds)",
     "fixed_rollout": "fixed-rollout diagnostic (critic variants on one frozen actor's rollouts)",
     "compute": "training compute",
+    "verdicts": "the paper's claims: each primary comparison, Holm-corrected (docs/report.md)",
 }
 
 
@@ -28,6 +29,14 @@ def _pm(key: str, d: int = 3):
 def _columns(table: str, with_paper: bool) -> list[Column]:
     head = [Column("preset", "preset"), Column("variant", "variant")]
     command = Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:g}", justify="right")
+    if table == "verdicts":
+        return [Column("claim", "claim"), command, Column("verdict", "verdict"), Column("unit", "on"),
+                Column("comparison", "comparison"), _pm("effect"), _pm("lo"), _pm("hi"),
+                Column("n_a", "n a", justify="right"), Column("n_b", "n b", justify="right"),
+                Column("p", "p", fmt=lambda v: _n(v, 4), justify="right"),
+                Column("p_holm", "Holm p", fmt=lambda v: _n(v, 4), justify="right"), Column("outcome", "outcome"),
+                Column("seeds_needed", "seeds/side for 80 %", fmt=lambda v: "-" if v is None else
+                       (f">{v - 1}" if v > 1000 else str(v)), justify="right")]
     if table == "transfer":
         cols = [*head, Column("robot", "robot"), Column("mode", "mode"), command,
                 Column("n_seeds", "seeds", justify="right"), Column("cell", "v_x ± σ / S", justify="right"),
@@ -77,7 +86,9 @@ def compare_baselines(
     """Side-by-side tables over variants and seeds (mean ± std over seeds), from the store only.
 
     Runs are grouped by preset and variant; for each robot the stored evaluations (zero-shot transfer), critic
-    diagnoses and fixed-rollout diagnoses of their checkpoints are aggregated over seeds, plus training compute.
+    diagnoses and fixed-rollout diagnoses of their checkpoints are aggregated over seeds, plus training compute,
+    and the paper's claims' comparisons (Welch / t-contrast, Holm-corrected, with the seeds each undecided one
+    would need).
     --with-paper adds the paper's numbers for the same variant and robot (paper_* columns; empty where the paper
     prints none). json/csv print every table's rows in one list, with a "table" column. The comparison is stored
     as a table artifact (ref tables/compare-baselines).

@@ -19,6 +19,7 @@ from morfic_cli.cli._options import (
 )
 from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
+from morfic_cli.cli.trust import note_skipped
 from morfic_cli.errors import MorficError
 from morfic_cli.validation import check_args
 
@@ -77,8 +78,8 @@ def critic_study(
     critic is built fresh and regressed on the Monte-Carlo returns of the training samples with the same optimiser,
     epochs and batches, --seeds times, then scored like `morfic diagnose` (EV, |NVB|, NVE, ASA, Flip, CosGrad on
     the frozen actor) on held-out training envs ('train') and on every robot. The table is each variant's mean
-    with a 95 % bootstrap interval over its fits; the verdicts of claims (a) and (c) come from intervals
-    (docs/metrics.md "Critic study"). Stores ref diagnoses/critic-study.
+    with a 95 % t interval over its fits; the verdicts of claims (a) and (c) come from Welch and t-contrast tests,
+    Holm-corrected per claim (docs/report.md "How a verdict is read"). Stores ref diagnoses/critic-study.
 
     Example: morfic critic-study --actor runs/film-cpu-s0 --seeds 5
     Example: morfic critic-study --variants film,concat --seeds 2 --robots aliengo --command-vx 1.0 --epochs 2
@@ -106,7 +107,7 @@ def critic_study(
                    stride=stride, epochs=epochs, minibatch=minibatch, trunc_eps=trunc_eps)
     check_cfg(cfg)
     st = Store(store)
-    spec = actor or default_actor(st)
+    spec = actor or default_actor(st, note_skipped)
     trained = load_trained(st, spec)  # a bad ref fails here, before any work
     with StepBar("critic-study", 0, quiet) as bar:
         result = run_study(st, spec, cfg, actor=trained, progress=StudyProgress(phase=bar.phase, advance=bar.step))
@@ -140,7 +141,7 @@ def critic_study(
             Column("n", "fits", justify="right"),
         ],
         title=f"critic study (actor {result.rows[0]['actor'] if result.rows else spec})",
-        caption="mean over fit seeds [95 % bootstrap interval]; 'train' = held-out envs of the training "
+        caption="mean over fit seeds [95 % t interval]; 'train' = held-out envs of the training "
         "distribution; higher is better: EV, CosGrad; lower: Flip",
     )
     if not quiet:

@@ -22,6 +22,7 @@ from morfic_cli.cli._options import (
 )
 from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
+from morfic_cli.cli.trust import note_skipped
 from morfic_cli.errors import MorficError
 from morfic_cli.validation import check_args
 
@@ -179,7 +180,7 @@ def _fixed(
 ) -> None:
     from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS, fixed_rollout, load_models
 
-    models = load_models(st, actor, critics, cfg)  # defaults, bad refs, incompatible critics fail here
+    models = load_models(st, actor, critics, cfg, on_skip=note_skipped)  # defaults, bad refs, incompatible critics fail
     with StepBar("diagnose", cfg.steps, quiet) as bar:
         result = fixed_rollout(st, robot, models, cfg, on_rollout_start=_describe(bar), on_step=bar.step)
     _write_out(out, "fixed_rollout.csv", result.rows, FIXED_ROLLOUT_COLUMNS)

@@ -114,10 +114,14 @@ def evaluate(
         result = run_eval(st, run, cfg, on_rollout_start=lambda r, m, vx: bar.describe(f"{r} {m} vx={vx:g}"),
                           on_step=bar.step,
                           keep_models=4 if video else 0, trained=trained)
-    if video:
-        from morfic_cli.evaluation.media import store_videos
+        if video:  # minutes in software GL: a phase of its own, counted in frames
+            from morfic_cli.evaluation.media import store_videos, video_frames
 
-        for path in store_videos(st, result, out):
+            bar.phase("videos", video_frames(result))
+            videos = store_videos(st, result, out, on_video=lambda name: bar.describe(f"videos {name}"),
+                                  on_frame=bar.step)
+    if video:
+        for path in videos:
             info(f"video: {path}")
     if out is not None:
         from morfic_cli.evaluation.protocol import EVAL_COLUMNS

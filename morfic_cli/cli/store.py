@@ -11,7 +11,7 @@ from rich.markup import escape
 
 from morfic_cli.cli._options import DEFAULT_STORE, FormatOpt, OutputFormat, StoreOpt
 from morfic_cli.cli._render import Column, emit_object, emit_rows, err_console, info
-from morfic_cli.errors import MorficError, StoreError
+from morfic_cli.errors import MorficError, StoreError, printable
 from morfic_cli.store import MANIFEST_KINDS, Store
 from morfic_cli.store.transfer import appends_results, export_path
 from morfic_cli.validation import check_args
@@ -123,19 +123,23 @@ def get(
     files: Annotated[
         Optional[list[str]], typer.Option("--file", help="Only this file of the artifact (repeatable).")
     ] = None,
+    force: Annotated[bool, typer.Option("--force", help="Replace files that exist in DIR.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
     """Copy an artifact's files out of the store into DIR, byte for byte, under readable names; print their paths.
 
     Files keep their names in the artifact (model.pt, eval.csv, table.csv, policy.onnx); a rollout's
-    rollout.mcap is named after its robot, mode and command (go1-descriptor-vx2.0.mcap).
+    rollout.mcap is named after its robot, mode and command (go1-descriptor-vx2.0.mcap). A file that exists in DIR
+    is kept (nothing is written) unless --force. Only plain names are written (no hidden part such as .config/, no
+    .py or .pth; docs/concepts.md), and never two files to one path, so no artifact can plant configuration or
+    code, whatever DIR is.
 
     Example: morfic store get runs/film-cpu-s0 --file model.pt --out ckpt/
     """
     from morfic_cli.store.get import get_files
 
-    got = get_files(Store(store), spec, out, files)
+    got = get_files(Store(store), spec, out, files, force=force)
     rows = [{"file": g.name, "path": str(g.path), "id": g.id, "size": g.size} for g in got]
     columns = [Column("file"), Column("path", overflow="fold"), Column("id", fmt=_short_id),
                Column("size", fmt=human_size, justify="right")]
@@ -150,7 +154,7 @@ def verify(store: StoreOpt = DEFAULT_STORE) -> None:
     """
     report = Store(store).verify()
     for problem in report.problems:
-        err_console.print(f"  {problem}", markup=False, highlight=False, soft_wrap=True)
+        err_console.print(f"  {printable(problem)}", markup=False, highlight=False, soft_wrap=True)
     if not report.ok:
         raise StoreError(f"{len(report.problems)} problem(s) found in store {store} (listed above); restore "
                          "damaged objects from an export (`morfic store import`) or drop what no longer "
@@ -289,7 +293,7 @@ def import_(
         except MorficError as exc:
             if len(paths) == 1 or os.environ.get("MORFIC_DEBUG", "") not in ("", "0"):
                 raise
-            err_console.print(f"Error: {exc}", markup=False, highlight=False, soft_wrap=True)
+            err_console.print(f"Error: {printable(exc, keep=chr(10))}", markup=False, highlight=False, soft_wrap=True)
             failed.append(path.name)
             continue
         rows += [{"bundle": path.name, "ref": name, "status": status} for name, status in report.refs.items()]

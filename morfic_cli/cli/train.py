@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import time
 from pathlib import Path
 from typing import Annotated
 
@@ -80,6 +81,7 @@ def train(
     Example: morfic train --variant film --preset cpu --seed 0
     Your own critic: morfic train --variant my_lab.critics:GatedCritic (docs/extending.md)
     """
+    started = time.perf_counter()  # the training clock counts from here: imports and the env's construction too
     check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None,
                trust=trust_variant)
     named = [variant] if variant is not None and resume is None else []
@@ -104,6 +106,7 @@ def train(
         cfg = apply_overrides(base, list(overrides or []))
         run = new_run(st, cfg, name or run_name(cfg.variant, cfg.seed, cfg.preset), device.value, live=live)
 
+    run.clock_from = started
     cfg = run.cfg
     quiet = quiet or run.dist.rank != 0  # torchrun: one progress bar, rank 0's
     if named and run.dist.rank == 0:
@@ -150,7 +153,7 @@ def train(
         "iteration": last.iteration,
         "max_iterations": cfg.max_iterations,
         "env_steps": int(row.get("env_steps", 0)),
-        "wall_time_s": round(float(row.get("wall_time_s", 0.0)), 1),
+        "wall_time_s": round(run.wall_time_s, 1),  # the training clock, the last checkpoint included
         "mean_reward": row.get("mean_reward"),
         "explained_variance": row.get("explained_variance"),
         "interrupted": run.interrupted,

@@ -5,10 +5,11 @@ from __future__ import annotations
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 
 from morfic_cli.cli._options import FormatOpt, OutputFormat
 from morfic_cli.cli._render import Column, emit_rows, info
-from morfic_cli.errors import MorficError
+from morfic_cli.errors import MorficError, printable
 
 
 def trust(
@@ -26,13 +27,20 @@ def trust(
     A run records its critic variant, and a run can come from anyone's bundle, so morfic imports a user variant
     (your own critic class) only when you consented to that exact name: with --trust-variant on the command, or
     once here. The allow-list is a file in your config folder ($XDG_CONFIG_HOME/morfic/trusted-variants, else
-    ~/.config/morfic/trusted-variants), never in a store: no bundle can add to it. Trusting imports nothing;
+    ~/.config/morfic/trusted-variants), never in a store, signed with a key of yours beside it (.trust-key): a list
+    morfic trust did not write (a bundle's file, an edit by hand) trusts nothing. Trusting imports nothing;
     `morfic train --variant` adds the variant it trains. Stock variants need no trust.
 
     Example: morfic trust my_lab.critics:GatedCritic
     Example: morfic trust --remove my_lab.critics:GatedCritic
     """
-    from morfic_cli.rl.variants import STOCK, add_to_allow_list, allow_list, allow_list_path, remove_from_allow_list
+    from morfic_cli.rl.variants import (
+        STOCK,
+        add_to_allow_list,
+        allow_list_path,
+        read_allow_list,
+        remove_from_allow_list,
+    )
 
     names = list(names or [])
     path = allow_list_path()
@@ -41,8 +49,13 @@ def trust(
     if remove and not names:
         raise MorficError("--remove needs the variants to remove, e.g. morfic trust --remove my_lab.critics:Critic.")
     if not names:
-        trusted = allow_list()
+        trusted, ignored = read_allow_list()
         info(f"allow-list {path}: {len(trusted)} trusted user variant(s)")
+        if ignored:
+            shown = printable(", ".join(ignored[:5])) + (f" and {len(ignored) - 5} more" if len(ignored) > 5 else "")
+            info(f"ignored: {shown}: the list is not signed by `morfic trust` (a file from elsewhere, e.g. fetched by "
+                 "`morfic store get`, or edited by hand), so it trusts nothing; `morfic trust NAME` for each you "
+                 "trust writes it again, signed.")
         emit_rows([{"variant": n} for n in trusted], fmt, columns=[Column("variant", "trusted user variant")])
         return
     try:
@@ -88,3 +101,8 @@ def remember_variants(names: list[str], quiet: bool = False) -> None:
     if added and not quiet:
         info(f"trusted {', '.join(added)} for later commands on its runs (added to {allow_list_path()}; `morfic "
              f"trust --remove {added[0]}` undoes it).")
+
+
+def note_skipped(ref: str, why: str) -> None:
+    """The note when a default choice of runs leaves ``ref`` out (``diagnostics.fixed_rollout.newest_runs``)."""
+    info(f"note: {escape(printable(ref))} left out of the default runs: {escape(printable(why))}")

@@ -14,9 +14,10 @@ Store: one ``diagnosis`` manifest per call (ref ``diagnoses/fixed-rollout/<robot
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -74,8 +75,35 @@ class _MeanCritic(torch.nn.Module):
         return torch.full((obs.batch_size[0], 1), self.value, dtype=torch.float64)
 
 
-def newest_runs(store: Store) -> dict[str, str]:
-    """Variant -> ref (``runs/NAME``) of the newest checkpoint of that variant in the store."""
+def unusable_run(manifest: Any) -> str | None:
+    """Why a run's checkpoint cannot be a default pick, or None; nothing is imported.
+
+    Its stored config is invalid (:func:`~morfic_cli.validation.stored_cfg_problem`), or it needs a user variant that
+    is not well-formed or not trusted here (:mod:`morfic_cli.rl.variants`).
+    """
+    from morfic_cli.errors import printable
+    from morfic_cli.rl.variants import check_variant_name, is_trusted
+    from morfic_cli.validation import stored_cfg_problem
+
+    problem = stored_cfg_problem(manifest.config)
+    if problem is not None:
+        return f"its stored config is invalid ({printable(problem)})"
+    variant = manifest.config.get("variant", "film")
+    try:
+        check_variant_name(variant)
+    except MorficError as exc:
+        return printable(str(exc).rstrip("."))
+    if not is_trusted(variant):
+        return f"it needs the user variant {variant}, not trusted here (--trust-variant {variant} names it)"
+    return None
+
+
+def newest_runs(store: Store, on_skip: Callable[[str, str], None] | None = None) -> dict[str, str]:
+    """Variant -> ref (``runs/NAME``) of the newest usable checkpoint of that variant in the store.
+
+    A run :func:`unusable_run` refuses is left out, and ``on_skip(ref, why)`` told: one bad run (a hand-made
+    bundle's) does not break every command's default choice.
+    """
     from morfic_cli.runs import RUNS_PREFIX
 
     newest: dict[str, tuple[str, str]] = {}
@@ -84,20 +112,25 @@ def newest_runs(store: Store) -> dict[str, str]:
             continue
         manifest = store.read_manifest(name)
         variant = manifest.meta.get("variant")
-        if manifest.kind != "checkpoint" or "model.pt" not in manifest.files or not variant:
+        if manifest.kind != "checkpoint" or "model.pt" not in manifest.files or not isinstance(variant, str):
+            continue
+        why = unusable_run(manifest)
+        if why is not None:
+            if on_skip is not None:
+                on_skip(name, why)
             continue
         if variant not in newest or manifest.created > newest[variant][0]:
             newest[variant] = (manifest.created, name)
     return {v: ref for v, (_, ref) in newest.items()}
 
 
-def default_actor(store: Store) -> str:
-    """The newest ``film`` run.
+def default_actor(store: Store, on_skip: Callable[[str, str], None] | None = None) -> str:
+    """The newest usable ``film`` run (``on_skip``: see :func:`newest_runs`).
 
     Raises:
         MorficError: The store has none.
     """
-    runs = newest_runs(store)
+    runs = newest_runs(store, on_skip)
     if DEFAULT_ACTOR_VARIANT not in runs:
         have = ", ".join(sorted(runs)) or "none"
         raise MorficError(
@@ -108,18 +141,20 @@ def default_actor(store: Store) -> str:
     return runs[DEFAULT_ACTOR_VARIANT]
 
 
-def default_critics(store: Store) -> list[str]:
-    """The newest run of each variant, in the paper's variant order."""
+def default_critics(store: Store, on_skip: Callable[[str, str], None] | None = None) -> list[str]:
+    """The newest usable run of each variant, in the paper's variant order (``on_skip``: see :func:`newest_runs`)."""
     from morfic_cli.rl.variants import VARIANTS
 
-    runs = newest_runs(store)
+    runs = newest_runs(store, on_skip)
     return [runs[v] for v in VARIANTS if v in runs] + [r for v, r in sorted(runs.items()) if v not in VARIANTS]
 
 
 def check_compatible(actor: TrainedModels, critic: TrainedModels, label: str) -> None:
     """Refuse a critic that was trained on other returns or other inputs than the actor's run.
 
-    Compared: the discount, the reward config, the (noise-free) observation config, and the control step.
+    Compared: the discount, the reward config, the (noise-free) observation config, and the control step. Whether
+    the env also gives URMA's token groups (``env.obs.body_tokens``) does not count: :func:`load_models` has the
+    actor's rollout record them when a critic reads them.
 
     Raises:
         MorficError: They differ; the message names what.
@@ -128,7 +163,7 @@ def check_compatible(actor: TrainedModels, critic: TrainedModels, label: str) ->
     pairs = {
         "ppo.gamma": (a.ppo.gamma, c.ppo.gamma),
         "env.rewards": (a.env.rewards, c.env.rewards),
-        "env.obs": (eval_env_cfg(a.env).obs, eval_env_cfg(c.env).obs),
+        "env.obs": tuple(dataclasses.replace(eval_env_cfg(x.env).obs, body_tokens=False) for x in (a, c)),
         "env.decimation": (a.env.decimation, c.env.decimation),
         "env.sim.physics_dt": (a.env.sim.physics_dt, c.env.sim.physics_dt),
     }
@@ -152,7 +187,8 @@ class FixedRolloutModels:
 
 
 def load_models(
-    store: Store, actor_spec: str | None, critic_specs: Sequence[str] | None, cfg: DiagnoseCfg
+    store: Store, actor_spec: str | None, critic_specs: Sequence[str] | None, cfg: DiagnoseCfg,
+    on_skip: Callable[[str, str], None] | None = None,
 ) -> FixedRolloutModels:
     """Resolve the defaults, load the actor and the critics, and check them against each other and ``cfg``.
 
@@ -161,6 +197,7 @@ def load_models(
         actor_spec: The actor's checkpoint; None = the newest ``film`` run.
         critic_specs: The critics' checkpoints; None or empty = the newest run of each variant.
         cfg: Rollout and metric settings (its steps are checked against the actor's discount).
+        on_skip: Told ``(ref, why)`` of each run a default choice left out (:func:`newest_runs`).
 
     Raises:
         MorficError: No default actor, a critic named twice, a spec that is not a checkpoint, an incompatible
@@ -168,14 +205,23 @@ def load_models(
     """
     from morfic_cli.rl.runner import load_trained
 
-    actor_spec = actor_spec or default_actor(store)
-    specs = list(critic_specs or default_critics(store))
+    skipped: dict[str, str] = {}
+    actor_spec = actor_spec or default_actor(store, skipped.__setitem__)
+    specs = list(critic_specs or default_critics(store, skipped.__setitem__))
+    for ref, why in skipped.items():  # each bad run once, though both defaults saw it
+        if on_skip is not None:
+            on_skip(ref, why)
     if len(set(specs)) != len(specs):
         raise MorficError(f"--critics names a run twice: {','.join(specs)}; give each critic once.")
     actor = load_trained(store, actor_spec)
     critics = [load_trained(store, s) for s in specs]
     for spec, critic in zip(specs, critics, strict=True):
         check_compatible(actor, critic, spec)
+    if any(c.cfg.env.obs.body_tokens for c in critics) and not actor.cfg.env.obs.body_tokens:
+        # a urma critic reads the token groups: the actor's rollout records them too (same physics, more groups)
+        env = actor.cfg.env
+        actor = dataclasses.replace(actor, cfg=dataclasses.replace(actor.cfg, env=dataclasses.replace(
+            env, obs=dataclasses.replace(env.obs, body_tokens=True))))
     check_horizon(actor.cfg.ppo.gamma, cfg)
     return FixedRolloutModels(actor_spec, actor, specs, critics)
 

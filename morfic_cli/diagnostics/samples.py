@@ -37,7 +37,15 @@ if TYPE_CHECKING:
 
 OBS_GROUPS: tuple[str, ...] = ("history", "critic", "privileged", "morphology")
 """Observation groups a diagnostic rollout keeps: the actor's (history, morphology) and every critic's (critic =
-clean history, privileged, morphology)."""
+clean history, privileged, morphology); :func:`kept_groups` adds URMA's token groups where the env gives them."""
+
+
+def kept_groups(env_cfg: Any) -> tuple[str, ...]:
+    """The groups a rollout in this env config keeps: :data:`OBS_GROUPS`, plus URMA's token groups
+    (:data:`~morfic_cli.envs.observations.BODY_TOKEN_GROUPS`) when ``env_cfg.obs.body_tokens``."""
+    from morfic_cli.envs.observations import BODY_TOKEN_GROUPS
+
+    return OBS_GROUPS + (BODY_TOKEN_GROUPS if env_cfg.obs.body_tokens else ())
 
 ROLLOUT_PURPOSE = "diagnose"
 """Value of ``config["purpose"]`` of diagnostic rollout manifests (eval rollouts have none)."""
@@ -116,8 +124,9 @@ class Samples:
     reused: bool
 
 
-def rollout_config(robot: str, cfg: DiagnoseCfg) -> dict[str, Any]:
-    """The config of a diagnostic rollout manifest: everything that changes the samples."""
+def rollout_config(robot: str, cfg: DiagnoseCfg, obs_groups: tuple[str, ...] = OBS_GROUPS) -> dict[str, Any]:
+    """The config of a diagnostic rollout manifest: everything that changes the samples (``obs_groups``: what it
+    keeps, :func:`kept_groups`)."""
     return {
         "purpose": ROLLOUT_PURPOSE,
         "robot": robot,
@@ -127,7 +136,7 @@ def rollout_config(robot: str, cfg: DiagnoseCfg) -> dict[str, Any]:
         "steps": cfg.steps,
         "seed": cfg.seed,
         "actions": "sample",
-        "obs_groups": list(OBS_GROUPS),
+        "obs_groups": list(obs_groups),
         **({"batch": list(cfg.batch)} if batched(robot, cfg) else {}),
     }
 
@@ -222,7 +231,7 @@ def collect_samples(
         cfg: Rollout settings (mode, command, envs, steps, seed, batch).
         on_step: Progress callback per policy step (called ``steps`` times at once for a reused rollout).
     """
-    config = rollout_config(robot, cfg)
+    config = rollout_config(robot, cfg, kept_groups(trained.cfg.env))
     existing = find_rollout(store, trained.checkpoint_id, config)
     if existing is not None:
         _reused(cfg, on_step)
@@ -246,7 +255,7 @@ def _diagnostic_rollouts(trained: TrainedModels, cfg: DiagnoseCfg, robots: tuple
 
     return run_rollouts(trained.actor, trained.critic, trained.cfg.env, robots=robots, mode=cfg.mode,
                         command_vx=cfg.command_vx, num_envs=cfg.num_envs, steps=cfg.steps, seed=cfg.seed,
-                        on_step=on_step, keep_obs=OBS_GROUPS, sample_actions=True)
+                        on_step=on_step, keep_obs=kept_groups(trained.cfg.env), sample_actions=True)
 
 
 def collect_batch(
@@ -270,7 +279,7 @@ def collect_batch(
     Returns:
         Robot -> its samples, in the order of ``cfg.batch``.
     """
-    configs = {robot: rollout_config(robot, cfg) for robot in cfg.batch}
+    configs = {robot: rollout_config(robot, cfg, kept_groups(trained.cfg.env)) for robot in cfg.batch}
     found = {robot: find_rollout(store, trained.checkpoint_id, c) for robot, c in configs.items()}
     if all(found.values()):
         _reused(cfg, on_step)

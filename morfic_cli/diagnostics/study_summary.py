@@ -1,21 +1,21 @@
 """The critic study's table and verdicts: per-cell intervals over fit seeds, claims (a) and (c) with the actor fixed.
 
 Pure functions over the rows of ``critic_study.csv`` (:data:`~morfic_cli.diagnostics.critic_study.STUDY_COLUMNS`).
-Intervals and verdicts use :mod:`morfic_cli.report.stats` (95 % percentile bootstrap over fit seeds, the verdict
-read from the interval; docs/report.md "How a verdict is read"):
+Intervals, tests and verdicts use :mod:`morfic_cli.report.stats` with the rule of the report's claims
+(docs/report.md "How a verdict is read"; the unit of replication here is the fit seed):
 
-- a **cell** is one metric of one variant on one robot at one command: its mean over fit seeds with an interval;
-- claim **(a)** per robot: the effect mean EV(multiplicative critics) - mean EV(additive critics)
-  (:func:`~morfic_cli.report.stats.group_effect`, each variant's seed mean weighing the same), higher is the claim;
+- a **cell** is one metric of one variant on one robot at one command: its mean over fit seeds with a 95 % t
+  interval (:func:`~morfic_cli.report.stats.mean_interval`);
+- claim **(a)** per robot: the t-contrast mean EV(multiplicative critics) - mean EV(additive critics)
+  (:func:`~morfic_cli.report.stats.group_effect`, each variant's seed mean weighing the same), claimed > 0;
   a user's critic (``multiplicative`` None) is in neither group;
-- claim **(c)** per robot: film's Flip against every other critic's (other - film, the claim: > 0) and its CosGrad
-  (film - other, the claim: > 0); it holds on a robot when every one of those comparisons holds, does not hold when
-  one of them is reversed, else cannot tell.
+- claim **(c)** per robot and other critic: Welch on Flip (other - film, claimed > 0) and on CosGrad (film - other,
+  claimed > 0).
 
-A claim over several robots: ``holds`` when it holds on every robot, ``holds partly`` when it holds on some and is
-reversed on none, ``mixed`` when it holds on some and is reversed on others, ``does not hold`` when it holds on none
-and is reversed on at least one, else ``cannot tell`` (the rule of :mod:`morfic_cli.report.claims`, with ``mixed``
-split out of ``holds partly``).
+A claim's comparisons (over its robots) are Holm-corrected together; a comparison's ``verdict`` is read from its
+adjusted p (:func:`~morfic_cli.report.stats.outcome`), a robot's and the claim's from those outcomes with
+:func:`~morfic_cli.report.stats.decide` (holds / holds partly / mixed / partly reversed / does not hold / cannot
+tell). A robot without rows is left out of the claim.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ OOD_ROBOTS: tuple[str, ...] = ("aliengo", "mini_cheetah", "anymal_c")
 FIXED_ROBOTS: tuple[str, ...] = ("aliengo", "mini_cheetah")
 """Claim (c)'s robots (paper Table "causal advantage")."""
 FILM = "film"
-PARTLY, MIXED = "holds partly", "mixed"
+PARTLY, MIXED = stats.PARTLY, stats.MIXED
+_WORD = {stats.FOR: stats.HOLDS, stats.AGAINST: stats.NOT, stats.NONE: stats.CANNOT}
 
 
 def group_of(value: Any) -> bool | None:
@@ -52,7 +53,7 @@ def _values(rows: Sequence[dict[str, Any]], metric: str, **match: Any) -> list[f
 
 
 def cell_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Mean and 95 % bootstrap interval over fit seeds of every (command, robot, variant, metric).
+    """Mean and 95 % t interval over fit seeds of every (command, robot, variant, metric).
 
     Returns:
         Rows ``command_vx, robot, variant, multiplicative, metric, mean, lo, hi, n`` (NaN ends for one seed).
@@ -63,33 +64,24 @@ def cell_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     for command, robot, variant in keys:
         for metric in SUMMARY_METRICS:
             vals = _values(rows, metric, command_vx=command, robot=robot, variant=variant)
-            mean, lo, hi = stats.bootstrap_statistic([vals], lambda m: float(m[0]))
+            mean, lo, hi = stats.mean_interval(vals)
             out.append({"command_vx": command, "robot": robot, "variant": variant, "multiplicative": mult[variant],
                         "metric": metric, "mean": mean, "lo": lo, "hi": hi, "n": len(vals)})
     return out
 
 
-def combine(verdicts: Sequence[str]) -> str:
-    """One verdict over robots from each robot's (module docstring)."""
-    holds, reversed_ = verdicts.count(stats.HOLDS), verdicts.count(stats.NOT)
-    if verdicts and holds == len(verdicts):
-        return stats.HOLDS
-    if holds and reversed_:
-        return MIXED
-    if holds:
-        return PARTLY
-    if reversed_:
-        return stats.NOT
-    return stats.CANNOT
+def _judge(effects: Sequence[stats.Effect]) -> tuple[list[float], list[str], str]:
+    """Holm over a claim's effects (each claimed > 0): (adjusted p's, each comparison's verdict, the claim's)."""
+    adjusted = stats.holm([e.p for e in effects])
+    outcomes = [int(stats.outcome(e.estimate, p)) if e.has_test else stats.NONE
+                for e, p in zip(effects, adjusted, strict=True)]
+    return [float(p) for p in adjusted], [_WORD[o] for o in outcomes], stats.decide(outcomes)
 
 
-def _all_pairs(verdicts: Sequence[str]) -> str:
-    """A robot's verdict of claim (c) from its pairwise comparisons."""
-    if verdicts and all(v == stats.HOLDS for v in verdicts):
-        return stats.HOLDS
-    if stats.NOT in verdicts:
-        return stats.NOT
-    return stats.CANNOT
+def _robot_verdict(verdicts: Sequence[str]) -> str:
+    """A robot's verdict from its comparisons' (already corrected) verdicts."""
+    inv = {v: k for k, v in _WORD.items()}
+    return stats.decide([inv[v] for v in verdicts])
 
 
 def claim_a(rows: Sequence[dict[str, Any]], command: float) -> dict[str, Any]:
@@ -101,9 +93,12 @@ def claim_a(rows: Sequence[dict[str, Any]], command: float) -> dict[str, Any]:
         side = {m: [_values(rows, "ev", command_vx=command, robot=robot, variant=v) for v in variants
                     if mult[v] is m] for m in (True, False)}
         effect = stats.group_effect(side[True], side[False])
-        per_robot.append({"robot": robot, "effect": effect, "verdict": effect.verdict(higher=True)})
-    return {"claim": "a", "command_vx": command, "robots": per_robot,
-            "verdict": combine([p["verdict"] for p in per_robot if p["effect"].n_a and p["effect"].n_b])}
+        if effect.n_a and effect.n_b:
+            per_robot.append({"robot": robot, "effect": effect})
+    adjusted, verdicts, verdict = _judge([p["effect"] for p in per_robot])
+    for p, adj, v in zip(per_robot, adjusted, verdicts, strict=True):
+        p.update(p_holm=adj, verdict=v)
+    return {"claim": "a", "command_vx": command, "robots": per_robot, "verdict": verdict}
 
 
 def claim_c(rows: Sequence[dict[str, Any]], command: float) -> dict[str, Any]:
@@ -119,11 +114,18 @@ def claim_c(rows: Sequence[dict[str, Any]], command: float) -> dict[str, Any]:
             cos = stats.mean_difference(film["cos_grad"],
                                         _values(rows, "cos_grad", command_vx=command, robot=robot, variant=other))
             pairs.append({"other": other, "flip": flip, "cos_grad": cos})
-        verdicts = [p[m].verdict(higher=True) for p in pairs for m in ("flip", "cos_grad")]
-        per_robot.append({"robot": robot, "pairs": pairs, "verdict": _all_pairs(verdicts) if film["flip"] else
-                          stats.CANNOT})
-    return {"claim": "c", "command_vx": command, "robots": per_robot,
-            "verdict": combine([p["verdict"] for p in per_robot])}
+        if film["flip"]:
+            per_robot.append({"robot": robot, "pairs": pairs})
+    effects = [p[m] for r in per_robot for p in r["pairs"] for m in ("flip", "cos_grad")]
+    adjusted, verdicts, verdict = _judge(effects)
+    k = 0
+    for r in per_robot:
+        for p in r["pairs"]:
+            for m in ("flip", "cos_grad"):
+                p[f"{m}_p_holm"], p[f"{m}_verdict"] = adjusted[k], verdicts[k]
+                k += 1
+        r["verdict"] = _robot_verdict([p[f"{m}_verdict"] for p in r["pairs"] for m in ("flip", "cos_grad")])
+    return {"claim": "c", "command_vx": command, "robots": per_robot, "verdict": verdict}
 
 
 def study_claims(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -137,19 +139,23 @@ def verdict_rows(claims: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
     for c in claims:
         for r in c["robots"]:
-            comparisons = ([("multiplicative - additive", "ev", r["effect"])] if c["claim"] == "a" else
-                           [(f"{p['other']} - film" if m == "flip" else f"film - {p['other']}", m, p[m])
-                            for p in r["pairs"] for m in ("flip", "cos_grad")])
-            for what, metric, e in comparisons:
+            comparisons = ([("multiplicative - additive", "ev", r["effect"], r["p_holm"], r["verdict"])]
+                           if c["claim"] == "a" else
+                           [(f"{p['other']} - film" if m == "flip" else f"film - {p['other']}", m, p[m],
+                             p[f"{m}_p_holm"], p[f"{m}_verdict"]) for p in r["pairs"] for m in ("flip", "cos_grad")])
+            m = len(c["robots"]) if c["claim"] == "a" else sum(2 * len(x["pairs"]) for x in c["robots"])
+            for what, metric, e, p_holm, verdict in comparisons:
+                need = stats.seeds_needed(e, alpha=stats.ALPHA / max(m, 1)) if verdict == stats.CANNOT else None
                 out.append({"claim": c["claim"], "command_vx": c["command_vx"], "robot": r["robot"],
                             "comparison": what, "metric": metric, "effect": e.estimate, "lo": e.lo, "hi": e.hi,
-                            "p": e.p, "n_a": e.n_a, "n_b": e.n_b, "verdict": e.verdict(higher=True),
-                            "robot_verdict": r["verdict"], "claim_verdict": c["verdict"]})
+                            "p": e.p, "p_holm": p_holm, "n_a": e.n_a, "n_b": e.n_b, "verdict": verdict,
+                            "seeds_needed": need, "robot_verdict": r["verdict"], "claim_verdict": c["verdict"]})
     return out
 
 
 VERDICT_COLUMNS: tuple[str, ...] = ("claim", "command_vx", "robot", "comparison", "metric", "effect", "lo", "hi", "p",
-                                    "n_a", "n_b", "verdict", "robot_verdict", "claim_verdict")
+                                    "p_holm", "n_a", "n_b", "verdict", "seeds_needed", "robot_verdict",
+                                    "claim_verdict")
 """Columns of ``verdicts.csv``."""
 SUMMARY_COLUMNS: tuple[str, ...] = ("command_vx", "robot", "variant", "multiplicative", "metric", "mean", "lo", "hi",
                                     "n")

@@ -2,7 +2,8 @@
 
 One policy step is ``decimation`` (4) physics steps of ``physics_dt`` (0.005 s): 50 Hz. Each env
 carries its own morphology: in ``train`` mode an 11-D descriptor is sampled from the paper's
-training support at every reset and applied to the Go2 template; in ``descriptor`` mode every env
+training support at every reset and applied to the Go2 template (with procedural geometry on, ``env.rand.geometry``,
+each env instead draws a generated robot from a pool at every reset, docs/robots.md); in ``descriptor`` mode every env
 is the Go2 template with one target's descriptor (the paper's zero-shot protocol); in ``full``
 mode every env is the target's own generated model. See docs/concepts.md ("The environment").
 
@@ -38,7 +39,8 @@ from morfic_cli.envs.state import EnvState
 from morfic_cli.envs.terminations import compute_terminations
 from morfic_cli.errors import MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
-from morfic_cli.morphology.descriptor import TRAIN_MAX, TRAIN_MIN, as_descriptor
+from morfic_cli.morphology.descriptor import LIMIT_PAIRS, TRAIN_MAX, TRAIN_MIN, as_descriptor
+from morfic_cli.morphology.procedural import GeometryPool, generate_pool
 from morfic_cli.morphology.robots import RobotSpec, load_robot
 from morfic_cli.sim import sync
 from morfic_cli.sim.args import NUM_JOINTS
@@ -47,6 +49,8 @@ from morfic_cli.sim.factory import make_backend
 
 Mode = Literal["train", "descriptor", "full"]
 MODES: tuple[str, ...] = ("train", "descriptor", "full")
+LIMIT_DIMS: list[int] = [i for pair in LIMIT_PAIRS for i in pair]
+"""The descriptor's joint-limit dimensions (5..10)."""
 TEMPLATE = "go2"
 FOOT_CONTACT_FORCE = 1.0
 """A foot is in contact (c_i) when its ground force exceeds this many newtons."""
@@ -57,7 +61,9 @@ class LocomotionEnv(VecEnv):
 
     Observation groups (TensorDict keys), N = num_envs:
         ``policy`` (N, 48), ``history`` (N, 16, 48) = [h_t, o_t], ``critic`` (N, 16, 48, clean),
-        ``privileged`` (N, 18), ``morphology`` (N, 11).
+        ``privileged`` (N, 18), ``morphology`` (N, 11); with ``cfg.obs.body_tokens`` (variant ``urma``) also
+        ``joint_description`` (N, 12, 18), ``foot_description`` (N, 4, 6) and ``foot_state`` (N, 4, 2)
+        (:mod:`morfic_cli.envs.observations`).
     """
 
     def __init__(
@@ -99,6 +105,9 @@ class LocomotionEnv(VecEnv):
         self._support_lo = torch.as_tensor(TRAIN_MIN, dtype=torch.float32, device=self.device)
         self._support_hi = torch.as_tensor(TRAIN_MAX, dtype=torch.float32, device=self.device)
         self._alloc_buffers()
+        self.geometry_pool: GeometryPool | None = None
+        if mode == "train" and cfg.rand.enabled and cfg.rand.geometry.enabled:
+            self._init_geometry(seed)
         if mode == "descriptor" and per_env is None:
             desc = torch.as_tensor(as_descriptor(self.target.descriptor), dtype=torch.float64)
             self.backend.set_morphology(self._all_ids, desc.expand(self.num_envs, -1).clone())
@@ -109,6 +118,8 @@ class LocomotionEnv(VecEnv):
             self.backend.set_morphology(self._all_ids, desc)
         self.params: SimParams = self.backend.params()
         self._reset_envs(self._all_ids)
+        if self.body_tokens and mode != "train":
+            self._describe(self._all_ids)  # the morphology never changes after this
         self._refresh_observations(self.backend.frame(), reset_ids=self._all_ids)
 
     # ------------------------------------------------------------------ buffers
@@ -142,6 +153,47 @@ class LocomotionEnv(VecEnv):
         hip_xy = torch.as_tensor(self.spec.hip_pos[:, :2] + self.spec.thigh_offset[:, :2], **f32)
         self.nominal_foot_pos_b = hip_xy.expand(n, 4, 2).clone()
         self._obs = TensorDict({}, batch_size=[n], device=dev)
+        self.body_tokens = self.cfg.obs.body_tokens
+        if self.body_tokens:  # URMA's tokens: descriptions per env model, foot touchdown clocks
+            self.joint_description = torch.zeros(n, NUM_JOINTS, O.JOINT_DESCRIPTION_DIM, **f32)
+            self.foot_description = torch.zeros(n, 4, O.FOOT_DESCRIPTION_DIM, **f32)
+            self.foot_touchdown_time = torch.zeros(n, 4, **f32)
+            self.foot_contact_prev = torch.zeros(n, 4, dtype=torch.bool, device=dev)
+
+    def _describe(self, ids: torch.Tensor) -> None:
+        """Read the normalised joint and foot descriptions of some envs' models (after their morphology changed).
+
+        Written out of place, so an observation handed out before keeps the description it had.
+        """
+        joints, feet = self.backend.body_description(ids)
+        self.joint_description = self.joint_description.index_put((ids,), O.joint_description_obs(joints.float()))
+        self.foot_description = self.foot_description.index_put((ids,), O.foot_description_obs(feet.float()))
+
+    def _init_geometry(self, seed: int) -> None:
+        """Generate and compile the pool of procedural robots (docs/robots.md, "Procedural geometry")."""
+        pool = generate_pool(self.spec, self.cfg.rand.geometry, seed)
+        self.backend.set_geometry_pool(pool.robots)
+        dev = self.device
+        self.geometry_pool = pool
+        self._pool_descriptor = torch.as_tensor(pool.descriptors, dtype=torch.float64, device=dev)
+        self._pool_init_height = torch.as_tensor(pool.init_height, dtype=torch.float32, device=dev)
+        self._pool_foot_pos_b = torch.as_tensor(pool.nominal_foot_pos_b, dtype=torch.float32, device=dev)
+        self.geometry_ids = torch.zeros(self.num_envs, dtype=torch.long, device=dev)
+        """Each env's robot in :attr:`geometry_pool`. Shape: (N,)."""
+
+    def _reset_geometry(self, ids: torch.Tensor) -> None:
+        """Draw each env's robot from the pool and apply it with its descriptor (limits from the support if asked)."""
+        k = len(ids)
+        pick = torch.randint(0, len(self._pool_descriptor), (k,), generator=self.gen, device=self.device)
+        self.geometry_ids[ids] = pick
+        self.backend.set_geometry(ids, pick)
+        desc = self._pool_descriptor[pick].clone()
+        if self.cfg.rand.geometry.limits_from_support:
+            u = torch.rand((k, DESCRIPTOR_DIM), generator=self.gen, dtype=torch.float64, device=self.device)
+            lo, hi = self._support_lo.double(), self._support_hi.double()
+            desc[:, LIMIT_DIMS] = (lo + (hi - lo) * u)[:, LIMIT_DIMS]
+        self.backend.set_morphology(ids, desc)
+        self.nominal_foot_pos_b[ids] = self._pool_foot_pos_b[pick]
 
     @property
     def nonfinite_resets(self) -> int:
@@ -256,13 +308,17 @@ class LocomotionEnv(VecEnv):
 
     def _reset_envs(self, ids: torch.Tensor) -> None:
         k = len(ids)
-        if self.mode == "train":
+        if self.geometry_pool is not None:
+            self._reset_geometry(ids)
+        elif self.mode == "train":
             u = torch.rand((k, DESCRIPTOR_DIM), generator=self.gen, dtype=torch.float64, device=self.device)
             lo, hi = self._support_lo.double(), self._support_hi.double()
             self.backend.set_morphology(ids, lo + (hi - lo) * u)
         dyn = sample_dynamics(k, self.cfg.rand, self.gen)
         self.backend.set_dynamics(ids, dyn.friction, dyn.restitution, dyn.com_offset, dyn.joint_friction)
         self.params = self.backend.params()
+        if self.body_tokens and self.mode == "train":  # a new morphology at every reset
+            self._describe(ids)
         p = self.params
         q = sample_reset_joint_pos(
             p.default_joint_pos[ids].float(), p.joint_range[ids].float(), self.cfg.rand, self.gen
@@ -270,7 +326,10 @@ class LocomotionEnv(VecEnv):
         dev = self.device
         yaw = (torch.rand(k, generator=self.gen, device=dev) * 2.0 - 1.0) * math.pi
         base_pos = torch.zeros(k, 3, device=dev)
-        base_pos[:, 2] = self.spec.init_height
+        if self.geometry_pool is not None:
+            base_pos[:, 2] = self._pool_init_height[self.geometry_ids[ids]]
+        else:
+            base_pos[:, 2] = self.spec.init_height
         self.backend.reset_envs(ids, base_pos, yaw_quat(yaw), torch.zeros(k, 6, device=dev), q,
                                 torch.zeros(k, NUM_JOINTS, device=dev))
         self.latency[ids] = sample_latency(k, self.cfg.rand, self.gen)
@@ -298,6 +357,7 @@ class LocomotionEnv(VecEnv):
         self.obs_buf = noisy
         self._obs = TensorDict(
             {
+                **(self._body_token_groups(state.foot_contact, reset_ids) if self.body_tokens else {}),
                 "policy": noisy,
                 "history": self.history.clone(),
                 "critic": self.critic_history.clone(),
@@ -310,6 +370,18 @@ class LocomotionEnv(VecEnv):
             batch_size=[self.num_envs],
             device=self.device,
         )
+
+    def _body_token_groups(self, contact: torch.Tensor, reset_ids: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Advance the feet's touchdown clocks (0 at reset) and give URMA's three groups. Contact: (N, 4) bool."""
+        self.foot_touchdown_time = O.touchdown_time(self.foot_touchdown_time, contact, self.foot_contact_prev, self.dt)
+        if len(reset_ids):
+            self.foot_touchdown_time[reset_ids] = 0.0
+        self.foot_contact_prev = contact
+        return {
+            "joint_description": self.joint_description,
+            "foot_description": self.foot_description,
+            "foot_state": torch.stack([contact.float(), self.foot_touchdown_time], dim=-1),
+        }
 
     def _push_and_resample(self) -> None:
         rand = self.cfg.rand
@@ -406,6 +478,9 @@ class LocomotionEnv(VecEnv):
                 "joint_friction": p.joint_friction.cpu().clone(),
             },
             "backend": self.backend.state_dict(),
+            **({"geometry_ids": self.geometry_ids.cpu().clone()} if self.geometry_pool is not None else {}),
+            **({"body_tokens": {"foot_touchdown_time": self.foot_touchdown_time.cpu().clone(),
+                                "foot_contact_prev": self.foot_contact_prev.cpu().clone()}} if self.body_tokens else {}),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -420,6 +495,9 @@ class LocomotionEnv(VecEnv):
                 f"{self.num_envs} in mode '{self.mode}'; resume with the run's own env settings."
             )
         prm = state["params"]
+        if self.geometry_pool is not None:
+            self.geometry_ids.copy_(state["geometry_ids"])
+            self.backend.set_geometry(self._all_ids, self.geometry_ids)
         if self.mode != "full":
             self.backend.set_morphology(self._all_ids, prm["descriptor"])
         self.backend.set_dynamics(
@@ -427,6 +505,10 @@ class LocomotionEnv(VecEnv):
         )
         self.params = self.backend.params()
         self.backend.load_state_dict(state["backend"])
+        if self.body_tokens:
+            self._describe(self._all_ids)
+            self.foot_touchdown_time = state["body_tokens"]["foot_touchdown_time"].to(self.device).clone()
+            self.foot_contact_prev = state["body_tokens"]["foot_contact_prev"].to(self.device).clone()
         for k in self._TENSORS:
             getattr(self, k).copy_(state["tensors"][k])
         dev = self.device

@@ -8,6 +8,13 @@
 - ``critic``: the same history with clean values (the critic sees clean observations).
 - ``privileged``: p_t (18) = [ground friction, restitution, base mass, COM offset (3), joint friction (12)].
 - ``morphology``: the 11-D descriptor normalised to [-1, 1] over the training support.
+
+With ``ObsCfg.body_tokens`` (variant ``urma``; URMA's tokens, docs/training.md, "External baselines"), also:
+
+- ``joint_description`` (N, 12, 18): each joint's description read from the env's model
+  (:mod:`morfic_cli.morphology.description`), normalised by :func:`joint_description_obs`; constant per model;
+- ``foot_description`` (N, 4, 6): each foot's, the same way (:func:`foot_description_obs`);
+- ``foot_state`` (N, 4, 2): [contact c_i (0 or 1), time since the foot's last touchdown (s)], clean.
 """
 
 from __future__ import annotations
@@ -32,6 +39,61 @@ POLICY_LAYOUT: tuple[tuple[str, int, int], ...] = (
     ("joint_vel", 24, 36),
     ("last_action", 36, 48),
 )
+
+
+JOINT_DESCRIPTION_NORM: tuple[tuple[float, float], ...] = (
+    (0.0, 0.5), (0.0, 0.5), (0.0, 0.5),  # anchor (m)
+    (0.0, 1.0), (0.0, 1.0), (0.0, 1.0),  # axis
+    (1.0, 1.0),  # direct child joints: 1 -> 0, 0 -> -1 (URMA's "children - 1")
+    (0.0, 4.6), (0.0, 4.6), (0.0, 4.6),  # q0, q_min, q_max (rad; URMA's / 4.6)
+    (75.0, 75.0),  # torque limit (N m): 0..150
+    (25.0, 25.0),  # velocity limit (rad/s): 0..50
+    (0.0, 1.0),  # damping (N m s/rad)
+    (0.0, 0.02),  # armature (kg m^2)
+    (150.0, 150.0),  # Kp (N m/rad): 0..300
+    (5.0, 5.0),  # Kd (N m s/rad): 0..10
+    (0.6, 0.6),  # child link mass (kg): 0..1.2
+    (30.0, 30.0),  # total mass (kg): 0..60
+)
+"""(centre, half-width) of each raw joint-description entry (:data:`~morfic_cli.morphology.description.JOINT_FIELDS`):
+the observation is (raw - centre) / half-width, about [-1, 1] over the seven robots (URMA's ranges are set for its
+sixteen robots, humanoids included; these for ours)."""
+FOOT_DESCRIPTION_NORM: tuple[tuple[float, float], ...] = (
+    (0.0, 0.5), (0.0, 0.5), (0.0, 0.5),  # foot position (m)
+    (0.025, 0.025),  # foot radius (m): 0..0.05
+    (0.1, 0.1),  # foot mass (kg): 0..0.2
+    (30.0, 30.0),  # total mass (kg)
+)
+"""(centre, half-width) of each raw foot-description entry (:data:`~morfic_cli.morphology.description.FOOT_FIELDS`)."""
+JOINT_DESCRIPTION_DIM = len(JOINT_DESCRIPTION_NORM)
+FOOT_DESCRIPTION_DIM = len(FOOT_DESCRIPTION_NORM)
+FOOT_STATE_DIM = 2
+BODY_TOKEN_GROUPS: tuple[str, ...] = ("joint_description", "foot_description", "foot_state")
+"""The groups ``ObsCfg.body_tokens`` adds."""
+
+
+def _normalise(raw: torch.Tensor, norm: tuple[tuple[float, float], ...]) -> torch.Tensor:
+    centre = torch.tensor([c for c, _ in norm], dtype=raw.dtype, device=raw.device)
+    half = torch.tensor([h for _, h in norm], dtype=raw.dtype, device=raw.device)
+    return (raw - centre) / half
+
+
+def joint_description_obs(raw: torch.Tensor) -> torch.Tensor:
+    """The normalised joint description (:data:`JOINT_DESCRIPTION_NORM`). Shape: (N, 12, 18) -> (N, 12, 18)."""
+    return _normalise(raw, JOINT_DESCRIPTION_NORM)
+
+
+def foot_description_obs(raw: torch.Tensor) -> torch.Tensor:
+    """The normalised foot description (:data:`FOOT_DESCRIPTION_NORM`). Shape: (N, 4, 6) -> (N, 4, 6)."""
+    return _normalise(raw, FOOT_DESCRIPTION_NORM)
+
+
+def touchdown_time(time: torch.Tensor, contact: torch.Tensor, contact_prev: torch.Tensor, dt: float) -> torch.Tensor:
+    """Time since each foot's last touchdown: 0 at a touchdown (contact now, none before), else ``time + dt``.
+
+    Shapes: (N, 4) float, (N, 4) bool, (N, 4) bool -> (N, 4).
+    """
+    return torch.where(contact & ~contact_prev, torch.zeros_like(time), time + dt)
 
 
 def history_frames(cfg: ObsCfg) -> int:

@@ -10,6 +10,8 @@ Each rollout that kept its first envs' models (``keep_models``) becomes one ``me
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from pathlib import Path
 
 from morfic_cli.evaluation.protocol import EvalResult
@@ -53,7 +55,14 @@ def write_logs(store: Store, eval_id: str, out: Path) -> list[Path]:
     return written
 
 
-def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: int = VIDEO_EVERY) -> list[Path | str]:
+def video_frames(result: EvalResult, every: int = VIDEO_EVERY) -> int:
+    """How many frames :func:`store_videos` renders for ``result``: ceil(steps / every) per rollout with models."""
+    return sum(math.ceil(r.arrays["done"].shape[0] / every) for r in result.rollouts.values() if r.models)
+
+
+def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: int = VIDEO_EVERY,
+                 on_video: Callable[[str], None] | None = None,
+                 on_frame: Callable[[], None] | None = None) -> list[Path | str]:
     """Render every rollout of ``result`` that kept models, store each as a ``media`` manifest.
 
     Args:
@@ -62,6 +71,8 @@ def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: i
         out: The ``--out`` directory; the videos and frame grids are also written into it as
             ``<robot>-<mode>-vx<cmd>.<mp4|gif>`` and ``...-frames.png``.
         every: Keep every ``every``-th policy step.
+        on_video: Called with a rollout's media name (``go1-descriptor-vx2``) before its video is rendered.
+        on_frame: Called after each rendered frame (:func:`video_frames` calls in all), for a progress bar.
 
     Returns:
         The written paths when ``out`` is given, else the media manifest ids.
@@ -77,7 +88,9 @@ def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: i
         if not rollout.models:
             continue
         models = rollout.models[:VIDEO_ENVS]
-        frames = render_frames(models, rollout.qpos(len(models)), every=every)
+        if on_video is not None:
+            on_video(media_name(role))
+        frames = render_frames(models, rollout.qpos(len(models)), every=every, on_frame=on_frame)
         fps = 1.0 / (rollout.dt * every)
         data, ext = encode_video(frames, fps)
         sheet = frame_grid_png(frames, n=6, fps=fps)

@@ -30,7 +30,7 @@ import math
 import os
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -259,7 +259,8 @@ def _follow_lights(scene: mujoco.MjvScene, center: np.ndarray) -> None:
 
 
 def render_frames(models: Sequence[mujoco.MjModel], qpos: np.ndarray, *, every: int = 2, width: int = 320,
-                  height: int = 240, track_body: str | int = 1, shadows: bool = True) -> np.ndarray:
+                  height: int = 240, track_body: str | int = 1, shadows: bool = True,
+                  on_frame: Callable[[], None] | None = None) -> np.ndarray:
     """Render recorded trajectories of E envs offscreen and tile them into one image per kept time step.
 
     Each env has its own model (morphologies may differ) but all share the joint layout (a common ``nq``). For
@@ -278,6 +279,7 @@ def render_frames(models: Sequence[mujoco.MjModel], qpos: np.ndarray, *, every: 
         height: Height of one env's tile, px.
         track_body: Body the camera follows, name or id (1: the first body after the world, the robot's base).
         shadows: Render shadows (a 1024 shadow map; in software rendering about 2.5x the frame time).
+        on_frame: Called after each rendered frame (all envs' tiles of one kept time step), for a progress bar.
 
     Returns:
         Frames, uint8, shape (F, rows * height, cols * width, 3) with F = ceil(T / every).
@@ -340,6 +342,8 @@ def render_frames(models: Sequence[mujoco.MjModel], qpos: np.ndarray, *, every: 
                 _add_floor_grid(scene, d.xpos[bodies[e]], line_width, shadows)
                 r, c = divmod(e, cols)
                 renderer.render(out=frames[f, r * height:(r + 1) * height, c * width:(c + 1) * width])
+            if on_frame is not None:
+                on_frame()
     finally:
         for renderer in renderers.values():
             renderer.close()

@@ -1,6 +1,6 @@
 """``compare-baselines``: variants side by side, mean ± std over seeds, optionally beside the paper's numbers.
 
-Runs are grouped by (preset, variant); each group's seeds are aggregated per robot. Four tables, each a list of
+Runs are grouped by (preset, variant); each group's seeds are aggregated per robot. Five tables, each a list of
 flat rows with a ``table`` key (so the CSV of all of them is one file):
 
 - ``transfer``: per (preset, variant, robot, mode, command): ``vx`` = mean over seeds of the per-run v_x,
@@ -14,6 +14,9 @@ flat rows with a ``table`` key (so the CSV of all of them is one file):
 - ``fixed_rollout``: per (preset, frozen actor's variant, robot, critic variant, command): Flip and Cos. over the
   critics (seeds); critics scored on different actors' rollouts are never averaged together.
 - ``compute``: per (preset, variant): transitions, iterations, s/iter, device-hours, hours per 400M transitions.
+- ``verdicts``: one row per primary comparison of the paper's claims (a)-(e) (:mod:`morfic_cli.report.claims`) at
+  each judged command: the effect, its 95 % t interval, p, the Holm-adjusted p, its outcome, the seeds per side
+  that would detect it where it is not significant, and the claim's verdict.
 
 Seeds are pooled within one command only: a run diagnosed at 2.0 and at 1.0 m/s is one seed in a row at each
 command (``command_vx``; a diagnosis that records none is at the paper's 2.0 m/s), never two seeds of one row.
@@ -35,14 +38,14 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from morfic_cli.report import paper
-from morfic_cli.report.claims import is_paper_command, row_command
+from morfic_cli.report.claims import check_claims, is_paper_command, row_command
 from morfic_cli.report.gather import StoreData
 from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, variant_order
 
 if TYPE_CHECKING:
     from morfic_cli.store import Published, Store
 
-TABLE_ORDER: tuple[str, ...] = ("transfer", "calibration", "fixed_rollout", "compute")
+TABLE_ORDER: tuple[str, ...] = ("transfer", "calibration", "fixed_rollout", "compute", "verdicts")
 TRANSITIONS_400M = 400e6
 """The paper normalises compute to 400M transitions (Table "Training compute")."""
 
@@ -221,6 +224,12 @@ def compute_rows(data: StoreData) -> list[dict[str, Any]]:
     return out
 
 
+def verdict_rows(data: StoreData) -> list[dict[str, Any]]:
+    """The claims' primary comparisons, one row each (:meth:`~morfic_cli.report.claims.Comparison.row`)."""
+    return [{"table": "verdicts", "claim": c.key, "command_vx": c.command_vx, "verdict": c.verdict, **row}
+            for c in check_claims(data.evals, data.calibration, data.fixed) for row in c.comparisons]
+
+
 def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Each row with the paper's numbers for the same variant, robot (and command) in ``paper_*`` columns.
 
@@ -273,6 +282,7 @@ def compare_tables(data: StoreData, *, with_paper: bool = False) -> dict[str, li
     }
     if with_paper:
         tables = {k: add_paper_columns(v) for k, v in tables.items()}
+    tables["verdicts"] = verdict_rows(data) if any(tables.values()) else []
     return {k: v for k, v in tables.items() if v}
 
 
@@ -285,10 +295,11 @@ def flat_rows(tables: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
     return [{c: row.get(c) for c in columns} for row in rows]
 
 
-COMPARE_LAYOUT = 2
+COMPARE_LAYOUT = 3
 """The comparison's layout (its tables' rows and columns); bump it with any change to what a comparison of the same
 results holds, so that one stored by an older morfic is not reused. 1 (no ``layout`` key): a run's diagnoses at two
-commands pooled as two seeds; 2: calibration and fixed-rollout rows per command (``command_vx``)."""
+commands pooled as two seeds; 2: calibration and fixed-rollout rows per command (``command_vx``); 3: the
+``verdicts`` table (the claims' comparisons, Holm-corrected t tests)."""
 
 
 def compare_config(data: StoreData, with_paper: bool) -> dict[str, Any]:

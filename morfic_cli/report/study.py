@@ -2,7 +2,7 @@
 
 Built from the rows of a stored ``critic_study.csv`` (``morfic critic-study``; :mod:`~morfic_cli.diagnostics.
 critic_study`) with :mod:`~morfic_cli.diagnostics.study_summary`: one table per command and metric (EV, Flip,
-CosGrad), robots x variants, each cell the mean over fit seeds with its 95 % bootstrap interval, and the claims'
+CosGrad), robots x variants, each cell the mean over fit seeds with its 95 % t interval, and the claims'
 verdicts as text.
 """
 
@@ -52,7 +52,7 @@ def study_tables(rows: Sequence[dict[str, Any]]) -> list[Table]:
             better = "lower" if metric == "flip" else "higher"
             caption = (f"{name} of every critic fitted from scratch on one frozen actor's rollouts of the training "
                        f"distribution ({seeds} fit seeds each), scored on that actor's rollouts at {command:g} m/s: "
-                       f"mean over the fits [95 % bootstrap interval]; {better} is better.")
+                       f"mean over the fits [95 % t interval]; {better} is better.")
             key = f"critic_study_{metric}_{command:g}".replace(".", "_")
             tables.append(Table(key, f"Critic study: {name} at {command:g} m/s", caption, "Target",
                                 tuple(STUDY_LABELS.get(v, variant_label(v)) for v in variants), tuple(out),
@@ -65,10 +65,11 @@ def study_text(rows: Sequence[dict[str, Any]], actor: str, artifact: str, second
     lines = [f"The conditioning alone: one frozen actor ({actor}), every critic fitted from scratch on the same "
              f"training-distribution data (`morfic critic-study`, artifact `{artifact[:12]}`; fits "
              f"{seconds.get('fits', math.nan):.0f} s, rollouts {seconds.get('rollouts', math.nan):.0f} s, scoring "
-             f"{seconds.get('scoring', math.nan):.0f} s). Verdicts from 95 % bootstrap intervals over fit seeds.", ""]
+             f"{seconds.get('scoring', math.nan):.0f} s). Verdicts from Welch and t-contrast tests over fit seeds, "
+             "Holm-corrected per claim (docs/report.md).", ""]
     for c in study_claims(rows):
         if c["claim"] == "a":
-            parts = [f"{r['robot']} {r['effect'].text()} ({r['verdict']})" for r in c["robots"]]
+            parts = [f"{r['robot']} {r['effect'].text(p_holm=r['p_holm'])} ({r['verdict']})" for r in c["robots"]]
             what = "EV multiplicative - additive"
         else:
             parts = []
@@ -81,11 +82,11 @@ def study_text(rows: Sequence[dict[str, Any]], actor: str, artifact: str, second
 
 
 def _worst_pair(pairs: Sequence[dict[str, Any]]) -> str:
-    """The comparison whose interval lies lowest (the one that decides the verdict), as text."""
-    cands = [(p[m].lo if math.isfinite(p[m].lo) else p[m].estimate, p["other"], m, p[m])
+    """The comparison whose interval lies lowest (the weakest for the claim), as text, with its Holm p."""
+    cands = [(p[m].lo if math.isfinite(p[m].lo) else p[m].estimate, p["other"], m, p[m], p.get(f"{m}_p_holm"))
              for p in pairs for m in ("flip", "cos_grad") if math.isfinite(p[m].estimate)]
     if not cands:
         return ""
-    _, other, m, e = min(cands, key=lambda t: t[0])
+    _, other, m, e, p_holm = min(cands, key=lambda t: t[0])
     what = f"{other} - film Flip" if m == "flip" else f"film - {other} Cos."
-    return f"{what} {e.text(3)}"
+    return f"{what} {e.text(3, p_holm)}"

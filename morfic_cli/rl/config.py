@@ -98,9 +98,12 @@ class TrainCfg:
 
 
 def smoke_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
-    """Tiny: 8 envs x 8 steps x 2 iterations, paper-sized networks. Seconds; for tests and CI."""
+    """Tiny: 8 envs x 8 steps x 2 iterations, paper-sized networks. Seconds; for tests and CI.
+
+    A checkpoint every 10 iterations (and at the end): one costs more than a smoke iteration (a 6.7 MB store write).
+    """
     return TrainCfg(
-        variant=variant, preset="smoke", seed=seed, max_iterations=2, num_steps_per_env=8, save_interval=1,
+        variant=variant, preset="smoke", seed=seed, max_iterations=2, num_steps_per_env=8, save_interval=10,
         env=EnvCfg(num_envs=8), ppo=PPOCfg(num_learning_epochs=1, num_mini_batches=2),
     )
 
@@ -137,7 +140,7 @@ _PRESET_FNS = {"smoke": smoke_preset, "cpu": cpu_preset, "paper": paper_preset}
 
 
 def preset_cfg(preset: str, variant: str = "film", seed: int = 0) -> TrainCfg:
-    """The config of a named preset.
+    """The config of a named preset for ``variant``, with the variant's env defaults (:func:`with_env_overrides`).
 
     Raises:
         UnknownNameError: Unknown preset or variant.
@@ -145,8 +148,32 @@ def preset_cfg(preset: str, variant: str = "film", seed: int = 0) -> TrainCfg:
     """
     if preset not in _PRESET_FNS:
         raise UnknownNameError("preset", preset, PRESETS)
-    resolve_variant(variant)
-    return _PRESET_FNS[preset](variant, seed)
+    overrides = resolve_variant(variant).env_overrides
+    return with_env_overrides(_PRESET_FNS[preset](variant, seed), overrides)
+
+
+def with_env_overrides(cfg: TrainCfg, overrides: dict[str, Any]) -> TrainCfg:
+    """``cfg`` with a variant's env defaults set (``cfg`` itself when there are none).
+
+    The keys are dotted paths under ``env`` (:attr:`~morfic_cli.rl.variants.Variant.env_overrides`).
+
+    Raises:
+        MorficError: A key that is not an env config field (a bug in the variant's entry) or a wrong type.
+    """
+    if not overrides:
+        return cfg
+    doc = train_cfg_to_dict(cfg)
+    for key, value in overrides.items():
+        node = doc["env"]
+        *parents, leaf = key.split(".")
+        for part in parents:
+            node = node.get(part) if isinstance(node, dict) else None
+            if not isinstance(node, dict):
+                raise MorficError(f"variant env override 'env.{key}' names no env config section.")
+        if leaf not in node:
+            raise MorficError(f"variant env override 'env.{key}' is not an env config key.")
+        node[leaf] = value
+    return train_cfg_from_dict(doc)
 
 
 # ---------------------------------------------------------------------------- dict round trip

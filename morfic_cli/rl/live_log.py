@@ -7,12 +7,15 @@ The store keeps each run's curve (``curve.csv`` in every checkpoint); this modul
 - rsl-rl's: ``Loss/<key>`` for the losses (``value``, ``surrogate``, ``entropy``, ``adaptation_error``; the
   curve's ``value_loss``, a copy of ``value``, is not written twice) and ``Loss/learning_rate``,
   ``Policy/mean_std``, ``Perf/total_fps``, ``Perf/collection_time``, ``Perf/learning_time``, ``Train/mean_reward``,
-  ``Train/mean_episode_length`` (steps). Before the first episode ends, the two ``Train/`` tags are the mean return
-  and length so far of the episodes under way, so the reward curve starts at the first iteration.
+  ``Train/mean_episode_length`` (steps), and the same two against wall time, ``Train/mean_reward/time`` and
+  ``Train/mean_episode_length/time`` (step = whole seconds of the run's wall clock, not on wandb: as rsl-rl). Before
+  the first episode ends, the ``Train/`` tags are the mean return and length so far of the episodes under way, so the
+  reward curve starts at the first iteration.
 - the PPO update's health in a group of its own: ``PPO/explained_variance``, ``PPO/kl``, ``PPO/clip_fraction``.
 - the env's episode extras, Isaac Lab / mjlab style (:data:`EXTRA_GROUPS`): ``Episode_Reward/<term>`` (each term's
   episode sum per second of episode), ``Episode_Termination/<term>`` (the fraction of ended episodes ended by it),
-  ``Curriculum/vx_max``, ``Metrics/vx_error``, ``Episode/length_s``, and the per-step term means
+  ``Curriculum/vx_max``, ``Curriculum/lin_tracking`` (at the iterations in which the curriculum was decided, once
+  per max episode length), ``Metrics/vx_error``, ``Episode/length_s``, and the per-step term means
   ``Step_Reward/<term>`` (weighted) and ``Step_Reward_Raw/<term>``.
 
 The writer is rsl-rl's choice: torch's ``SummaryWriter`` for ``tensorboard``, rsl-rl's ``WandbLogWriter`` for
@@ -112,7 +115,8 @@ def loss_tag(key: str) -> str | None:
 
 def write_iteration(writer: Any, it: int, size: int, collect_time: float, learn_time: float,
                     loss_dict: dict[str, float], learning_rate: float, action_std: float,
-                    extras: dict[str, float], mean_reward: float | None, mean_length: float | None) -> None:
+                    extras: dict[str, float], mean_reward: float | None, mean_length: float | None,
+                    wall_time_s: float | None = None) -> None:
     """Write one iteration's scalars at step ``it`` (0-based) under the tags of the module docstring.
 
     Args:
@@ -128,6 +132,8 @@ def write_iteration(writer: Any, it: int, size: int, collect_time: float, learn_
         mean_reward: Mean return of the last 100 finished episodes, or, before the first one ended, of the
             episodes under way so far; None: not written.
         mean_length: Their mean length in steps, likewise.
+        wall_time_s: The run's wall seconds so far (the training clock, checkpoints included): the step of the
+            ``/time`` tags, whole seconds as rsl-rl's; None: those tags are not written (rsl-rl skips them on wandb).
     """
     for key, value in extras.items():
         writer.add_scalar(extra_tag(key), value, it)
@@ -142,5 +148,9 @@ def write_iteration(writer: Any, it: int, size: int, collect_time: float, learn_
     writer.add_scalar("Perf/learning_time", learn_time, it)
     if mean_reward is not None:
         writer.add_scalar("Train/mean_reward", mean_reward, it)
+        if wall_time_s is not None:
+            writer.add_scalar("Train/mean_reward/time", mean_reward, int(wall_time_s))
     if mean_length is not None:
         writer.add_scalar("Train/mean_episode_length", mean_length, it)
+        if wall_time_s is not None:
+            writer.add_scalar("Train/mean_episode_length/time", mean_length, int(wall_time_s))

@@ -102,9 +102,13 @@ class _Float32Linear(nn.Linear):
             return super().forward(x.float())
 
 
-def _output_layer(model: nn.Module) -> nn.Linear:
-    """The last ``nn.Linear`` of a model's MLP head (the action mean, or the value)."""
-    return [m for m in model.mlp.modules() if isinstance(m, nn.Linear)][-1]
+def _output_layers(model: nn.Module) -> list[nn.Linear]:
+    """The last ``nn.Linear`` of a model's MLP head (the action mean, or the value); none for a model whose output
+    layers compute in float32 themselves (``float32_outputs``: the external baselines, :mod:`morfic_cli.rl.external`).
+    """
+    if getattr(model, "float32_outputs", False):
+        return []
+    return [[m for m in model.mlp.modules() if isinstance(m, nn.Linear)][-1]]
 
 
 class MorficPPO(PPO):
@@ -127,6 +131,9 @@ class MorficPPO(PPO):
     - ``clip_fraction``: mean over mini-batches of the fraction of samples with ``|ratio - 1| > clip_param``.
     - ``adaptation_error``: mean over mini-batches of ``||z_priv_hat - z_priv||^2 / 16`` before each adaptation step.
 
+    Models without an adaptation module (an actor without ``estimate_privileged`` or a critic without
+    ``encode_privileged``: the external baselines) train with plain PPO; ``adaptation_error`` is then NaN.
+
     Only feed-forward models without symmetry augmentation are supported.
     """
 
@@ -145,20 +152,20 @@ class MorficPPO(PPO):
         """Build PPO, then the adaptation optimiser.
 
         Args:
-            actor: The policy; must have an adaptation module (``estimate_privileged``).
-            critic: The value function; must have a privileged encoder (``encode_privileged``).
+            actor: The policy; its adaptation module (``estimate_privileged``) is trained when it has one.
+            critic: The value function; its privileged encoder (``encode_privileged``) gives the adaptation target.
             storage: rsl-rl rollout storage.
             adaptation_loss_coef: c_adapt.
             adaptation_learning_rate: Adaptation optimiser learning rate; None uses ``learning_rate``.
             **kwargs: rsl-rl PPO arguments (learning_rate, clip_param, ..., device, multi_gpu_cfg).
         """
-        if not hasattr(actor, "estimate_privileged") or not hasattr(critic, "encode_privileged"):
-            raise TypeError("MorficPPO needs MorficActor / MorficCritic models (adaptation module + z_priv encoder).")
+        #: Whether the actor has an adaptation module to regress onto the critic's z_priv (not the baselines).
+        self.adapts = hasattr(actor, "estimate_privileged") and hasattr(critic, "encode_privileged")
         if actor.is_recurrent or critic.is_recurrent:
             raise ValueError("MorficPPO supports feed-forward models only.")
         if kwargs.get("symmetry_cfg"):
             raise ValueError("MorficPPO does not support symmetry augmentation.")
-        if actor.privileged_latent_dim != critic.privileged_latent_dim:
+        if self.adapts and actor.privileged_latent_dim != critic.privileged_latent_dim:
             raise ValueError(
                 f"actor z_priv_hat size {actor.privileged_latent_dim} != critic z_priv size "
                 f"{critic.privileged_latent_dim}."
@@ -178,7 +185,7 @@ class MorficPPO(PPO):
             self.optimizer = optimizer(self.optimizer.param_groups[0]["params"], lr=self.learning_rate, **fused)
         self.adaptation_optimizer = optimizer(
             raw_models(self)[0].adaptation.parameters(), lr=self.adaptation_learning_rate, **fused
-        )
+        ) if self.adapts else None
 
     @contextlib.contextmanager
     def _precision(self, autocast: bool = True) -> Iterator[None]:
@@ -193,7 +200,7 @@ class MorficPPO(PPO):
         if not self.use_mixed_precision:
             yield
             return
-        heads = [_output_layer(model) for model in raw_models(self)]
+        heads = [head for model in raw_models(self) for head in _output_layers(model)]
         classes = [type(h) for h in heads]
         for head in heads:
             head.__class__ = _Float32Linear
@@ -237,13 +244,15 @@ class MorficPPO(PPO):
     def save(self) -> dict:
         """PPO's checkpoint dict plus ``adaptation_optimizer_state_dict``."""
         saved = super().save()
-        saved["adaptation_optimizer_state_dict"] = self.adaptation_optimizer.state_dict()
+        if self.adaptation_optimizer is not None:
+            saved["adaptation_optimizer_state_dict"] = self.adaptation_optimizer.state_dict()
         return saved
 
     def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
         """PPO's load, plus the adaptation optimiser state when the optimiser is loaded and the checkpoint has it."""
         load_iteration = super().load(loaded_dict, load_cfg, strict)
-        if (load_cfg is None or load_cfg.get("optimizer")) and "adaptation_optimizer_state_dict" in loaded_dict:
+        if ((load_cfg is None or load_cfg.get("optimizer")) and "adaptation_optimizer_state_dict" in loaded_dict
+                and self.adaptation_optimizer is not None):
             self.adaptation_optimizer.load_state_dict(loaded_dict["adaptation_optimizer_state_dict"])
         return load_iteration
 
@@ -274,7 +283,10 @@ class MorficPPO(PPO):
         return kl, clip_fraction
 
     def _adaptation_step(self, batch: RolloutStorage.Batch) -> torch.Tensor:
-        """One optimiser step on L_adapt for one mini-batch; returns the error before the step. Shape: ()."""
+        """One optimiser step on L_adapt for one mini-batch; returns the error before the step (NaN without an
+        adaptation module). Shape: ()."""
+        if not self.adapts:
+            return torch.full((), float("nan"))
         obs = batch.observations
         with torch.autocast(
             device_type=torch.device(self.device).type, enabled=self.use_mixed_precision, dtype=torch.bfloat16

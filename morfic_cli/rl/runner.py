@@ -6,7 +6,8 @@ rsl-rl does the PPO loop (:class:`~rsl_rl.runners.OnPolicyRunner.learn`); morfic
 iterations. Store layout of a run named ``NAME``:
 
 - ref ``runs/NAME`` -> ``checkpoint`` manifests: ``model.pt`` (actor and critic weights),
-  ``curve.csv`` and ``curve.png`` (the training curve so far); config = the resolved :class:`TrainCfg`;
+  ``curve.csv`` (the training curve so far) and, in the last checkpoint of a training (finished or Ctrl-C),
+  ``curve.png`` (drawn once, off the training loop); config = the resolved :class:`TrainCfg`;
   meta = variant, seed, iteration, env steps, wall time, git commit, finished/interrupted;
   input ``trainer_state`` = a ``checkpoint`` manifest (config ``{"role": "trainer-state"}``) with
   ``trainer.json`` + ``trainer-tensors.pt`` (optimiser states, env state, RNG states, logger buffers as
@@ -31,6 +32,7 @@ import io
 import os
 import re
 import subprocess
+import time
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
@@ -57,6 +59,7 @@ from morfic_cli.store import RefMovedError, Store
 from morfic_cli.store.lock import LockTimeoutError
 from morfic_cli.store.refs import is_ref_name
 from morfic_cli.store.shallow import TRAINER_STATE_ROLE  # defined by the store: weights-only bundles leave it out
+from morfic_cli.validation import check_stored_cfg
 
 
 def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
@@ -67,11 +70,13 @@ def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
     """
     variant = resolve_variant(cfg.variant)
     actor, critic, obs_groups = variant.model_cfgs()
-    actor["hidden_dims"] = list(cfg.model.actor_hidden_dims)
-    actor["distribution_cfg"]["init_std"] = cfg.model.init_std
-    if cfg.model.critic_hidden_dims is not None:
-        critic["hidden_dims"] = list(cfg.model.critic_hidden_dims)
-    if variant.stock:  # a user's class takes the config its critic_defaults give (docs/extending.md)
+    if "distribution_cfg" in actor:
+        actor["distribution_cfg"]["init_std"] = cfg.model.init_std
+    if not variant.own_models:  # the external baselines keep their own sizes (model.*_hidden_dims are the MLPs')
+        actor["hidden_dims"] = list(cfg.model.actor_hidden_dims)
+        if cfg.model.critic_hidden_dims is not None:
+            critic["hidden_dims"] = list(cfg.model.critic_hidden_dims)
+    if variant.stock and not variant.own_models:  # a user's class takes the config its critic_defaults give
         if critic["conditioning"] == "film":
             critic["conditioning_scale"] = cfg.model.film_scale
         if critic["conditioning"] == "hyper" and cfg.model.hyper_conditions == "head":
@@ -102,6 +107,9 @@ def dummy_observations(cfg: TrainCfg, batch: int = 1) -> TensorDict:
             "critic": torch.zeros(batch, h, O.POLICY_DIM),
             "privileged": torch.zeros(batch, O.PRIVILEGED_DIM),
             "morphology": torch.zeros(batch, DESCRIPTOR_DIM),
+            **({"joint_description": torch.zeros(batch, NUM_JOINTS, O.JOINT_DESCRIPTION_DIM),
+                "foot_description": torch.zeros(batch, 4, O.FOOT_DESCRIPTION_DIM),
+                "foot_state": torch.zeros(batch, 4, O.FOOT_STATE_DIM)} if cfg.env.obs.body_tokens else {}),
         },
         batch_size=[batch],
     )
@@ -150,7 +158,7 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
         raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training checkpoint; "
                           "pass a run ref such as runs/film-cpu-s0 (see `morfic store ls --kind checkpoint`).")
     check_weights(store, spec, manifest)
-    cfg = train_cfg_from_dict(manifest.config)
+    cfg = check_stored_cfg(manifest.config, spec)  # a bundle's config: checked before anything is built
     variant = resolve_variant(cfg.variant, source=spec)  # a user variant: only with the user's consent, else Error
     actor, critic = build_models(cfg)
     state = _load_weights(store, manifest.id, "cpu")
@@ -197,7 +205,12 @@ class _Sink:
 
 
 class CurveLogger(Logger):
-    """rsl-rl's Logger, but each iteration becomes a curve row handed to ``on_iteration`` (no console dump)."""
+    """rsl-rl's Logger, but each iteration becomes a curve row handed to ``on_iteration`` (no console dump).
+
+    Its clock (:attr:`wall_time_s`) is the wall time the user waited for: from :meth:`start_clock` (the start of
+    rsl-rl's ``learn``) on, checkpoints and logging included, added to the wall time of the run before a resume.
+    rsl-rl's own ``tot_time`` (collection + learning only) is kept for what rsl-rl computes from it.
+    """
 
     def __init__(self, *args: Any, dt: float, on_iteration: Callable[[dict[str, float]], None],
                  live: tuple[str, Path] | None = None, **kwargs: Any):
@@ -205,8 +218,33 @@ class CurveLogger(Logger):
         self.dt = dt
         self.on_iteration = on_iteration
         self.wall_time_s = 0.0
+        """Wall seconds of the run so far (over resumes), as of the last :meth:`clock` reading."""
+        self._clock_start: float | None = None
+        self._clock_base = 0.0
         self.live_cfg = live
         self.live: Any = None
+
+    def start_clock(self, since: float | None = None) -> None:
+        """Start counting wall time on top of :attr:`wall_time_s` (the time of the run before this process).
+
+        Args:
+            since: A ``time.perf_counter()`` reading to count from (``morfic train``: the command's start, so the
+                imports and the env's construction count too); None: now.
+        """
+        self._clock_base = self.wall_time_s
+        self._clock_start = time.perf_counter() if since is None else since
+
+    def clock(self) -> float:
+        """The run's wall seconds now (:attr:`wall_time_s` updated); before :meth:`start_clock`, the stored value."""
+        if self._clock_start is not None:
+            self.wall_time_s = self._clock_base + time.perf_counter() - self._clock_start
+        return self.wall_time_s
+
+    def stop_clock(self) -> float:
+        """Read the clock a last time and stop it; returns the run's wall seconds."""
+        wall = self.clock()
+        self._clock_start = None
+        return wall
 
     def init_logging_writer(self) -> None:
         """No rsl-rl writer, no git snapshot (the store keeps the run); the live writer, if one is configured."""
@@ -229,11 +267,10 @@ class CurveLogger(Logger):
         size = self.cfg["num_steps_per_env"] * self.num_envs
         self.tot_timesteps += size
         self.tot_time += collect_time + learn_time
-        self.wall_time_s += collect_time + learn_time
         row: dict[str, float] = {
             "iteration": it + 1,
             "env_steps": self.tot_timesteps,
-            "wall_time_s": self.wall_time_s,
+            "wall_time_s": self.clock(),
             "steps_per_s": size / max(collect_time + learn_time, 1e-9),
             "collect_s": collect_time,
             "learn_s": learn_time,
@@ -263,8 +300,9 @@ class CurveLogger(Logger):
                       else float(self.cur_reward_sum.float().mean()))
             length = (sum(self.lenbuffer) / len(self.lenbuffer) if self.lenbuffer
                       else float(self.cur_episode_length.float().mean()))
+            wall = None if self.live_cfg is not None and self.live_cfg[0] == "wandb" else self.wall_time_s  # as rsl-rl
             write_iteration(self.live, it, size, collect_time, learn_time, {k: float(v) for k, v in loss_dict.items()},
-                            learning_rate, float(action_std.detach().mean()), extras, reward, length)
+                            learning_rate, float(action_std.detach().mean()), extras, reward, length, wall)
         self.ep_extras.clear()
         self.on_iteration(row)
 
@@ -272,7 +310,7 @@ class CurveLogger(Logger):
         """The episode buffers and counters, for exact curves after a resume."""
         return {"rewbuffer": list(self.rewbuffer), "lenbuffer": list(self.lenbuffer),
                 "cur_reward_sum": self.cur_reward_sum.clone(), "cur_episode_length": self.cur_episode_length.clone(),
-                "tot_timesteps": self.tot_timesteps, "tot_time": self.tot_time, "wall_time_s": self.wall_time_s}
+                "tot_timesteps": self.tot_timesteps, "tot_time": self.tot_time, "wall_time_s": self.clock()}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore :meth:`state_dict`."""
@@ -359,6 +397,8 @@ class TrainingRun:
         self.interrupted = False
         self.progress: Callable[[dict[str, float]], None] | None = None
         self.checkpoints: list[Checkpoint] = []
+        self.clock_from: float | None = None
+        """A ``time.perf_counter()`` reading the next :meth:`train` counts the wall time from; None: its start."""
         self._fresh = True
 
     # ------------------------------------------------------------------ the loop
@@ -368,13 +408,25 @@ class TrainingRun:
         if remaining <= 0:
             return self.checkpoints[-1] if self.checkpoints else None
         self.runner.current_learning_iteration = self.iteration
+        logger: CurveLogger = self.runner.logger  # type: ignore[assignment]
+        logger.start_clock(self.clock_from)
+        self.clock_from = None
         try:
             self.runner.learn(remaining, init_at_random_ep_len=self._fresh and self.cfg.init_at_random_ep_len)
         except _Stop:
             pass
         finally:
-            self.runner.logger.close_live()  # type: ignore[attr-defined]
+            logger.close_live()
+            logger.stop_clock()
         return self.checkpoints[-1] if self.checkpoints else None
+
+    @property
+    def wall_time_s(self) -> float:
+        """Wall seconds of the run, over resumes, checkpoints included.
+
+        Counted from :attr:`clock_from` (or the start of rsl-rl's ``learn``) to now, or to the end of :meth:`train`.
+        """
+        return self.runner.logger.clock()  # type: ignore[attr-defined]
 
     def _on_iteration(self, row: dict[str, float]) -> None:
         self.iteration = int(row["iteration"])
@@ -391,12 +443,21 @@ class TrainingRun:
 
     # ------------------------------------------------------------------ checkpoints
     def save_checkpoint(self, *, finished: bool, interrupted: bool = False) -> Checkpoint:
-        """Write the trainer state and the weights manifest naming it, then advance ``runs/NAME`` (one ref update)."""
+        """Write the trainer state and the weights manifest naming it, then advance ``runs/NAME`` (one ref update).
+
+        ``curve.png`` is drawn only for the last checkpoint of this training (``finished`` or ``interrupted``): at
+        1-2 s a drawing, once per checkpoint it cost more than a smoke iteration; every checkpoint has ``curve.csv``.
+        """
         from morfic_cli.recording.curves import curve_csv, curve_png
 
         alg = self.runner.alg
         actor, critic = raw_models(alg)
         model = _to_bytes({"actor": actor.state_dict(), "critic": critic.state_dict()})
+        curves = {"curve.csv": curve_csv(self.rows)}
+        if finished or interrupted:
+            curves["curve.png"] = curve_png(self.rows)
+        logger: CurveLogger = self.runner.logger  # type: ignore[assignment]
+        wall = logger.clock()  # after the drawing: the stored time misses only the write below
         saved = alg.save()
         saved.pop("actor_state_dict"), saved.pop("critic_state_dict")
         trainer = trainer_state.encode({
@@ -407,11 +468,10 @@ class TrainingRun:
             "logger": self.runner.logger.state_dict(),
             "torch_rng": torch.get_rng_state(),
         })
-        logger: CurveLogger = self.runner.logger  # type: ignore[assignment]
         meta = {
             "variant": self.cfg.variant, "seed": self.cfg.seed, "preset": self.cfg.preset, "iteration": self.iteration,
             "max_iterations": self.cfg.max_iterations, "env_steps": logger.tot_timesteps,
-            "wall_time_s": round(logger.wall_time_s, 3), "git_commit": self.git_commit, "finished": finished,
+            "wall_time_s": round(wall, 3), "git_commit": self.git_commit, "finished": finished,
             "interrupted": interrupted, "parent": self.parent, "device": self.device, "run": self.name,
             "vx_max": float(self.env.command_ranges.vx[1]), **variant_record(self.cfg),
             **({"bf16_matmul": alg.bf16_matmul} if getattr(alg, "bf16_matmul", None) else {}),
@@ -422,7 +482,7 @@ class TrainingRun:
                                                   "format": trainer_state.FORMAT})
             ckpt = self.store.put_manifest(
                 "checkpoint", config=train_cfg_to_dict(self.cfg), meta=meta, inputs={TRAINER_STATE_ROLE: state},
-                files={"model.pt": model, "curve.csv": curve_csv(self.rows), "curve.png": curve_png(self.rows)},
+                files={"model.pt": model, **curves},
             )
             try:  # the one visible step, unless another process wrote this run meanwhile
                 version = self.store.set_ref(RUNS_PREFIX + self.name, ckpt, expect=self.head)
@@ -646,7 +706,7 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
         raise MorficError(f"--resume '{spec}' is not a training checkpoint; pass a run ref like runs/film-cpu-s0.")
     name = run_of(spec, manifest.meta)
-    resolve_variant(train_cfg_from_dict(manifest.config).variant, source=spec)  # consent first (morfic_cli.rl.variants)
+    resolve_variant(check_stored_cfg(manifest.config, spec).variant, source=spec)  # checked, then consent
     check_weights(store, spec, manifest)
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
     if state_id is not None and store.is_omitted(state_id):
@@ -660,10 +720,7 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
                                        store.read_file(state.id, trainer_state.TENSORS_FILE), f"checkpoint '{spec}'")
     else:
         trainer = _legacy_trainer_state(store, spec, manifest.id, name)
-    if not isinstance(trainer, dict) or not TRAINER_KEYS <= set(trainer):
-        missing = sorted(TRAINER_KEYS - set(trainer if isinstance(trainer, dict) else {}))
-        raise MorficError(f"the trainer state of checkpoint '{spec}' lacks {missing}; use a checkpoint written by "
-                          "`morfic train`.")
+    trainer_state.check_trainer_state(trainer, f"checkpoint '{spec}'", TRAINER_KEYS)  # keys, types, sizes
     rows = read_curve_csv(store.read_file(manifest.id, "curve.csv"))
     return ResumePoint(manifest, name, trainer, rows)
 

@@ -28,7 +28,8 @@ Consent (docs/extending.md, "Which code morfic imports"): a stored run, imported
 variant, so a user variant is imported only when the user consented to that exact name: named on this command
 line (``--variant``, ``--variants``, ``--trust-variant``: :func:`trust_variants`, scoped to one command by
 :func:`consent_scope`) or listed in the allow-list in the user's config folder (:func:`allow_list_path`, managed
-by ``morfic trust``), which no bundle can write. :func:`resolve_variant` is the one place that imports, and it
+by ``morfic trust``), which counts only when signed with the user's key (:func:`read_allow_list`), so no file a
+bundle brings can act as it. :func:`resolve_variant` is the one place that imports, and it
 checks both (:func:`require_trusted`) and the name's form (:func:`check_variant_name`) before it imports
 anything; stock names need neither.
 """
@@ -37,11 +38,15 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import hashlib
+import hmac
 import importlib
 import importlib.metadata
+import inspect
 import keyword
 import os
 import re
+import secrets
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -73,13 +78,21 @@ class Variant:
     Attributes:
         name: The ``--variant`` name (``film``), or the import path of a user variant (``pkg.mod:Class``).
         label: Its name in the paper's tables and our figures (``MorFiC-F``).
-        tables: The paper's transfer tables it is a column of: ``main`` (zero-shot transfer), ``ablation``.
+        tables: The paper's transfer tables it is a column of: ``main`` (zero-shot transfer), ``ablation``,
+            ``external`` (the external baselines, Table "External baselines vs. MorFiC").
         actor_class: rsl-rl ``class_name`` of the actor.
         critic_class: rsl-rl ``class_name`` of the critic.
         actor_morphology: Whether the actor sees z_m (False only for ``ppo``).
         critic_morphology: Whether the critic sees z_m.
         critic_defaults: Critic config entries of this variant (conditioning, conditioning_scale, hidden_dims).
         stock: One of the paper's variants (False: a user's class).
+        actor_defaults: Actor config entries of this variant, over the stock actor's.
+        own_models: ``actor_defaults`` / ``critic_defaults`` are the complete model configs, not entries over
+            morfic's MLP configs (the external baselines' token models, :mod:`morfic_cli.rl.external`).
+        obs_groups: The rsl-rl ``obs_groups`` of this variant; None: the MLP variants' (history, privileged, m).
+        env_overrides: Env config entries this variant trains with, by dotted key under ``env`` (``--set env.KEY``
+            without the ``env.``), applied to every preset before ``--set`` (:func:`morfic_cli.rl.config.preset_cfg`);
+            ``genloco``'s turns procedural geometry on.
     """
 
     name: str
@@ -91,6 +104,10 @@ class Variant:
     critic_morphology: bool = True
     critic_defaults: dict[str, Any] = field(default_factory=dict)
     stock: bool = True
+    actor_defaults: dict[str, Any] = field(default_factory=dict)
+    own_models: bool = False
+    obs_groups: dict[str, list[str]] | None = None
+    env_overrides: dict[str, Any] = field(default_factory=dict)
 
     @property
     def multiplicative(self) -> bool:
@@ -102,6 +119,9 @@ class Variant:
 
     def model_cfgs(self) -> tuple[dict, dict, dict[str, list[str]]]:
         """The rsl-rl ``actor``, ``critic`` and ``obs_groups`` config entries (paper sizes); fresh dicts per call."""
+        if self.own_models:
+            return (copy.deepcopy(self.actor_defaults), copy.deepcopy(self.critic_defaults),
+                    copy.deepcopy(self.obs_groups or {}))
         actor_cfg = {
             "class_name": self.actor_class,
             "hidden_dims": list(PAPER_TRUNK),
@@ -131,8 +151,9 @@ class Variant:
             "hyper_rank": 16,
             "generator_hidden_dim": 128,
         }
+        actor_cfg.update(copy.deepcopy(self.actor_defaults))
         critic_cfg.update(copy.deepcopy(self.critic_defaults))
-        obs_groups = {
+        obs_groups = copy.deepcopy(self.obs_groups) if self.obs_groups is not None else {
             "actor": ["history", "morphology"] if self.actor_morphology else ["history"],
             "critic": ["critic", "privileged", "morphology"] if self.critic_morphology else ["critic", "privileged"],
         }
@@ -146,6 +167,22 @@ def _stock(name: str, label: str, tables: tuple[str, ...], conditioning: str, sc
                                     "hidden_dims": list(trunk)})
 
 
+_GAUSSIAN = {"class_name": "GaussianDistribution", "init_std": 1.0, "std_type": "scalar"}
+_BOT = {"d_model": 64, "nhead": 2, "num_layers": 8, "dim_feedforward": 128}
+"""BodyTransformer's "BoT-Hard" encoder (Sferrazza et al. 2024): 8 layers, d = 64, 2 heads, feed-forward 128."""
+
+
+def _external(name: str, label: str, actor: dict[str, Any], critic: dict[str, Any],
+              obs_groups: dict[str, list[str]], env_overrides: dict[str, Any] | None = None) -> Variant:
+    """An external baseline: its own token models and observation groups (docs/training.md, "External baselines")."""
+    return Variant(name, label, ("external",), actor_class=actor["class_name"], critic_class=critic["class_name"],
+                   actor_morphology=False, critic_morphology=False, critic_defaults=critic, actor_defaults=actor,
+                   own_models=True, obs_groups=obs_groups, env_overrides=env_overrides or {})
+
+
+_URMA_GROUPS = ["joint_description", "foot_description", "foot_state"]
+
+
 STOCK: dict[str, Variant] = {v.name: v for v in (
     _stock("ppo", "PPO", ("main",), "none", actor_morphology=False),
     _stock("actor-only", "Actor-only", ("main",), "none"),
@@ -154,8 +191,24 @@ STOCK: dict[str, Variant] = {v.name: v for v in (
     _stock("film-scaled", "MorFiC-F(Scaled)", ("ablation",), "film", 0.1, (1024, 512, 256)),
     _stock("hyper", "MorFiC-H", ("ablation",), "hyper", 0.1),
     _stock("adaln", "MorFiC-A", ("ablation",), "adaln"),
+    _external("bot", "BodyTransformer",
+              {"class_name": "morfic_cli.rl.bot:BotActor", **_BOT, "distribution_cfg": dict(_GAUSSIAN)},
+              {"class_name": "morfic_cli.rl.bot:BotCritic", **_BOT, "privileged_group": "privileged"},
+              {"actor": ["history"], "critic": ["critic", "privileged"]}),
+    _external("urma", "URMA",
+              {"class_name": "morfic_cli.rl.urma:UrmaActor", "state_group": "history",
+               "distribution_cfg": dict(_GAUSSIAN)},
+              {"class_name": "morfic_cli.rl.urma:UrmaCritic", "state_group": "critic", "privileged_group": "privileged"},
+              {"actor": ["history", *_URMA_GROUPS], "critic": ["critic", "privileged", *_URMA_GROUPS]},
+              {"obs.body_tokens": True}),
+    # GenLoco (Feng et al. 2022): ppo's networks, trained on procedurally generated robots (docs/training.md)
+    Variant("genloco", "GenLoco", ("external",), actor_morphology=False, critic_morphology=False,
+            critic_defaults={"conditioning": "none", "conditioning_scale": 1.0, "hidden_dims": list(PAPER_TRUNK)},
+            env_overrides={"rand.geometry.enabled": True}),
 )}
-"""The paper's variants, in the order of its tables (sizes: paper Tables "architecture", "conditioning variants")."""
+"""The paper's variants, in the order of its tables (sizes: paper Tables "architecture", "conditioning variants"), then
+the external baselines re-implemented in morfic's pipeline (table ``external``: paper Table "External baselines vs.
+MorFiC")."""
 
 VARIANTS: tuple[str, ...] = tuple(STOCK)
 """The stock ``--variant`` names, in the paper's order."""
@@ -298,11 +351,54 @@ def allow_list_path() -> Path:
     """The allow-list of trusted user variants: ``$XDG_CONFIG_HOME/morfic/trusted-variants``.
 
     ``~/.config/morfic/trusted-variants`` when ``XDG_CONFIG_HOME`` is unset or not an absolute path. It lives in
-    the user's config folder, never in a store, so no imported bundle can write it.
+    the user's config folder, never in a store, and morfic reads only the names it signed (:func:`allow_list`).
     """
     base = os.environ.get("XDG_CONFIG_HOME", "")
     root = Path(base) if base and Path(base).is_absolute() else Path.home() / ".config"
     return root / "morfic" / "trusted-variants"
+
+
+def trust_key_path() -> Path:
+    """The per-user key that signs the allow-list: ``.trust-key`` beside it (64 hex digits, mode 0600).
+
+    Its name starts with ``.``, and no file a bundle carries may have such a part (``plain_name_problem`` in
+    :mod:`morfic_cli.store.manifest`), so neither ``store get`` (whatever its ``--out``) nor any other write-out of a
+    stored file can create or replace it. ``morfic trust`` creates it once.
+    """
+    return allow_list_path().with_name(".trust-key")
+
+
+SIGNATURE = "# signature: hmac-sha256 "
+"""The allow-list line that holds the HMAC-SHA256, under :func:`trust_key_path`'s key, of the names below it."""
+
+_KEY = re.compile(r"[0-9a-f]{64}")
+
+
+def _trust_key(create: bool = False) -> bytes | None:
+    """The signing key; None when there is none (or it is not 64 hex digits) and ``create`` is not set."""
+    path = trust_key_path()
+    try:
+        text = path.read_text(encoding="ascii", errors="replace").strip()
+    except FileNotFoundError:
+        if not create:
+            return None
+        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        except FileExistsError:  # another `morfic trust` made it meanwhile
+            return _trust_key()
+        with os.fdopen(fd, "w", encoding="ascii") as fh:
+            fh.write(secrets.token_hex(32) + "\n")
+        return _trust_key()
+    except OSError as exc:
+        raise MorficError(f"cannot read the key of the allow-list {path} ({exc.strerror}); fix its permissions, or "
+                          "pass --trust-variant to this command.") from exc
+    return text.encode() if _KEY.fullmatch(text) else None
+
+
+def _signature(key: bytes, names: list[str]) -> str:
+    return hmac.new(key, "".join(f"{n}\n" for n in ["morfic trusted-variants 1", *names]).encode(),
+                    hashlib.sha256).hexdigest()
 
 
 def _allow_list_lines() -> list[str]:
@@ -315,15 +411,38 @@ def _allow_list_lines() -> list[str]:
                           "fix its permissions, or pass --trust-variant to this command.") from exc
 
 
+def read_allow_list() -> tuple[list[str], list[str]]:
+    """``(trusted, ignored)``: the allow-list's names its signature vouches for, and those it ignores.
+
+    One name a line; blank lines and other ``#`` lines skipped. The names are ignored, all of them, when the signature
+    is missing or does not match.
+
+    Only ``morfic trust`` (and ``train --variant``) write the signature, with the user's key
+    (:func:`trust_key_path`), so a file put there by anything else (a bundle's file fetched with ``store get``, an
+    edit by hand) trusts nothing.
+    """
+    lines = [line.strip() for line in _allow_list_lines()]
+    names = [n for n in dict.fromkeys(lines) if n and not n.startswith("#")]
+    signed = [line[len(SIGNATURE):] for line in lines if line.startswith(SIGNATURE)]
+    key = _trust_key() if names else None
+    if key is not None and len(signed) == 1 and hmac.compare_digest(signed[0], _signature(key, names)):
+        return names, []
+    return [], names
+
+
 def allow_list() -> list[str]:
-    """The user variants on the allow-list (one name a line; blank lines and ``#`` comments skipped)."""
-    names = [line.strip() for line in _allow_list_lines()]
-    return [n for n in dict.fromkeys(names) if n and not n.startswith("#")]
+    """The user variants on the allow-list that ``morfic trust`` signed (:func:`read_allow_list`)."""
+    return read_allow_list()[0]
 
 
-def _write_allow_list(lines: list[str]) -> None:
+def _write_allow_list(names: list[str]) -> None:
     path = allow_list_path()
     path.parent.mkdir(parents=True, exist_ok=True)
+    key = _trust_key(create=True)
+    assert key is not None  # just created
+    lines = ["# User variants morfic may import when a stored run names them. Written by `morfic trust` "
+             "(docs/extending.md): a line added by hand voids the signature, and with it the list.",
+             SIGNATURE + _signature(key, names), *names]
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".trusted-variants-")
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
@@ -338,34 +457,32 @@ def _write_allow_list(lines: list[str]) -> None:
 def add_to_allow_list(names: Iterable[str]) -> list[str]:
     """Put user variants on the allow-list; returns those that were not on it (stock names are never added).
 
+    The list is written again, signed (:func:`read_allow_list`); names it listed without a valid signature are
+    dropped.
+
     Raises:
         MorficError: A name that is not well-formed.
         OSError: The config folder cannot be written.
     """
     new = [n for n in dict.fromkeys(check_variant_name(n) for n in names) if n not in STOCK]
-    have = set(allow_list())
-    new = [n for n in new if n not in have]
-    if new:
-        lines = _allow_list_lines()
-        if not lines:
-            lines = ["# User variants morfic may import when a stored run names them (`morfic trust`; "
-                     "docs/extending.md)."]
-        _write_allow_list(lines + new)
+    trusted, ignored = read_allow_list()
+    new = [n for n in new if n not in trusted]
+    if new or (ignored and trusted):
+        _write_allow_list(trusted + new)
     return new
 
 
 def remove_from_allow_list(names: Iterable[str]) -> list[str]:
-    """Take names off the allow-list; returns those that were on it.
+    """Take names off the allow-list; returns those that were on it (signed).
 
     Raises:
         OSError: The config folder cannot be written.
     """
     drop = set(names)
-    lines = _allow_list_lines()
-    kept = [line for line in lines if line.strip() not in drop]
-    removed = [n for n in dict.fromkeys(line.strip() for line in lines) if n in drop]
+    trusted = allow_list()
+    removed = [n for n in trusted if n in drop]
     if removed:
-        _write_allow_list(kept)
+        _write_allow_list([n for n in trusted if n not in drop])
     return removed
 
 
@@ -399,6 +516,9 @@ def require_trusted(name: str, *, source: str | None = None) -> None:
         return
     how = (f"If you trust that code, pass --trust-variant {name} to this command, or trust it for every command "
            f"with `morfic trust {name}` (the allow-list {allow_list_path()}).")
+    if name in read_allow_list()[1]:
+        how += (" The allow-list names it, but morfic ignores that list: `morfic trust` did not sign it (a file from "
+                "elsewhere, or edited by hand); `morfic trust --list` says more.")
     if source is not None:
         raise UntrustedVariantError(f"run {source} needs the user variant {name}; morfic will not import code named "
                                     f"by a stored run without --trust-variant {name}. {how}")
@@ -436,7 +556,7 @@ def resolve_variant(name: str, *, source: str | None = None) -> Variant:
         module = importlib.import_module(module_name)
     except ImportError as exc:
         raise MorficError(f"variant '{name}': cannot import module '{module_name}' ({exc}). Install the package "
-                          "that provides it, or put the folder holding it on PYTHONPATH (docs/extending.md).") from exc
+                          "that provides it (a variant's code travels as its own package: docs/extending.md).") from exc
     obj = module
     for part in attr.split("."):
         if not hasattr(obj, part):
@@ -450,17 +570,33 @@ def user_variant(name: str, cls: Any, path: str) -> Variant:
     """A user's critic class as a :class:`Variant` (the stock actor with z_m, the class as critic).
 
     Raises:
-        MorficError: ``cls`` is not a class.
+        MorficError: ``cls`` is not a class, not an rsl-rl critic model (a ``torch.nn.Module`` with
+            ``encode_privileged``), or cannot be built as ``cls(obs, obs_groups, "critic", 1, **critic_cfg)``.
     """
     if not isinstance(cls, type):
         raise MorficError(f"variant '{name}' names {type(cls).__name__} '{path}', not a class; a variant is a "
                           "critic class (docs/extending.md).")
+    import torch
+
+    protocol = ("a critic model: a torch.nn.Module subclass with forward and encode_privileged, built as cls(obs, "
+                "obs_groups, 'critic', 1, **critic_cfg); subclass morfic_cli.rl.models.MorficCritic "
+                "(docs/extending.md, \"The protocol\")")
+    if not issubclass(cls, torch.nn.Module) or not callable(getattr(cls, "encode_privileged", None)):
+        raise MorficError(f"variant '{name}': class {cls.__qualname__} is not {protocol}.")
     defaults = getattr(cls, "critic_defaults", {}) or {}
     if not isinstance(defaults, dict):
         raise MorficError(f"variant '{name}': {cls.__name__}.critic_defaults must be a dict of critic config "
                           f"entries, got {type(defaults).__name__}.")
-    return Variant(name=name, label=str(getattr(cls, "label", cls.__name__)), tables=(),
-                   critic_class=f"{cls.__module__}:{cls.__qualname__}", critic_defaults=dict(defaults), stock=False)
+    variant = Variant(name=name, label=str(getattr(cls, "label", cls.__name__)), tables=(),
+                      critic_class=f"{cls.__module__}:{cls.__qualname__}", critic_defaults=dict(defaults), stock=False)
+    critic_cfg = {k: v for k, v in variant.model_cfgs()[1].items() if k != "class_name"}
+    try:
+        inspect.signature(cls).bind(None, None, "critic", 1, **critic_cfg)
+    except TypeError as exc:
+        raise MorficError(f"variant '{name}': class {cls.__qualname__} is not {protocol} ({exc}).") from None
+    except ValueError:  # no signature to inspect (a C type): building it says more
+        pass
+    return variant
 
 
 def model_cfgs(variant: str) -> tuple[dict, dict, dict[str, list[str]]]:

@@ -13,7 +13,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     import torch
+
+    from morfic_cli.morphology.robots import RobotSpec
 
 
 #: Bodies whose ground contact ``SimFrame.body_contact_force`` reports, in this order.
@@ -161,6 +165,28 @@ class SimBackend(Protocol):
         Args:
             env_ids: Envs to change. Shape: (k,).
             descriptors: Raw descriptors. Shape: (k, 11).
+        """
+        ...
+
+    def set_geometry_pool(self, robots: Sequence[RobotSpec]) -> None:
+        """Compile K generated robots with the template's structure (:mod:`morfic_cli.morphology.procedural`).
+
+        Only the CPU backend implements it; the warp backend raises ``MorficError`` (its worlds share geometry).
+        """
+        ...
+
+    def set_geometry(self, env_ids: torch.Tensor, robot_ids: torch.Tensor) -> None:
+        """Give some envs a pool robot's model (its geometry, masses, gains, descriptor), at rest at its home.
+
+        Args:
+            env_ids: Envs to change. Shape: (k,).
+            robot_ids: Each env's robot in the pool. Shape: (k,).
+        """
+        ...
+
+    def body_description(self, env_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """URMA's raw joint (k, 12, 18) and foot (k, 4, 6) descriptions of some envs' models
+        (:mod:`morfic_cli.morphology.description`). Only the CPU backend implements it; warp raises ``MorficError``.
         """
         ...
 

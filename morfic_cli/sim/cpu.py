@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -47,6 +48,7 @@ from morfic_cli.config import SimCfg
 from morfic_cli.errors import MorficError
 from morfic_cli.morphology.apply import TemplateInfo, apply_descriptor, clamp_to_limits, model_joint_ranges, summarize
 from morfic_cli.morphology.builder import build_model
+from morfic_cli.morphology.description import FOOT_FIELDS, JOINT_FIELDS, body_description
 from morfic_cli.morphology.robots import JOINTS, LEGS, RobotSpec
 from morfic_cli.quaternion import quat_rotate_inverse
 from morfic_cli.sim.args import NUM_JOINTS, dynamics_rows, env_index, env_rows
@@ -140,7 +142,10 @@ class CpuBackend:
         self.info = TemplateInfo.from_model(nominal)
         self.layout = SensorLayout.from_model(nominal)
         self._scratch = mujoco.MjData(nominal)
-        self._nominal_ipos = nominal.body_ipos[self.info.base_body].copy()
+        self._nominal_ipos = np.tile(nominal.body_ipos[self.info.base_body], (self.num_envs, 1))
+        self._env_info = [self.info] * self.num_envs  # per env: the nominal values its model started from
+        self._env_robot = [robot] * self.num_envs  # per env: the robot its model was built from
+        self._pool: list[tuple[mujoco.MjModel, TemplateInfo, RobotSpec]] = []
         self._qvel0 = 1 + nominal.nq  # first qvel entry in the state vector
 
         first = copy.copy(nominal)
@@ -336,14 +341,93 @@ class CpuBackend:
         ids = self._ids(env_ids)
         rows = self._rows(descriptors, ids.size, (11,), "descriptors")
         for env, m in zip(ids, rows, strict=True):
-            model = self.models[env]
-            self._descriptor[env] = apply_descriptor(model, self._scratch, m, self.info)
-            summary = summarize(model, self._scratch, self.info, self.robot.default_qpos, self.robot.foot_radius)
+            model, robot = self.models[env], self._env_robot[env]
+            self._descriptor[env] = apply_descriptor(model, self._scratch, m, self._env_info[env])
+            summary = summarize(model, self._scratch, self.info, robot.default_qpos, robot.foot_radius)
             self._joint_range[env] = model_joint_ranges(model, self.info)
             self._default_qpos[env] = summary.default_joint_pos
             self._nominal_height[env] = summary.nominal_height
             self._total_mass[env] = summary.total_mass
             self._base_mass[env] = summary.base_mass
+
+    def set_geometry_pool(self, robots: Sequence[RobotSpec]) -> None:
+        """Compile generated robots (:mod:`morfic_cli.morphology.procedural`) for :meth:`set_geometry`.
+
+        Args:
+            robots: K specs with the template's structure (made by ``procedural.generate_robot``).
+
+        Raises:
+            MorficError: the backend is in ``full`` mode.
+            ValueError: a robot's model differs from the template's in its sizes.
+        """
+        if not self.morphology_mutable:
+            raise MorficError(f"procedural geometry needs the template backend; this one simulates "
+                              f"'{self.robot.name}' in full mode with its own morphology.")
+        pool = []
+        for robot in robots:
+            model = build_model(robot, floor=True, sim_sensors=True)
+            model.opt.timestep = self.physics_dt
+            if (model.nq, model.nv, model.nu, model.nsensordata, model.nbody, model.ngeom) != (
+                    self.models[0].nq, self.models[0].nv, self.models[0].nu, self.models[0].nsensordata,
+                    self.models[0].nbody, self.models[0].ngeom):
+                raise ValueError(f"generated robot '{robot.name}' does not have the template's structure.")
+            pool.append((model, TemplateInfo.from_model(model), robot))
+        self._pool = pool
+
+    def set_geometry(self, env_ids: torch.Tensor, robot_ids: torch.Tensor) -> None:
+        """Give some envs a fresh copy of a pool robot's model (:meth:`set_geometry_pool`), at rest at its home.
+
+        The env's descriptor, limits, default pose, heights, masses and torque limits become that robot's;
+        dynamics are the model's own until the next :meth:`set_dynamics`, morphology until :meth:`set_morphology`.
+
+        Args:
+            env_ids: Envs to change. Shape: (k,).
+            robot_ids: Index of each env's robot in the pool. Shape: (k,), in [0, K).
+        """
+        ids = self._ids(env_ids)
+        picks = env_index(robot_ids, len(self._pool))
+        if picks.size != ids.size:
+            raise ValueError(f"set_geometry: {ids.size} envs but {picks.size} robot ids.")
+        for env, pick in zip(ids, picks, strict=True):
+            nominal, info, robot = self._pool[pick]
+            model = copy.copy(nominal)
+            self.models[env] = model
+            self._stepper.set_model(int(env), model)
+            self._env_info[env], self._env_robot[env] = info, robot
+            self._nominal_ipos[env] = nominal.body_ipos[self.info.base_body]
+            summary = summarize(model, self._scratch, self.info, robot.default_qpos, robot.foot_radius)
+            self._descriptor[env] = robot.descriptor
+            self._joint_range[env] = model_joint_ranges(model, self.info)
+            self._default_qpos[env] = summary.default_joint_pos
+            self._nominal_height[env] = summary.nominal_height
+            self._total_mass[env] = summary.total_mass
+            self._base_mass[env] = summary.base_mass
+            self._torque_limit[env] = model.actuator_forcerange[self.info.actuator_ids, 1]
+            self._friction[env] = model.geom_friction[model.geom("floor").id, 0]
+            self._restitution[env] = 0.0
+            self._com_offset[env] = 0.0
+            self._joint_friction[env] = model.dof_frictionloss[self.info.dof_adr]
+            self.state[env] = self._home_state(env)
+        self._refresh_sensors(ids)
+
+    def body_description(self, env_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """URMA's raw joint and foot descriptions of some envs' models (:mod:`morfic_cli.morphology.description`).
+
+        Read from each env's own model at its default pose (``mj_kinematics`` on the scratch data); the velocity
+        limits are the env's robot spec's (the model has none). Call it when a model changes, not per step.
+
+        Args:
+            env_ids: Envs to describe. Shape: (k,).
+
+        Returns:
+            Joint descriptions (k, 12, 18) and foot descriptions (k, 4, 6), float32 on the backend's device.
+        """
+        ids = self._ids(env_ids)
+        rows = [body_description(self.models[env], self._scratch, self._env_info[env], self._default_qpos[env],
+                                 np.asarray(self._env_robot[env].velocity_limit, dtype=np.float64)) for env in ids]
+        joints = np.stack([r[0] for r in rows]) if rows else np.zeros((0, NUM_JOINTS, len(JOINT_FIELDS)))
+        feet = np.stack([r[1] for r in rows]) if rows else np.zeros((0, len(LEGS), len(FOOT_FIELDS)))
+        return self._tensor(joints), self._tensor(feet)
 
     def set_dynamics(self, env_ids: torch.Tensor, friction: torch.Tensor, restitution: torch.Tensor,
                      com_offset: torch.Tensor, joint_friction: torch.Tensor) -> None:
@@ -367,7 +451,7 @@ class CpuBackend:
             model = self.models[env]
             model.geom_friction[:, 0] = mu[j]
             model.geom_solref[:, 1] = zeta[j]
-            model.body_ipos[self.info.base_body] = self._nominal_ipos + com[j]
+            model.body_ipos[self.info.base_body] = self._nominal_ipos[env] + com[j]
             model.dof_frictionloss[self.info.dof_adr] = jf[j]
             mujoco.mj_setConst(model, self._scratch)  # the COM moved: inverse weights change
         self._friction[ids], self._restitution[ids] = mu, e

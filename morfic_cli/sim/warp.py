@@ -250,6 +250,11 @@ def restitution_to_dampratio(e: torch.Tensor) -> torch.Tensor:
     return torch.where(e > 0, -log_e / torch.sqrt(math.pi**2 + log_e**2), torch.ones_like(e))
 
 
+GEOMETRY_NEEDS_CPU = ("procedural geometry (env.rand.geometry.enabled) runs on the cpu backend only; train it with "
+                      "--set env.sim.backend=cpu (no --device cuda), or turn it off with "
+                      "--set env.rand.geometry.enabled=false.")
+
+
 class WarpBackend:
     """Batched quadruped physics on MuJoCo Warp (implements :class:`morfic_cli.sim.backend.SimBackend`).
 
@@ -749,6 +754,31 @@ class WarpBackend:
             self._d_joint_range[ids] = joint_range.float()
             self._home_qpos[ids[:, None], self._qpos_adr] = default.float()
         self._const_dirty = True
+
+    def set_geometry_pool(self, robots) -> None:
+        """Not supported: procedural geometry runs on the CPU backend only.
+
+        Its robots differ in body positions and geom sizes, which this backend keeps shared across worlds
+        (docs/robots.md, "Procedural geometry").
+
+        Raises:
+            MorficError: always.
+        """
+        raise MorficError(GEOMETRY_NEEDS_CPU)
+
+    def set_geometry(self, env_ids: torch.Tensor, robot_ids: torch.Tensor) -> None:
+        """See :meth:`set_geometry_pool`. Raises MorficError."""
+        raise MorficError(GEOMETRY_NEEDS_CPU)
+
+    def body_description(self, env_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Not supported: URMA's joint and foot descriptions (``env.obs.body_tokens``, variant ``urma``) are read
+        from per-env ``MjModel`` objects, which only the CPU backend keeps.
+
+        Raises:
+            MorficError: always.
+        """
+        raise MorficError("variant urma's joint descriptions (env.obs.body_tokens) need the CPU backend, which keeps "
+                          "one MjModel per env; train it with --device cpu (--set env.sim.backend=cpu).")
 
     def set_dynamics(self, env_ids: torch.Tensor, friction: torch.Tensor, restitution: torch.Tensor,
                      com_offset: torch.Tensor, joint_friction: torch.Tensor) -> None:

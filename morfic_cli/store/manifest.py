@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import os
 import re
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -183,21 +183,74 @@ def file_name_problem(name: object) -> str | None:
     return None
 
 
-def check_file_name(name: str) -> str:
-    """Return ``name`` if it is a safe relative file name inside a manifest (``a.csv``, ``figures/x.png``).
+#: Endings of the files Python runs or imports by itself from a folder on its path (``sitecustomize.py``, a
+#: ``.pth`` file, an extension module): no artifact holds one (docs/concepts.md, "File names").
+CODE_SUFFIXES = (".py", ".pyc", ".pyo", ".pyw", ".pyz", ".pth", ".so", ".pyd", ".dll", ".dylib", ".egg", ".whl")
 
-    Raises:
-        StoreError: See :func:`file_name_problem`.
+_PLAIN_PART = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._+-]*")
+
+
+def plain_name_problem(name: object) -> str | None:
+    """Why ``name`` is not a file name morfic writes, stores or imports, or ``None`` if it is.
+
+    :func:`file_name_problem`'s rule, plus: every part starts with an ASCII letter, digit or ``_`` (no hidden
+    ``.config`` part, no leading ``-``) and holds only ASCII letters, digits, ``.``, ``_``, ``+`` and ``-``; and the
+    name does not end in one of :data:`CODE_SUFFIXES` (any case). Every file morfic writes (``model.pt``,
+    ``figures/ev.png``, ``eval.csv``) passes, so a name that does not came from a hand-made bundle: ``store
+    import`` refuses it, and ``store get`` and every other write-out never write it (docs/concepts.md).
     """
     problem = file_name_problem(name)
     if problem is not None:
-        raise StoreError(f"invalid manifest file name {str(name)[:80]!r}: it {problem}; use a relative name "
-                         "like 'curves.csv' or 'figures/ev.png' (no leading '/', no '.' or '..' parts).")
+        return problem
+    assert isinstance(name, str)
+    bad = next((part for part in name.split("/") if not _PLAIN_PART.fullmatch(part)), None)
+    if bad is not None and bad.startswith("."):
+        return f"has the hidden part {ascii(bad[:40])} (starts with '.')"
+    if bad is not None:
+        return (f"has the part {ascii(bad[:40])}, which starts with or holds another character than ASCII letters, "
+                "digits and '_' (then also '.', '+', '-')")
+    if name.lower().endswith(CODE_SUFFIXES):
+        return (f"ends in {name[name.rfind('.'):]!r}, a file Python runs or imports from a folder on its path; no "
+                "artifact holds code")
+    return None
+
+
+def clashing_names(names: Iterable[str]) -> tuple[str, str] | None:
+    """Two of ``names`` that cannot both be files of one folder, or None.
+
+    They clash when they are equal, or equal but for case (one file on a case-insensitive file system), or when one
+    is a folder part of the other (``figures`` and ``figures/ev.png``). Example: ``["A.csv", "a.csv"]`` -> ``("A.csv", "a.csv")``.
+    """
+    claims: dict[str, tuple[int, str, bool]] = {}  # case-folded path -> (which name, the name, is a file)
+    for n, name in enumerate(names):
+        parts = name.casefold().split("/")
+        for i in range(1, len(parts) + 1):
+            key, is_file = "/".join(parts[:i]), i == len(parts)
+            other_n, other, other_file = claims.setdefault(key, (n, name, is_file))
+            if other_n != n and (is_file or other_file):
+                return other, name
+    return None
+
+
+def check_file_name(name: str) -> str:
+    """Return ``name`` if it is a plain relative file name for a manifest (``a.csv``, ``figures/x.png``).
+
+    Every manifest morfic writes (:func:`build_manifest`) and every file written out of the store
+    (:func:`safe_join`) goes through here.
+
+    Raises:
+        StoreError: See :func:`plain_name_problem`.
+    """
+    problem = plain_name_problem(name)
+    if problem is not None:
+        raise StoreError(f"invalid manifest file name {ascii(str(name)[:80])}: it {problem}; use a relative name "
+                         "like 'curves.csv' or 'figures/ev.png' (ASCII letters, digits, '.', '_', '+', '-'; no "
+                         "leading '/' or '.', no '.' or '..' parts).")
     return name
 
 
 def safe_join(folder: Path, name: str) -> Path:
-    """``folder / name`` for a manifest file name, refusing any name that would leave ``folder``.
+    """``folder / name`` for a manifest file name, refusing any name that would leave ``folder`` or is not plain.
 
     Every command that writes a manifest's files out goes through here (a manifest may come from an
     imported, untrusted bundle).
@@ -230,6 +283,10 @@ def build_manifest(
     for what, value in (("config", config), ("meta", meta), ("inputs", inputs), ("files", files)):
         if value is not None and not isinstance(value, dict):
             raise StoreError(f"manifest {what} must be a dict, not {type(value).__name__}.")
+    clash = clashing_names(files or {})
+    if clash is not None:
+        raise StoreError(f"manifest files {clash[0]!r} and {clash[1]!r} cannot both be files of one folder (equal but "
+                         "for case, or one a folder of the other); rename one.")
     return {
         "schema": SCHEMA_VERSION,
         "kind": check_kind(kind),

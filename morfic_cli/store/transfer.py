@@ -43,11 +43,11 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 from morfic_cli import __version__
-from morfic_cli.errors import ArtifactNotFoundError, MorficError, StoreError
+from morfic_cli.errors import ArtifactNotFoundError, MorficError, StoreError, printable
 from morfic_cli.rl.variants import STOCK, stored_variants
 from morfic_cli.runs import RUNS_PREFIX
 from morfic_cli.store.gc import walk
-from morfic_cli.store.manifest import MAX_MANIFEST_BYTES, parse_manifest
+from morfic_cli.store.manifest import MAX_MANIFEST_BYTES, clashing_names, parse_manifest, plain_name_problem
 from morfic_cli.store.objects import CHUNK_SIZE, is_object_id, object_relpath, store_os_error, unlink_quiet
 from morfic_cli.store.refs import (
     RefEntry,
@@ -60,6 +60,7 @@ from morfic_cli.store.refs import (
 )
 from morfic_cli.store.results import results_histories
 from morfic_cli.store.shallow import NOTHING, OMITTABLE_FILES, OMITTABLE_ROLES, RESULTS_ONLY, WEIGHTS_ONLY
+from morfic_cli.validation import stored_cfg_problem
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -742,8 +743,24 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
                          "was not made by morfic, or was edited.") from None
     if users:
         plan.variants[oid] = users
+    if manifest.kind == "checkpoint" and "model.pt" in manifest.files:  # a run: commands rebuild models from it
+        problem = stored_cfg_problem(manifest.config)
+        if problem is not None:
+            raise StoreError(f"manifest {oid} in the export is a run's checkpoint with an invalid config "
+                             f"({printable(problem)}); nothing was imported. `morfic train` never writes one: the "
+                             "bundle was not made by morfic, or was edited.")
+    clash = clashing_names(manifest.files)
+    if clash is not None:
+        raise StoreError(f"manifest {oid} in the export names the files {ascii(clash[0][:80])} and "
+                         f"{ascii(clash[1][:80])}, which cannot both be files of one folder (equal but for case, or "
+                         "one a folder of the other); nothing was imported. The bundle was not made by morfic.")
     named: set[str] = set()
     for name, entry in manifest.files.items():
+        problem = plain_name_problem(name)  # e.g. .config/morfic/trusted-variants, sitecustomize.py, x.pth
+        if problem is not None:
+            raise StoreError(f"manifest {oid} in the export names the file {ascii(name[:80])}: it {problem}; nothing "
+                             "was imported. morfic writes only plain file names (docs/concepts.md, \"File names\"): "
+                             "the bundle was not made by morfic, or was edited.")
         size = sizes.get(entry.id)
         if size is None and store.objects.intact(entry.id):
             size = store.objects.size(entry.id)

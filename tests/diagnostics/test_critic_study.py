@@ -194,18 +194,21 @@ def _rows(values: dict[tuple[str, str], list[float]], metric: str) -> list[dict]
 
 
 def test_claim_a_effect_by_hand():
-    # aliengo: film 0.5, adaln 0.3 (multiplicative mean 0.4); ppo 0.1 -> +0.3, constant seeds: a point interval
+    # aliengo: film 0.5, adaln 0.3 (multiplicative mean 0.4); ppo 0.1 -> +0.3, constant seeds: exact, p 0
+    # mini_cheetah: film {0, 0.2}, adaln {0, 0.2} (mean 0.1, s² 0.02 each), ppo 0.1 constant: effect 0,
+    # t 0 -> p 1. Holm over the two robots: 0 and 1.
     rows = _rows({("film", "aliengo"): [0.5, 0.5], ("adaln", "aliengo"): [0.3, 0.3], ("ppo", "aliengo"): [0.1, 0.1],
                   ("film", "mini_cheetah"): [0.0, 0.2], ("adaln", "mini_cheetah"): [0.0, 0.2],
                   ("ppo", "mini_cheetah"): [0.1, 0.1]}, "ev")
     claim = ss.claim_a(rows, 1.0)
     by_robot = {r["robot"]: r for r in claim["robots"]}
     e = by_robot["aliengo"]["effect"]
-    assert (e.estimate, e.lo, e.hi) == (pytest.approx(0.3), pytest.approx(0.3), pytest.approx(0.3))
+    assert (e.estimate, e.lo, e.hi, e.p) == (pytest.approx(0.3), pytest.approx(0.3), pytest.approx(0.3), 0.0)
     assert by_robot["aliengo"]["verdict"] == stats.HOLDS
     assert by_robot["mini_cheetah"]["effect"].estimate == pytest.approx(0.0)
+    assert by_robot["mini_cheetah"]["p_holm"] == pytest.approx(1.0)
     assert by_robot["mini_cheetah"]["verdict"] == stats.CANNOT
-    assert by_robot["anymal_c"]["effect"].n_a == 0  # no rows: left out of the claim's verdict
+    assert "anymal_c" not in by_robot  # no rows: left out of the claim
     assert claim["verdict"] == ss.PARTLY
 
 
@@ -217,14 +220,18 @@ def test_claim_c_needs_film_best_against_every_critic():
     for r, c in zip(flip, cos, strict=True):
         r["cos_grad"] = c["cos_grad"]
     claim = ss.claim_c(flip, 1.0)
+    assert [r["robot"] for r in claim["robots"]] == ["aliengo"]  # mini_cheetah: no rows, left out
     aliengo = claim["robots"][0]
     pairs = {p["other"]: p for p in aliengo["pairs"]}
     assert pairs["ppo"]["flip"].estimate == pytest.approx(0.1)  # ppo - film
     assert pairs["adaln"]["flip"].estimate == pytest.approx(-0.1)  # adaln flips less than film: reversed
     assert pairs["adaln"]["cos_grad"].estimate == pytest.approx(0.1)
-    assert aliengo["verdict"] == stats.NOT
-    assert claim["robots"][1]["verdict"] == stats.CANNOT  # mini_cheetah: no rows
-    assert claim["verdict"] == stats.NOT  # reversed on one robot, holds on none
+    # every seed constant: every comparison exact (p 0): 3 for, adaln's Flip against -> mixed
+    assert pairs["adaln"]["flip_verdict"] == stats.NOT and pairs["ppo"]["flip_verdict"] == stats.HOLDS
+    assert aliengo["verdict"] == ss.MIXED and claim["verdict"] == ss.MIXED
+    rows = ss.verdict_rows([claim])
+    assert [r["verdict"] for r in rows] == [stats.HOLDS, stats.HOLDS, stats.NOT, stats.HOLDS]
+    assert set(ss.VERDICT_COLUMNS) == set(rows[0])
 
 
 def test_a_users_critic_is_in_neither_group_of_claim_a():
@@ -236,12 +243,3 @@ def test_a_users_critic_is_in_neither_group_of_claim_a():
     effect = ss.claim_a(rows, 1.0)["robots"][0]["effect"]
     assert effect.estimate == pytest.approx(0.4) and (effect.n_a, effect.n_b) == (2, 2)
     assert [ss.group_of(v) for v in (True, "False", None, float("nan"), "true")] == [True, False, None, None, True]
-
-
-def test_combine_by_hand():
-    assert ss.combine([stats.HOLDS, stats.HOLDS]) == stats.HOLDS
-    assert ss.combine([stats.NOT, stats.NOT]) == stats.NOT
-    assert ss.combine([stats.HOLDS, stats.CANNOT]) == ss.PARTLY
-    assert ss.combine([stats.HOLDS, stats.NOT]) == ss.MIXED
-    assert ss.combine([stats.CANNOT, stats.NOT]) == stats.NOT
-    assert ss.combine([stats.CANNOT, stats.CANNOT]) == stats.CANNOT

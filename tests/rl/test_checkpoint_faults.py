@@ -72,8 +72,8 @@ def _finish(tmp_path: Path, proc: subprocess.Popen, timeout: float = 300) -> sub
 
 
 def _train_args(iterations: int, name: str = NAME) -> list[str]:
-    return ["train", "--preset", "smoke", "--name", name, "--set", f"max_iterations={iterations}", "-q",
-            "-f", "json"]
+    return ["train", "--preset", "smoke", "--name", name, "--set", f"max_iterations={iterations}", "--set",
+            "save_interval=1", "-q", "-f", "json"]  # a checkpoint every iteration: kills land between them
 
 
 def _ok(proc: subprocess.CompletedProcess) -> None:

@@ -53,7 +53,7 @@ def trained(tmp_path_factory):
 
 def test_a_user_variant_trains_evaluates_diagnoses_exports_and_compares(trained):
     tmp, mods, result = trained
-    assert result["variant"] == VARIANT and result["ref"] == f"{RUN}@2"
+    assert result["variant"] == VARIANT and result["ref"] == f"{RUN}@1"
     show = morfic(tmp, "store", "show", RUN, "-f", "json", pythonpath=mods)
     manifest = json.loads(show.stdout)
     assert manifest["config"]["variant"] == VARIANT and manifest["meta"]["variant"] == VARIANT

@@ -28,12 +28,12 @@ def test_run_names_follow_one_rule():
 
 
 def test_a_user_class_becomes_a_variant_with_the_stock_actor():
-    with V.consent_scope(["collections:OrderedDict"]):  # any importable class stands in for a critic here
-        variant = V.resolve_variant("collections:OrderedDict")
-    assert not variant.stock and variant.label == "OrderedDict"
+    with V.consent_scope(["morfic_cli.rl.models:MorficCritic"]):  # morfic's own critic class, named by import path
+        variant = V.resolve_variant("morfic_cli.rl.models:MorficCritic")
+    assert not variant.stock and variant.label == "MorficCritic"
     actor, critic, groups = variant.model_cfgs()
     assert actor["class_name"] == V.ACTOR_CLASS and actor["morphology_group"] == "morphology"
-    assert critic["class_name"] == "collections:OrderedDict"
+    assert critic["class_name"] == "morfic_cli.rl.models:MorficCritic"
     assert groups["critic"] == ["critic", "privileged", "morphology"]
 
 
@@ -42,6 +42,8 @@ def test_a_user_class_becomes_a_variant_with_the_stock_actor():
     ("no_such_module_xyz:Critic", "cannot import module 'no_such_module_xyz'"),
     ("collections:NoSuchClass", "has no 'NoSuchClass'"),
     ("collections:abc", "not a class"),
+    ("collections:OrderedDict", "class OrderedDict is not a critic model: a torch.nn.Module subclass"),  # issue 53
+    ("torch.nn:Linear", "class Linear is not a critic model"),
     (":Critic", "not an import path"),
 ])
 def test_bad_variant_names_are_user_errors(name, needle):
@@ -63,7 +65,8 @@ def sentinel(tmp_path, monkeypatch):
     marker = tmp_path / "imported"
     (tmp_path / "mods").mkdir()
     (tmp_path / "mods" / "sentinel_critic.py").write_text(
-        f"import pathlib\npathlib.Path({str(marker)!r}).write_text('imported')\nclass Critic:\n    pass\n")
+        f"import pathlib\npathlib.Path({str(marker)!r}).write_text('imported')\n"
+        "from morfic_cli.rl.models import MorficCritic\nclass Critic(MorficCritic):\n    pass\n")
     monkeypatch.syspath_prepend(str(tmp_path / "mods"))
     monkeypatch.delitem(__import__("sys").modules, "sentinel_critic", raising=False)
     return "sentinel_critic:Critic", marker

