@@ -31,11 +31,9 @@ def _columns(table: str, with_paper: bool) -> list[Column]:
     command = Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:g}", justify="right")
     if table == "verdicts":
         return [Column("claim", "claim"), command, Column("verdict", "verdict"), Column("unit", "on"),
-                Column("comparison", "comparison"), _pm("effect"), _pm("lo"), _pm("hi"),
-                Column("n_a", "n a", justify="right"), Column("n_b", "n b", justify="right"),
-                Column("p", "p", fmt=lambda v: _n(v, 4), justify="right"),
+                Column("comparison", "comparison"), Column("cell", "effect [95 %]", justify="right"),
                 Column("p_holm", "Holm p", fmt=lambda v: _n(v, 4), justify="right"), Column("outcome", "outcome"),
-                Column("seeds_needed", "seeds/side for 80 %", fmt=lambda v: "-" if v is None else
+                Column("seeds_needed", "seeds for 80 %", fmt=lambda v: "-" if v is None else
                        (f">{v - 1}" if v > 1000 else str(v)), justify="right")]
     if table == "transfer":
         cols = [*head, Column("robot", "robot"), Column("mode", "mode"), command,

@@ -226,8 +226,14 @@ def compute_rows(data: StoreData) -> list[dict[str, Any]]:
 
 def verdict_rows(data: StoreData) -> list[dict[str, Any]]:
     """The claims' primary comparisons, one row each (:meth:`~morfic_cli.report.claims.Comparison.row`)."""
-    return [{"table": "verdicts", "claim": c.key, "command_vx": c.command_vx, "verdict": c.verdict, **row}
-            for c in check_claims(data.evals, data.calibration, data.fixed) for row in c.comparisons]
+    def cell(r: dict[str, Any]) -> str:
+        if r["effect"] is None:
+            return "-"
+        return f"{r['effect']:+.3f}" + (f" [{r['lo']:+.3f}, {r['hi']:+.3f}]" if r["lo"] is not None else "")
+
+    claims = check_claims(data.evals, data.calibration, data.fixed)
+    return [{"table": "verdicts", "claim": c.key, "command_vx": c.command_vx, "verdict": c.verdict, **row,
+             "cell": cell(row)} for c in claims for row in c.comparisons]
 
 
 def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

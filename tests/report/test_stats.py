@@ -194,3 +194,11 @@ def test_the_simulated_rule_is_the_claims_rule():
                  "mode": "descriptor", "command_vx": 2.0, "artifact": "x"}
                 for i, r in enumerate(C.OOD_ROBOTS) for j, v in enumerate(("film", *C.BASELINES)) for k in range(3)]
         assert C.claim_b(rows).verdict == simulate.claim_b(x)[0]
+
+
+def test_docs_report_shows_the_simulated_rates_as_the_code_gives_them():
+    # docs/report.md's block is generated (scripts/stats_calibration.py): it must be what the code gives now
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "report.md").read_text()
+    assert simulate.calibration_markdown() in text

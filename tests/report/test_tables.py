@@ -271,6 +271,12 @@ def test_a_runs_diagnoses_at_two_commands_are_never_pooled_as_seeds(tmp_path):
     assert calib[1.0]["paper_abs_nvb"] is None and calib[1.0]["paper_table"] is None
     film = {r["command_vx"]: r for r in tables["fixed_rollout"] if r["variant"] == "film"}
     assert {c: (r["n_seeds"], r["flip"]) for c, r in film.items()} == {2.0: (1, 0.31), 1.0: (1, 0.12)}
+    # the claims' comparisons as a table of their own: (a)-(e) at 2.0 m/s, one seed of film alone: no test anywhere
+    verdicts = tables["verdicts"]
+    assert {r["claim"] for r in verdicts} == set("abcd") and {r["verdict"] for r in verdicts} == {"cannot tell"}
+    assert len([r for r in verdicts if r["claim"] == "b"]) == 9 and all(r["table"] == "verdicts" for r in verdicts)
+    a = next(r for r in verdicts if r["claim"] == "a" and r["unit"] == "aliengo")
+    assert (a["outcome"], a["p_holm"], a["seeds_needed"], a["cell"]) == ("not significant", None, None, "-")
     assert film[2.0]["paper_flip"] == 0.255 and film[1.0]["paper_flip"] is None
 
     def section(sections, heading):

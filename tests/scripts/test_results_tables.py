@@ -357,3 +357,37 @@ def test_the_1_0_fixed_rollout_is_the_papers_analysis_at_one_metre_per_second_an
         with pytest.raises(SystemExit) as exit_:
             et.main(["concat-cpu-s1", *argv, "--store", str(tmp_path / "store")])
         assert exit_.value.code == 2, argv
+
+
+def test_the_answer_and_the_readme_headline_are_written_from_the_verdicts(tmp_path):
+    """Two seeds alike of film and ppo on AlienGo: film keeps 0.00 against ppo's 0.51, exact (zero spread): (b)'s
+    one comparison with a test is significant against the claim -> partly reversed; the rest cannot tell."""
+    _runs(tmp_path)
+    for run in ("film", "ppo"):
+        (tmp_path / f"{run}-cpu-s1-eval.csv").write_text((tmp_path / f"{run}-cpu-s0-eval.csv").read_text())
+    answer = rt.render_answer(tmp_path)
+    assert "(2 variants x 2 seeds)" in answer
+    assert "**At 2.0 m/s (the paper's command): (b) partly reversed; (a), (c), (d) and (e) cannot tell.**" in answer
+    assert "| (b) MorFiC-F transfers better than ppo, actor-only, concat | **partly reversed** | " \
+           "aliengo film - ppo -0.51 [-0.51, -0.51] (Holm p 0, against the claim) at 2.0 m/s |" in answer
+    assert "none: its test is over the robots, and seeds add no robots" in answer
+    head = rt.render_headline(tmp_path)
+    assert head.startswith("- The paper's five claims on the trained policies (2 variants x 2 seeds, the `cpu` "
+                           "preset), read with Holm-corrected Welch and t-contrast tests over seeds: at 2.0 m/s (b) "
+                           "partly reversed; (a), (c), (d) and (e) cannot tell.")
+    readme, doc = tmp_path / "README.md", tmp_path / "results.md"
+    readme.write_text(f"# x\n\n## What the experiment found\n\n{rt.HEADLINE_BEGIN}\nold\n{rt.HEADLINE_END}\nkept\n")
+    doc.write_text(f"{rt.BEGIN}\n{rt.END}\n{rt.CLAIMS_BEGIN}\n{rt.CLAIMS_END}\n{rt.WALK_BEGIN}\n{rt.WALK_END}\n"
+                   f"{rt.BUNDLES_BEGIN}\n{rt.BUNDLES_END}\n## The answer\n{rt.ANSWER_BEGIN}\nold\n{rt.ANSWER_END}\n")
+    assert rt.main(["--results", str(tmp_path), "--write", str(doc), "--readme", str(readme),
+                    "--bundles", str(tmp_path / "none")]) == 0
+    assert "old" not in readme.read_text() and readme.read_text().endswith(f"{rt.HEADLINE_END}\nkept\n")
+    assert head in readme.read_text() and answer in doc.read_text()
+
+
+def test_the_shipped_answer_and_headline_are_current():
+    """docs/results.md's answer and README's headline are what the script makes of docs/results/ now."""
+    root = SCRIPT.parents[1]
+    results = root / "docs" / "results"
+    assert rt.render_answer(results) in (root / "docs" / "results.md").read_text()
+    assert rt.render_headline(results) in (root / "README.md").read_text()
