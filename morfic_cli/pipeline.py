@@ -110,8 +110,9 @@ SHIPPED_PROTOCOL: dict[str, Any] = {"modes": ("descriptor",), "command_vx": (2.0
                                     "batch_robots": True}
 
 
-SMOKE_STUDY: dict[str, Any] = {"seeds": 2, "commands": (2.0,), "train_envs": 4, "held_out": 1, "target_envs": 2,
-                               "steps": 80, "trunc_eps": 0.5, "epochs": 1, "minibatch": 64, "stride": 2}
+SMOKE_STUDY: dict[str, Any] = {"seeds": 2, "commands": (2.0,), "train_envs": 4, "held_out": 1, "val_envs": 1,
+                               "target_envs": 2, "steps": 80, "trunc_eps": 0.5, "max_epochs": 2, "patience": 1,
+                               "minibatch": 64, "stride": 2}
 """The smoke preset's critic study: every stage in seconds (its numbers are not results)."""
 SHIPPED_STUDY_BUNDLE = "results/critic-study.tar"
 """Where, under the bundle folder, the shipped preset finds the critic study of the shipped runs."""
@@ -385,15 +386,19 @@ class Pipeline:
     def stored_train(self, variant: str, seed: int, spec: str) -> StepResult | None:
         """The skipped result when the store holds ``spec`` finished; None when it must train (or resume).
 
+        The stored config is compared as rebuilt (``train_cfg_from_dict``): a field its morfic did not have reads
+        its legacy value, or its default when that is what that morfic did (``env.rand.geometry``).
+
         Raises:
             MorficError: ``spec`` exists but was trained with another config.
         """
-        from morfic_cli.rl.config import train_cfg_to_dict
+        from morfic_cli.rl.config import train_cfg_from_dict, train_cfg_to_dict
 
         if not self.store.has_ref(spec):
             return None
         manifest = self.store.read_manifest(spec)
-        if experiment_config(manifest.config) != experiment_config(train_cfg_to_dict(self.train_cfg(variant, seed))):
+        recorded = train_cfg_to_dict(train_cfg_from_dict(manifest.config))
+        if experiment_config(recorded) != experiment_config(train_cfg_to_dict(self.train_cfg(variant, seed))):
             raise MorficError(
                 f"{spec} exists in {self.store.root} but was trained with another config than this "
                 f"reproduce asks for; use another --store, or move it aside (it stays in the store's history).")
@@ -602,13 +607,24 @@ class Pipeline:
         res = fixed_rollout(self.store, robot, models, cfg, on_step=lambda _t: self.progress.step_advance(advance=1))
         return StepResult("fixed-rollout", robot, "done", res.id, f"{res.ref}@{res.version}")
 
+    def study_actors(self) -> list[str]:
+        """The critic study's frozen actors, those this pipeline trains or the store holds.
+
+        They are :data:`~morfic_cli.diagnostics.critic_study.ACTOR_RUNS` under this preset's run names.
+        """
+        from morfic_cli.diagnostics.critic_study import ACTOR_RUNS
+
+        mine = {spec for _, _, spec in self.run_specs()}
+        specs = [RUNS_PREFIX + run_name(v, s, self.cfg.preset) for v, s in ACTOR_RUNS]
+        return [s for s in specs if s in mine or self.store.has_ref(s)]
+
     def study_cfg(self):
         """The critic study's :class:`~morfic_cli.diagnostics.critic_study.StudyCfg` (None: no study)."""
         from morfic_cli.diagnostics.critic_study import StudyCfg
 
         if self.cfg.critic_study is None:
             return None
-        return StudyCfg(robots=self.cfg.robots, **self.cfg.critic_study)
+        return StudyCfg(**{"robots": self.cfg.robots, "actors": tuple(self.study_actors()), **self.cfg.critic_study})
 
     def shipped_study(self) -> Path | None:
         """The shipped critic-study bundle (``shipped`` preset only), when the bundle folder has one."""
@@ -618,10 +634,9 @@ class Pipeline:
         return path if path.is_file() else None
 
     def critic_study(self) -> StepResult:
-        """Every critic fitted from scratch on the fixed-rollout actor's data (skip when stored; shipped: import)."""
+        """Every critic fitted from scratch on each study actor's data (skip when stored; shipped: import)."""
         from morfic_cli.diagnostics.critic_study import STUDY_REF, StudyProgress, run_study, study_config
 
-        actor, _ = self.fixed_rollout_models()
         shipped = self.shipped_study()
         if shipped is not None:
             from morfic_cli.store.transfer import import_tar
@@ -631,17 +646,19 @@ class Pipeline:
             status = "skipped" if all(v == "unchanged" for v in report.refs.values()) else "done"  # a rerun: as held
             found = self.store.resolve(STUDY_REF) if self.store.has_ref(STUDY_REF) else None
             return StepResult("critic-study", STUDY_LABEL, status, found, STUDY_REF, detail=f"imported {shipped.name}")
-        why = self.fixed_rollout_unavailable()
-        if why is not None:
-            return StepResult("critic-study", STUDY_LABEL, NOT_RUN, detail=why)
         cfg = self.study_cfg()
-        found = find_manifest(self.store, "diagnosis", _json(study_config(actor, cfg)),
-                              inputs_subset={"actor": self.store.resolve(actor)}, files=("critic_study.csv",))
+        if not cfg.actors:
+            return StepResult("critic-study", STUDY_LABEL, NOT_RUN,
+                              detail="none of its actors (film seeds 0-2, actor-only and concat seed 0) is reproduced "
+                              "here or in the store")
+        found = find_manifest(self.store, "diagnosis", _json(study_config(cfg)),
+                              inputs_subset={f"actor/{run_of(a)}": self.store.resolve(a) for a in cfg.actors},
+                              files=("critic_study.csv",))
         if found:
             return StepResult("critic-study", STUDY_LABEL, "skipped", found)
         self._start("critic-study", STUDY_LABEL, 1, "study")
         progress = StudyProgress(phase=lambda label, _total: self.progress.step_advance(detail=label))
-        res = run_study(self.store, actor, cfg, progress=progress)
+        res = run_study(self.store, cfg, progress=progress)
         return StepResult("critic-study", STUDY_LABEL, "done", res.id, f"{STUDY_REF}@{res.version}")
 
     def compare(self) -> StepResult:

@@ -1,6 +1,6 @@
 """Procedural geometry: quadrupeds generated around the template, as GenLoco does (docs/robots.md).
 
-GenLoco (Feng et al. 2022, Sec. "Morphology randomization"; its public generator) trains one morphology-agnostic
+GenLoco (Feng et al. 2022; its public generator ``quadruped_generator.py``) trains one morphology-agnostic
 policy on procedurally generated A1-like robots. This module draws such robots around any template
 :class:`~morfic_cli.morphology.robots.RobotSpec` (Go2 in morfic) and returns each as a new ``RobotSpec``, so the
 one MJCF builder (:mod:`morfic_cli.morphology.builder`) compiles it and every model of a pool has the same
@@ -51,6 +51,13 @@ POOL_SEED_SALT = 0x6E10C0
 MAX_REDRAWS = 1000
 """Draws per robot before :func:`sample_geometry` gives up on ``min_base_clearance`` (a config that cannot be met)."""
 
+FACTOR_NAMES: tuple[str, ...] = (
+    "scale", "base_size_x", "base_size_y", "base_size_z", "base_density", "hip_pos_x", "hip_pos_y", "thigh_offset",
+    "calf_length", "thigh_ratio", "calf_radius", "thigh_radius_ratio", "hip_mass", "thigh_mass", "calf_mass",
+    "foot_mass",
+)
+"""Names of :meth:`GeometrySample.vector`'s entries (the mass entries are factors before scale^3)."""
+
 
 @dataclass(frozen=True)
 class GeometrySample:
@@ -79,6 +86,12 @@ class GeometrySample:
     calf_radius: float
     thigh_radius_ratio: float
     link_mass: np.ndarray
+
+    def vector(self) -> np.ndarray:
+        """The factors in :data:`FACTOR_NAMES` order (e.g. an extended descriptor's input). Shape: (16,)."""
+        return np.concatenate([[self.scale], self.base_size, [self.base_density], self.hip_pos,
+                               [self.thigh_offset, self.calf_length, self.thigh_ratio, self.calf_radius,
+                                self.thigh_radius_ratio], self.link_mass]).astype(np.float64)
 
     @classmethod
     def nominal(cls) -> GeometrySample:

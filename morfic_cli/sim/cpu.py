@@ -1,7 +1,9 @@
 """The CPU backend: MuJoCo C on every core, one ``MjModel`` per env (docs/concepts.md).
 
 Each env owns a copy of the robot model, so its morphology (template mode) and its randomised
-dynamics can differ from every other env. All envs are stepped in C by
+dynamics can differ from every other env. With procedural geometry (docs/robots.md) an env's model
+becomes a generated robot's at reset (:meth:`CpuBackend.set_geometry` copies the fields that differ);
+every generated model has the template's structure, so they are stepped together. All envs are stepped in C by
 :class:`morfic_cli.sim.floor.BatchStepper` (``mujoco.rollout`` with a persistent thread pool); the
 physics state of all envs is one float64 array ``state`` of shape (N, nstate) in MuJoCo's
 ``mjSTATE_FULLPHYSICS`` layout ``[time, qpos (19), qvel (18)]``, so resets and pushes are array
@@ -36,6 +38,7 @@ larger of the two geoms' values) has exactly that coefficient.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -46,7 +49,14 @@ import torch
 
 from morfic_cli.config import SimCfg
 from morfic_cli.errors import MorficError
-from morfic_cli.morphology.apply import TemplateInfo, apply_descriptor, clamp_to_limits, model_joint_ranges, summarize
+from morfic_cli.morphology.apply import (
+    MorphologySummary,
+    TemplateInfo,
+    apply_descriptor,
+    clamp_to_limits,
+    model_joint_ranges,
+    summarize,
+)
 from morfic_cli.morphology.builder import build_model
 from morfic_cli.morphology.description import FOOT_FIELDS, JOINT_FIELDS, body_description
 from morfic_cli.morphology.robots import JOINTS, LEGS, RobotSpec
@@ -108,6 +118,38 @@ class SensorLayout:
         )
 
 
+MUTABLE_FIELDS: tuple[str, ...] = (
+    "body_mass", "body_inertia", "jnt_range", "actuator_ctrlrange",  # set_morphology (apply_descriptor)
+    "geom_friction", "geom_solref", "body_ipos", "dof_frictionloss",  # set_dynamics
+)
+"""Model fields this backend writes after construction: :meth:`CpuBackend.set_geometry` always restores them."""
+
+STAT_FIELDS: tuple[str, ...] = ("meaninertia", "meanmass", "meansize", "extent", "center")
+"""``MjModel.stat``: the compiler's statistics of a model (the solver scales by ``meaninertia``)."""
+
+
+def geometry_fields(template: mujoco.MjModel, models: Sequence[mujoco.MjModel]) -> tuple[str, ...]:
+    """The array fields of ``MjModel`` in which any of ``models`` differs from ``template``, plus MUTABLE_FIELDS.
+
+    Copying these (and :data:`STAT_FIELDS`) from one of ``models`` into a model that started as a copy of
+    ``template`` or of any of ``models`` and was changed only in :data:`MUTABLE_FIELDS` and by ``mj_setConst``
+    (whose outputs derive from the masses, so they differ between generated robots) makes it equal that model.
+    """
+    names = [n for n in dir(template) if not n.startswith("_") and isinstance(getattr(template, n), np.ndarray)]
+    differ = {n for n in names if any(not np.array_equal(getattr(template, n), getattr(m, n)) for m in models)}
+    return tuple(sorted(differ | set(MUTABLE_FIELDS)))
+
+
+@dataclass(frozen=True, eq=False)
+class _PoolRobot:
+    """One compiled robot of the geometry pool, with what :meth:`CpuBackend.set_geometry` reads from it."""
+
+    model: mujoco.MjModel
+    info: TemplateInfo
+    robot: RobotSpec
+    summary: MorphologySummary
+
+
 class CpuBackend:
     """Batched quadruped physics on the CPU (implements :class:`morfic_cli.sim.backend.SimBackend`).
 
@@ -145,7 +187,8 @@ class CpuBackend:
         self._nominal_ipos = np.tile(nominal.body_ipos[self.info.base_body], (self.num_envs, 1))
         self._env_info = [self.info] * self.num_envs  # per env: the nominal values its model started from
         self._env_robot = [robot] * self.num_envs  # per env: the robot its model was built from
-        self._pool: list[tuple[mujoco.MjModel, TemplateInfo, RobotSpec]] = []
+        self._pool: list[_PoolRobot] = []
+        self._geometry_fields: tuple[str, ...] = ()
         self._qvel0 = 1 + nominal.nq  # first qvel entry in the state vector
 
         first = copy.copy(nominal)
@@ -353,6 +396,10 @@ class CpuBackend:
     def set_geometry_pool(self, robots: Sequence[RobotSpec]) -> None:
         """Compile generated robots (:mod:`morfic_cli.morphology.procedural`) for :meth:`set_geometry`.
 
+        Each is compiled under the template's model name (so every model's name tables match) and summarised once;
+        the model fields that differ between the template and any of them, plus :data:`MUTABLE_FIELDS`, are what
+        :meth:`set_geometry` copies.
+
         Args:
             robots: K specs with the template's structure (made by ``procedural.generate_robot``).
 
@@ -363,22 +410,28 @@ class CpuBackend:
         if not self.morphology_mutable:
             raise MorficError(f"procedural geometry needs the template backend; this one simulates "
                               f"'{self.robot.name}' in full mode with its own morphology.")
+        template = build_model(self.robot, floor=True, sim_sensors=True)
+        template.opt.timestep = self.physics_dt
         pool = []
         for robot in robots:
-            model = build_model(robot, floor=True, sim_sensors=True)
+            model = build_model(dataclasses.replace(robot, name=self.robot.name), floor=True, sim_sensors=True)
             model.opt.timestep = self.physics_dt
-            if (model.nq, model.nv, model.nu, model.nsensordata, model.nbody, model.ngeom) != (
-                    self.models[0].nq, self.models[0].nv, self.models[0].nu, self.models[0].nsensordata,
-                    self.models[0].nbody, self.models[0].ngeom):
+            sizes = [(m.nq, m.nv, m.nu, m.nsensordata, m.nbody, m.ngeom, m.nnames) for m in (model, template)]
+            if sizes[0] != sizes[1]:
                 raise ValueError(f"generated robot '{robot.name}' does not have the template's structure.")
-            pool.append((model, TemplateInfo.from_model(model), robot))
+            summary = summarize(model, self._scratch, self.info, robot.default_qpos, robot.foot_radius)
+            pool.append(_PoolRobot(model, TemplateInfo.from_model(model), robot, summary))
         self._pool = pool
+        self._geometry_fields = geometry_fields(template, [entry.model for entry in pool])
 
     def set_geometry(self, env_ids: torch.Tensor, robot_ids: torch.Tensor) -> None:
-        """Give some envs a fresh copy of a pool robot's model (:meth:`set_geometry_pool`), at rest at its home.
+        """Make some envs' models a pool robot's (:meth:`set_geometry_pool`), at rest at its home.
 
-        The env's descriptor, limits, default pose, heights, masses and torque limits become that robot's;
-        dynamics are the model's own until the next :meth:`set_dynamics`, morphology until :meth:`set_morphology`.
+        The fields that can differ are copied into the env's own model, which then equals a fresh copy of the pool
+        robot's (tested field by field). The env's descriptor, limits, default pose, heights, masses and torque
+        limits become that robot's; dynamics are the model's own until the next :meth:`set_dynamics`, morphology
+        until :meth:`set_morphology`. Call :meth:`reset_envs` next (as the env's reset does): it computes the new
+        model's sensors, which :meth:`frame` reports from the previous model until then.
 
         Args:
             env_ids: Envs to change. Shape: (k,).
@@ -389,26 +442,27 @@ class CpuBackend:
         if picks.size != ids.size:
             raise ValueError(f"set_geometry: {ids.size} envs but {picks.size} robot ids.")
         for env, pick in zip(ids, picks, strict=True):
-            nominal, info, robot = self._pool[pick]
-            model = copy.copy(nominal)
-            self.models[env] = model
-            self._stepper.set_model(int(env), model)
-            self._env_info[env], self._env_robot[env] = info, robot
-            self._nominal_ipos[env] = nominal.body_ipos[self.info.base_body]
-            summary = summarize(model, self._scratch, self.info, robot.default_qpos, robot.foot_radius)
-            self._descriptor[env] = robot.descriptor
-            self._joint_range[env] = model_joint_ranges(model, self.info)
-            self._default_qpos[env] = summary.default_joint_pos
-            self._nominal_height[env] = summary.nominal_height
-            self._total_mass[env] = summary.total_mass
-            self._base_mass[env] = summary.base_mass
-            self._torque_limit[env] = model.actuator_forcerange[self.info.actuator_ids, 1]
-            self._friction[env] = model.geom_friction[model.geom("floor").id, 0]
+            entry = self._pool[pick]
+            model, source = self.models[env], entry.model
+            for name in self._geometry_fields:
+                np.copyto(getattr(model, name), getattr(source, name))
+            for name in STAT_FIELDS:
+                setattr(model.stat, name, getattr(source.stat, name))
+            self._env_info[env], self._env_robot[env] = entry.info, entry.robot
+            self._nominal_ipos[env] = source.body_ipos[self.info.base_body]
+            self._descriptor[env] = entry.robot.descriptor
+            self._joint_range[env] = model_joint_ranges(source, self.info)
+            self._default_qpos[env] = entry.summary.default_joint_pos
+            self._nominal_height[env] = entry.summary.nominal_height
+            self._total_mass[env] = entry.summary.total_mass
+            self._base_mass[env] = entry.summary.base_mass
+            self._torque_limit[env] = source.actuator_forcerange[self.info.actuator_ids, 1]
+            self._friction[env] = source.geom_friction[source.geom("floor").id, 0]
             self._restitution[env] = 0.0
             self._com_offset[env] = 0.0
-            self._joint_friction[env] = model.dof_frictionloss[self.info.dof_adr]
+            self._joint_friction[env] = source.dof_frictionloss[self.info.dof_adr]
             self.state[env] = self._home_state(env)
-        self._refresh_sensors(ids)
+            self._bad[env] = False
 
     def body_description(self, env_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """URMA's raw joint and foot descriptions of some envs' models (:mod:`morfic_cli.morphology.description`).

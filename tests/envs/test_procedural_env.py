@@ -116,3 +116,32 @@ def test_geometry_on_the_warp_backend_is_a_user_error():
 
     with pytest.raises(MorficError, match="cpu backend only"):
         apply_overrides(preset_cfg("smoke", "genloco"), ["env.sim.backend=warp"])
+
+
+def test_set_geometry_makes_an_env_model_equal_its_pool_robots():
+    from morfic_cli.morphology.procedural import generate_pool
+    from morfic_cli.morphology.robots import load_robot
+    from morfic_cli.sim.cpu import STAT_FIELDS, CpuBackend
+
+    go2 = load_robot("go2")
+    pool = generate_pool(go2, GeometryRandCfg(enabled=True, pool_size=3), 0)
+    backend = CpuBackend(SimCfg(num_threads=1), go2, 2, template=True)
+    try:
+        backend.set_geometry_pool(pool.robots)
+        ids = torch.tensor([0, 1])
+        backend.set_geometry(ids, torch.tensor([2, 1]))
+        backend.set_morphology(ids, torch.as_tensor(pool.descriptors[[0, 0]]) * 1.1)  # change what can change
+        backend.set_dynamics(ids, torch.full((2,), 0.7), torch.full((2,), 0.3), torch.full((2, 3), 0.02),
+                             torch.full((2, 12), 0.1))
+        backend.set_geometry(ids, torch.tensor([0, 2]))
+        for env, pick in ((0, 0), (1, 2)):
+            model, source = backend.models[env], backend._pool[pick].model
+            fields = [n for n in dir(source) if not n.startswith("_") and isinstance(getattr(source, n), np.ndarray)]
+            assert len(fields) > 400
+            for name in fields:
+                assert np.array_equal(getattr(model, name), getattr(source, name)), name
+            for name in STAT_FIELDS:
+                assert np.array_equal(getattr(model.stat, name), getattr(source.stat, name)), name
+        np.testing.assert_allclose(backend.params().descriptor.numpy(), pool.descriptors[[0, 2]])
+    finally:
+        backend.close()

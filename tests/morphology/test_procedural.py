@@ -131,3 +131,12 @@ def test_an_unreachable_clearance_is_an_error(monkeypatch):
     monkeypatch.setattr(P, "MAX_REDRAWS", 3)
     with pytest.raises(ValueError, match="min_base_clearance"):
         P.sample_geometry(np.random.default_rng(0), dataclasses.replace(CFG, min_base_clearance=5.0), GO2)
+
+
+def test_a_sample_is_one_named_vector():
+    v = SAMPLE.vector()
+    assert v.shape == (len(P.FACTOR_NAMES),) == (16,)
+    named = dict(zip(P.FACTOR_NAMES, v, strict=True))
+    assert named["scale"] == 1.1 and named["base_size_y"] == 0.8 and named["thigh_offset"] == 1.08
+    assert named["calf_radius"] == 0.6 and named["hip_mass"] == 1.4 and named["foot_mass"] == 0.5
+    assert np.array_equal(P.GeometrySample.nominal().vector(), np.ones(16))

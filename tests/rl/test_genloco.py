@@ -48,3 +48,23 @@ def test_train_genloco_smoke_and_evaluate_it_on_one_robot(run_cli):
     rows = json.loads(out)
     assert sorted((r["robot"], r["mode"]) for r in rows) == [("go1", "descriptor"), ("go1", "full")]
     assert all(r["num_envs"] == 2 and r["steps"] == 20 and 0.0 <= r["survival"] <= 1.0 for r in rows)
+
+
+def test_a_run_recorded_before_procedural_geometry_is_the_same_experiment(tmp_path):
+    from types import SimpleNamespace
+
+    from morfic_cli.errors import MorficError
+    from morfic_cli.pipeline import Pipeline, ReproduceCfg
+    from morfic_cli.rl.config import train_cfg_to_dict
+
+    def manifest(variant):  # a manifest written before env.rand.geometry existed
+        doc = train_cfg_to_dict(preset_cfg("smoke", variant))
+        del doc["env"]["rand"]["geometry"]
+        return SimpleNamespace(config=doc, meta={"finished": True, "iteration": 2}, id="abc")
+
+    store = SimpleNamespace(root=tmp_path, has_ref=lambda spec: True,
+                            read_manifest=lambda spec: manifest(spec.split("/")[1].split("-")[0]))
+    pipeline = Pipeline(store, ReproduceCfg(preset="smoke", variants=("film", "genloco")))
+    assert pipeline.stored_train("film", 0, "runs/film-smoke-s0").status == "skipped"
+    with pytest.raises(MorficError, match="another config"):  # it reads as geometry off: not genloco's experiment
+        pipeline.stored_train("genloco", 0, "runs/genloco-smoke-s0")
