@@ -55,5 +55,8 @@ def printable(text: object, *, keep: str = "") -> str:
     text = str(text)
     if text.isprintable() and text.isascii():
         return text
-    return "".join(c if c in keep or unicodedata.category(c) not in ("Cc", "Cf", "Cs", "Co", "Zl", "Zp")
-                   else ascii(c)[1:-1] for c in text)
+    return "".join(c if c in keep or unicodedata.category(c) not in UNPRINTABLE else ascii(c)[1:-1] for c in text)
+
+
+UNPRINTABLE = ("Cc", "Cf", "Cs", "Co", "Zl", "Zp")
+"""Unicode categories :func:`printable` escapes: controls, format characters, surrogates, private use, separators."""

@@ -93,9 +93,10 @@ def remember_variants(names: list[str], quiet: bool = False) -> None:
 
     try:
         added = add_to_allow_list(names)
-    except OSError as exc:
+    except (OSError, MorficError) as exc:  # a folder that cannot be written; a key morfic trust did not write
         if not quiet:
-            info(f"note: could not add {', '.join(names)} to the allow-list {allow_list_path()} ({exc.strerror}); "
+            why = exc.strerror if isinstance(exc, OSError) else str(exc).rstrip(".")
+            info(f"note: could not add {', '.join(names)} to the allow-list {allow_list_path()} ({why}); "
                  "later commands on its runs need --trust-variant.")
         return
     if added and not quiet:

@@ -20,7 +20,6 @@ import io
 import json
 import math
 import pickle
-import re
 from collections.abc import Iterable
 from typing import Any
 
@@ -224,7 +223,7 @@ def _alg_problems(alg: Any) -> list[str]:
 
 
 def _env_problems(env: Any, max_envs: int) -> list[str]:
-    from morfic_cli.envs.locomotion import LocomotionEnv
+    from morfic_cli.envs.locomotion import MODES, LocomotionEnv
 
     want = {"num_envs", "mode", "counters", "command_vx", "generator", *ENV_PER_ENV}
     if not isinstance(env, dict) or not want <= set(env):
@@ -235,8 +234,8 @@ def _env_problems(env: Any, max_envs: int) -> list[str]:
     if not (_count(n) and 1 <= n <= max_envs):
         return [f"env.num_envs is {_shown(n)}, not an integer in [1, {max_envs}]"]
     problems = []
-    if not (isinstance(env["mode"], str) and re.fullmatch(r"[a-z_-]{1,40}", env["mode"])):
-        problems.append(f"env.mode is {_shown(env['mode'])}, not a mode name (train, descriptor, ...)")
+    if env["mode"] not in MODES:
+        problems.append(f"env.mode is {_shown(env['mode'])}, not one of {', '.join(MODES)}")
     counters = env["counters"]
     if not (isinstance(counters, dict) and all(_number(counters.get(k)) for k in ENV_COUNTERS)):
         problems.append(f"env.counters is {_shown(counters)}, not {', '.join(ENV_COUNTERS)} as numbers")

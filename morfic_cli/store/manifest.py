@@ -219,7 +219,8 @@ def clashing_names(names: Iterable[str]) -> tuple[str, str] | None:
     """Two of ``names`` that cannot both be files of one folder, or None.
 
     They clash when they are equal, or equal but for case (one file on a case-insensitive file system), or when one
-    is a folder part of the other (``figures`` and ``figures/ev.png``). Example: ``["A.csv", "a.csv"]`` -> ``("A.csv", "a.csv")``.
+    is a folder part of the other (``figures`` and ``figures/ev.png``).
+    Example: ``["A.csv", "a.csv"]`` -> ``("A.csv", "a.csv")``.
     """
     claims: dict[str, tuple[int, str, bool]] = {}  # case-folded path -> (which name, the name, is a file)
     for n, name in enumerate(names):

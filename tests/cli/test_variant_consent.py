@@ -196,3 +196,54 @@ def test_a_cluster_worker_imports_only_what_the_driver_trusts(sentinel, tmp_path
     assert refused.error.startswith(f"run {run} needs the user variant {SENTINEL};") and not imported(sentinel)
     trusted = execute(job, cfg, __version__, tar, trusted=(SENTINEL,))
     assert imported(sentinel) and "needs the user variant" not in trusted.error
+
+
+def test_a_trusted_name_that_is_not_a_critic_class_is_an_error(run_cli, tmp_path, monkeypatch):
+    """Issue 53, item 4: `class Critic: pass`, consented to: `Error:` naming the protocol, not a TypeError."""
+    mods = tmp_path / "mods"
+    mods.mkdir()
+    (mods / "notcritic_consent.py").write_text("class Critic:\n    pass\n")
+    monkeypatch.syspath_prepend(str(mods))
+    monkeypatch.delitem(sys.modules, "notcritic_consent", raising=False)
+    name = "notcritic_consent:Critic"
+    assert run_cli("store", "import", str(run_bundle(tmp_path, name)))[0] == 0
+    for argv in (LOADERS["eval"], LOADERS["diagnose"], LOADERS["train --resume"]):
+        code, _, err = run_cli(*argv, "--trust-variant", name)
+        assert code == 1 and "Traceback" not in err and err.count("\n") == 1, err
+        assert err.startswith(f"Error: variant '{name}': class Critic is not a critic model: a torch.nn.Module "
+                              "subclass with forward and encode_privileged"), err
+
+
+def test_the_example_variant_installs_as_its_own_package(tmp_path):
+    """docs/extending.md: the example travels as a package (examples/pyproject.toml), installed, no PYTHONPATH.
+
+    Built offline from a copy of examples/ and installed into a folder that a subprocess adds as a site directory
+    (as site-packages is); the variant resolves and its models build with consent, and only with it.
+    """
+    import shutil
+    import subprocess
+
+    repo = Path(__file__).resolve().parents[2]
+    shutil.copytree(repo / "examples", tmp_path / "src")
+    site = tmp_path / "site"
+    proc = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "--no-index",
+                           "--quiet", "--target", str(site), str(tmp_path / "src")], capture_output=True, text=True,
+                          timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert (site / "custom_variant.py").read_bytes() == (repo / "examples" / "custom_variant.py").read_bytes()
+    script = (f"import site; site.addsitedir({str(site)!r})\n"
+              "from morfic_cli.rl import variants as V\n"
+              "from morfic_cli.rl.config import smoke_preset\n"
+              "from morfic_cli.rl.runner import build_models\n"
+              "name = 'custom_variant:GatedCritic'\n"
+              "try:\n    V.resolve_variant(name)\nexcept V.UntrustedVariantError:\n    print('refused')\n"
+              "with V.consent_scope([name]):\n"
+              "    cfg = smoke_preset(name)\n"
+              "    actor, critic = build_models(cfg)\n"
+              "    label = V.resolve_variant(name).label\n"
+              "print(type(critic).__name__, type(critic).__module__, label)\n")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=False,
+                          cwd=tmp_path, env={**env, "OMP_NUM_THREADS": "1"})
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["refused", "GatedCritic", "custom_variant", "Gated"]

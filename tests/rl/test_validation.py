@@ -69,3 +69,46 @@ def test_command_vx_parsing():
     for bad in ("nan", "inf", "", "2,,", "10.5", "a"):
         with pytest.raises(MorficError, match="--command-vx"):
             V.parse_commands_vx(bad)
+
+
+# ---------------------------------------------------------------------------- stored configs (issue 53)
+def test_network_weights_by_hand():
+    # (16 x 48 + 128) x 512 + 512 x 256 + 256 x 128: the paper's trunk on a 16-frame history
+    assert V.network_weights(16, [512, 256, 128]) == 896 * 512 + 512 * 256 + 256 * 128 == 622592
+    assert V.network_weights(1, [2]) == (48 + 128) * 2
+
+
+def test_the_network_bound_applies_to_training_configs_too():
+    cfg = preset_cfg("smoke")
+    assert cfg.env.obs.history_len == 15
+    # (15 x 48 + 128) x 16384 + 16384 x 2048 = 47448064 <= 2^26 = 67108864
+    apply_overrides(cfg, ["model.actor_hidden_dims=[16384,2048]"])
+    # (15 x 48 + 128) x 16384 + 16384 x 16384 = 13893632 + 268435456 = 282329088
+    with pytest.raises(MorficError, match=r"model.actor_hidden_dims = \[16384, 16384\] with env.obs.history_len = "
+                                          r"15: 282329088 weights, more than the 67108864"):
+        apply_overrides(cfg, ["model.actor_hidden_dims=[16384,16384]"])
+
+
+@pytest.mark.parametrize(("change", "problem"), [
+    ({"model.actor_hidden_dims": [-5]}, "model.actor_hidden_dims = [-5]: must be a list of 1 to 8 layer widths"),
+    ({"env.obs.history_len": -3}, "env.obs.history_len = -3: must be an integer in [1, 1000]"),
+    ({"env.sim.physics_dt": 0}, "env.sim.physics_dt = 0.0: must be a finite number in (0, 0.1]"),
+    ({"model.critic_hidden_dims": []}, "model.critic_hidden_dims = []: must be null or a list of 1 to 8"),
+    ({"variants": ["film"]}, "unknown config key 'variants'"),
+    ({"seed": "0"}, "config key 'seed' takes an integer; got '0'"),
+    ({"env": {}}, None),  # every field missing: the legacy values fill them (a record of an older morfic)
+])
+def test_a_stored_config_is_checked_like_a_training_config(change, problem):
+    from crafted_bundles import run_config
+
+    found = V.stored_cfg_problem(run_config(**change))
+    assert found == problem or (problem is not None and found.startswith(problem)), found
+
+
+def test_check_stored_cfg_names_the_run_and_returns_the_config():
+    from crafted_bundles import run_config
+
+    assert V.check_stored_cfg(run_config(), "runs/x").variant == "film"
+    with pytest.raises(MorficError, match=r"^run runs/x@2 has an invalid stored config: env.obs.history_len = -3"):
+        V.check_stored_cfg(run_config(**{"env.obs.history_len": -3}), "runs/x@2")
+    assert V.stored_cfg_problem([1]) == "its config is list, not an object"

@@ -628,7 +628,8 @@ CASES: dict[str, Case] = {
                                                       match=BAD_CONFIG + ".*1892941824 weights, more than"),
     "config: history 1000 frames into 16384 (789 M weights)": Case(
         _run(**{"env.obs.history_len": 1000, "model.actor_hidden_dims": [16384]}), match="more than the 67108864"),
-    "config: an extra key variants": Case(_run(variants=["film"]), match=BAD_CONFIG + ".*unknown config key 'variants'"),
+    "config: an extra key variants": Case(_run(variants=["film"]),
+                                          match=BAD_CONFIG + ".*unknown config key 'variants'"),
     "config: seed a string": Case(_run(seed="0"), match=BAD_CONFIG + ".*'seed' takes an integer"),
     "config: env a string": Case(_run(env="cpu"), match=BAD_CONFIG + ".*'env' is a section"),
     "config: ppo.gamma 2": Case(_run(**{"ppo.gamma": 2}), match=BAD_CONFIG + ".*ppo.gamma = 2"),
@@ -986,3 +987,160 @@ def test_the_after_import_cases_cover_every_item():
     kinds = {name.split(":")[0] for name in USE_CASES}
     assert kinds == {"config at load", "trainer state", "ctl", "pickle", "dotpath at get", "code at get",
                      "collision at get", "overwrite at get"}
+
+
+def test_the_crafted_trainer_state_is_one_morfic_train_writes():
+    """The base of the trainer-state cases passes the check, so each case's one change is what it refuses."""
+    from crafted_bundles import trainer_state
+
+    from morfic_cli.rl import trainer_state as T
+    from morfic_cli.rl.runner import TRAINER_KEYS
+
+    assert T.trainer_state_problems(trainer_state(), TRAINER_KEYS) == []
+    assert T.trainer_state_problems(trainer_state(iteration=True), TRAINER_KEYS) == [
+        "iteration is bool True, not an integer in [0, 10000000]"]
+    state = trainer_state()
+    del state["torch_rng"]
+    assert T.trainer_state_problems(state, TRAINER_KEYS) == ["it lacks torch_rng"]
+
+
+# ------------------------------------------------------------------------------------------------ the allow-list
+PLANTED = "morfic_hostile_sentinel:Critic"
+
+
+def _planting_bundle(tmp: Path) -> Path:
+    """runs/x naming the sentinel variant, and media/evil: every plain name that could land on the allow-list or its
+    key under some --out (the allow-list forged with a signature of zeros)."""
+    from crafted_bundles import run_config
+
+    from morfic_cli.rl.variants import SIGNATURE
+
+    forged = f"# x\n{SIGNATURE}{'0' * 64}\n{PLANTED}\n".encode()
+    src = Store(tmp / "src")
+    src.set_ref(RUN, src.put_manifest("checkpoint", config=run_config(PLANTED), files={"model.pt": MODEL},
+                                      meta={"variant": PLANTED, "run": "x"}))
+    src.set_ref("media/evil", src.put_manifest("media", files={
+        "trusted-variants": forged, "morfic/trusted-variants": forged, "trust-key": b"0" * 64 + b"\n",
+        "morfic/trust-key": b"0" * 64 + b"\n"}))
+    return src.export_tar([RUN, "media/evil"], tmp / "evil.tar").path
+
+
+@pytest.mark.parametrize("out", ["config/morfic", "config", "home", "cwd", "store/refs"])
+def test_a_bundle_gains_no_consent_whatever_out_its_files_go_to(use_world, out, run_cli):
+    """The bundle imports (plain names); `store get` puts its files anywhere; the next eval still refuses the run's
+    variant before importing it, and `morfic trust --list` trusts nothing but names what it ignores."""
+    from morfic_cli.rl.variants import allow_list_path, read_allow_list
+
+    w = use_world
+    target = w.tmp / out
+    assert run_cli("store", "import", str(_planting_bundle(w.tmp)), "--store", str(w.root))[0] == 0
+    code, _, err = run_cli("store", "get", "media/evil", "--out", str(target), "--store", str(w.root))
+    assert code == 0, err
+    planted = allow_list_path().exists()
+    assert planted == (out in ("config/morfic", "config")) and not (w.tmp / "config" / "morfic" / ".trust-key").exists()
+    assert read_allow_list() == ([], [PLANTED] if planted else [])
+    code, _, err = run_cli(*EVAL, "--store", str(w.root))
+    assert code == 1 and err.startswith(f"Error: run {RUN} needs the user variant {PLANTED}; morfic will not import")
+    assert ("The allow-list names it, but morfic ignores that list" in err) == planted
+    assert not w.sentinel_ran.exists() and "morfic_hostile_sentinel" not in sys.modules
+    code, out_, err = run_cli("trust", "--list", "-f", "json")
+    assert code == 0 and out_.strip() == "[]" and (f"ignored: {PLANTED}" in err) == planted
+    # the user's own `morfic trust` signs a new list with only what they named
+    assert run_cli("trust", "pkg.mod:Mine")[0] == 0
+    assert read_allow_list() == (["pkg.mod:Mine"], [])
+
+
+def test_an_existing_allow_list_is_kept_and_a_forced_copy_trusts_nothing(use_world, run_cli):
+    from morfic_cli.rl.variants import allow_list_path, read_allow_list
+
+    w = use_world
+    assert run_cli("trust", "pkg.mod:Mine")[0] == 0
+    signed = allow_list_path().read_bytes()
+    assert run_cli("store", "import", str(_planting_bundle(w.tmp)), "--store", str(w.root))[0] == 0
+    code, _, err = run_cli("store", "get", "media/evil", "--out", str(allow_list_path().parent), "--store",
+                           str(w.root))
+    assert code == 1 and "trusted-variants exists; nothing was written. Pass --force" in err
+    assert allow_list_path().read_bytes() == signed and read_allow_list() == (["pkg.mod:Mine"], [])
+    assert not (allow_list_path().parent / "trust-key").exists()  # all or nothing: no file of the four written
+    code, _, err = run_cli("store", "get", "media/evil", "--out", str(allow_list_path().parent), "--force",
+                           "--store", str(w.root))
+    assert code == 0, err
+    assert read_allow_list() == ([], [PLANTED])  # the user lost their list; the bundle gained nothing
+    assert run_cli(*EVAL, "--store", str(w.root))[0] == 1 and not w.sentinel_ran.exists()
+
+
+def test_a_list_edited_by_hand_trusts_nothing(use_world):
+    from morfic_cli.rl import variants as V
+
+    assert V.add_to_allow_list(["pkg.mod:A"]) == ["pkg.mod:A"]
+    path = V.allow_list_path()
+    lines = path.read_text().splitlines()
+    assert lines[1].startswith(V.SIGNATURE) and lines[2:] == ["pkg.mod:A"]
+    assert oct((path.parent / ".trust-key").stat().st_mode & 0o777) == "0o600"
+    path.write_text("\n".join([*lines, "pkg.mod:B"]) + "\n")  # a name added by hand voids the signature
+    assert V.read_allow_list() == ([], ["pkg.mod:A", "pkg.mod:B"]) and not V.is_trusted("pkg.mod:A")
+    path.write_text("\n".join(lines) + "\n")
+    assert V.read_allow_list() == (["pkg.mod:A"], [])
+    (path.parent / ".trust-key").write_text("1" * 64 + "\n")  # another key: the same list no longer verifies
+    assert V.allow_list() == []
+    (path.parent / ".trust-key").write_text("not a key\n")
+    assert V.allow_list() == []
+    with pytest.raises(MorficError, match=r"is not one `morfic trust` wrote \(64 hex digits\); remove"):
+        V.add_to_allow_list(["pkg.mod:C"])
+
+
+# ------------------------------------------------------------------------------------------------ default choice
+def test_one_bad_run_is_left_out_of_the_default_choice_with_a_note(use_world, run_cli):
+    """diagnose --fixed-rollout with default runs: the run with an invalid config is named and skipped; the others
+    are chosen (their crafted weights then fail to load, which is the next step's own Error)."""
+    from crafted_bundles import run_config
+
+    from morfic_cli.diagnostics.fixed_rollout import newest_runs
+
+    w = use_world
+    store = Store(w.root)
+    store.set_ref("runs/good", store.put_manifest("checkpoint", config=run_config(), files={"model.pt": MODEL},
+                                                  meta={"variant": "film", "run": "good"}))
+    bad = run_config(variants=["film"])
+    store.set_ref("runs/bad", store.put_manifest("checkpoint", config=bad, files={"model.pt": MODEL},
+                                                 meta={"variant": "film", "run": "bad"}))
+    store.set_ref("runs/user", store.put_manifest("checkpoint", config=run_config(PLANTED), files={"model.pt": MODEL},
+                                                  meta={"variant": PLANTED, "run": "user"}))
+    skipped: dict[str, str] = {}
+    assert newest_runs(store, skipped.__setitem__) == {"film": "runs/good"}
+    assert skipped == {"runs/bad": "its stored config is invalid (unknown config key 'variants')",
+                       "runs/user": f"it needs the user variant {PLANTED}, not trusted here (--trust-variant "
+                                    f"{PLANTED} names it)"}
+    code, _, err = run_cli("diagnose", "--fixed-rollout", "go2", "--envs", "1", "--store", str(w.root))
+    assert code == 1 and "Traceback" not in err
+    assert ("note: runs/bad left out of the default runs: its stored config is invalid (unknown config key "
+            "'variants')") in err
+    assert "unknown config key" not in err.split("Error: ")[1] and "model.pt of checkpoint" in err
+    assert not w.sentinel_ran.exists()
+
+
+# ------------------------------------------------------------------------------------------------ printing
+def test_printable_escapes_what_could_drive_a_terminal():
+    from morfic_cli.errors import printable
+
+    assert printable("a\x1b]0;pwned\x07b") == "a\\x1b]0;pwned\\x07b"
+    assert printable("x\u202eyz\x9b2J") == "x\\u202eyz\\x9b2J"  # a bidi override, a C1 CSI
+    assert printable("line\nnext\t", keep="\n") == "line\nnext\\t"
+    assert printable("caf\u00e9 [bold]ok[/]") == "caf\u00e9 [bold]ok[/]"  # printable text is kept as it is
+
+
+def test_store_show_and_ls_print_a_bundles_escape_codes_as_text(use_world, run_cli):
+    w = use_world
+    src = Store(w.tmp / "src")
+    src.set_ref("reports/evil", src.put_manifest("report", meta={"title": "\x1b]0;pwned\x07\x1b[2J",
+                                                                 "note": "a\u202eb"}, files={"r.md": b"x"}))
+    bundle = src.export_tar(["reports/evil"], w.tmp / "e.tar").path
+    assert run_cli("store", "import", str(bundle), "--store", str(w.root))[0] == 0
+    code, out, err = run_cli("store", "show", "reports/evil", "--store", str(w.root))
+    assert code == 0 and "\x1b" not in out + err and "\u202e" not in out
+    assert "\\x1b]0;pwned\\x07\\x1b[2J" in out and "a\\u202eb" in out
+    code, out, _ = run_cli("store", "show", "reports/evil", "-f", "json", "--store", str(w.root))
+    assert code == 0 and out.isascii() and "\x1b" not in out  # JSON escapes: the data is the bundle's, unchanged
+    assert __import__("json").loads(out)["meta"] == {"title": "\x1b]0;pwned\x07\x1b[2J", "note": "a\u202eb"}
+    code, out, _ = run_cli("store", "ls", "-f", "json", "--store", str(w.root))
+    assert code == 0 and "\x1b" not in out and "\u202e" not in out
