@@ -557,6 +557,17 @@ def _study_verdicts(results: Path) -> str:
     return "; ".join(f"({k}) {', '.join(v)}" for k, v in by_key.items())
 
 
+def _study_design(results: Path) -> str:
+    """How the critic study's rows replicate: over actors (layout 2), or one actor's fit seeds (layout 1)."""
+    from morfic_cli.diagnostics.study_summary import ACTOR, study_unit
+
+    rows = pd.read_csv(results / STUDY_CSV).to_dict("records")
+    if study_unit(rows) == ACTOR:
+        return f"its unit is the frozen actor, {len({r['actor'] for r in rows})} of them, converged fits only"
+    return ("its unit is the fit seed of one actor's critics, fitted for a fixed epoch count (the study's layout 1, "
+            "before issue 54), so it speaks of that actor only")
+
+
 def render_answer(results: Path) -> str:
     """docs/results.md's "The answer": the claims' verdicts at each command, what decided them, what it would take.
 
@@ -585,8 +596,7 @@ def render_answer(results: Path) -> str:
     study = _study_verdicts(results)
     if study:
         lines += ["", "With the actor fixed ([the critic study](#the-critic-study-the-conditioning-alone-the-actor-"
-                  "fixed); its unit is the fit seed of one actor's critics, so it speaks of that actor only): "
-                  f"{study}."]
+                  f"fixed); {_study_design(results)}): {study}."]
     lines += ["", "Every comparison, with its interval, p, Holm p and the seeds it would need: "
               "[the paper's claims](#the-papers-claims). The dated lab notes of sessions 1-29: "
               "[results-history.md](results-history.md)."]
@@ -606,7 +616,7 @@ def render_headline(results: Path) -> str:
              "- Significant: " + ("; ".join(decided) if decided else "no comparison") + "."]
     study = _study_verdicts(results)
     if study:
-        lines.append(f"- With the actor fixed (`morfic critic-study`, one actor, fit seeds): {study}.")
+        lines.append(f"- With the actor fixed (`morfic critic-study`; {_study_design(results)}): {study}.")
     lines.append("- Every comparison, the seeds an undecided one would need, and the artifact ids: "
                  "[docs/results.md](docs/results.md).")
     return "\n".join(lines) + "\n"

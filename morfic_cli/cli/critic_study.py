@@ -1,4 +1,4 @@
-"""``morfic critic-study``: every variant's critic fitted from scratch on one frozen actor's data, scored per robot."""
+"""``morfic critic-study``: every variant's critic fitted from scratch on frozen actors' data, scored per robot."""
 
 from __future__ import annotations
 
@@ -19,7 +19,6 @@ from morfic_cli.cli._options import (
 )
 from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
-from morfic_cli.cli.trust import note_skipped
 from morfic_cli.errors import MorficError
 from morfic_cli.validation import check_args
 
@@ -36,28 +35,38 @@ def _interval(row: dict) -> str:
 
 
 def critic_study(
-    actor: Annotated[
+    actors: Annotated[
         str | None,
-        typer.Option("--actor", help="The frozen actor's run (default: the newest film run, e.g. runs/film-cpu-s0)."),
+        typer.Option("--actors", "--actor", help="Comma-separated frozen actors' runs, the unit of replication "
+                     "(default: runs/film-cpu-s0, -s1, -s2, runs/actor-only-cpu-s0, runs/concat-cpu-s0)."),
     ] = None,
     variants: Annotated[
         str,
         typer.Option("--variants", help="Comma-separated critics to fit, or 'all' (ppo, concat, film, film-scaled, "
                      "hyper, adaln; actor-only's critic is ppo's); a user's critic as module:Class."),
     ] = "all",
-    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Fits per variant (fit seeds 0..N-1).")] = 5,
+    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Fits per variant and actor (fit seeds 0..N-1), "
+                                       "averaged within the actor.")] = 2,
     command_vx: Annotated[
         str, typer.Option("--command-vx", help="Forward command(s) in m/s; one fit set over all of them.")
     ] = "1.0,2.0",
     robots: RobotsOpt = "all",
     train_envs: Annotated[int, typer.Option("--train-envs", min=2, help="Envs of the training-distribution "
                                             "rollout per command (one sampled morphology each).")] = 128,
-    held_out: Annotated[int, typer.Option("--held-out", min=1, help="Of those, envs kept out of the fit and scored "
-                                          "as robot 'train'.")] = 16,
+    held_out: Annotated[int, typer.Option("--held-out", min=1, help="Of those, the last envs, never fitted on, "
+                                          "scored as robot 'train'.")] = 16,
+    val_envs: Annotated[int, typer.Option("--val-envs", min=1, help="The envs before those: the validation split "
+                                          "that stops each fit and decides whether it converged.")] = 16,
     target_envs: Annotated[int, typer.Option("--target-envs", min=1, help="Envs per target robot.")] = 32,
     steps: Annotated[int, typer.Option("--steps", min=1, help="Policy steps per rollout (must exceed H_eps, 299 at "
                                        "gamma 0.99).")] = 800,
-    epochs: Annotated[int, typer.Option("--epochs", min=1, help="Passes over the fit set.")] = 6,
+    max_epochs: Annotated[int, typer.Option("--max-epochs", "--epochs", min=1, help="Most passes over the fit set "
+                                            "(early stopping's cap).")] = 100,
+    patience: Annotated[int, typer.Option("--patience", min=1, help="Stop a fit after this many epochs without a "
+                                          "validation-loss improvement; keep its best epoch.")] = 8,
+    min_ev: Annotated[float, typer.Option("--min-ev", help="A fit whose validation EV stays below this, or that "
+                                          "--max-epochs cut short, is flagged unconverged and left out of the "
+                                          "averages.")] = 0.1,
     minibatch: Annotated[int, typer.Option("--minibatch", min=1, help="Samples per gradient step.")] = 256,
     stride: Annotated[int, typer.Option("--stride", min=1, help="Take every N-th step of a training env.")] = 4,
     trunc_eps: Annotated[float, typer.Option("--trunc-eps", help="I_eps is the window t <= T - H_eps with "
@@ -71,23 +80,34 @@ def critic_study(
     trust_variant: TrustOpt = None,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """Fit every variant's critic from scratch on one frozen actor's rollouts and score it on every robot.
+    """Fit every variant's critic from scratch on each frozen actor's rollouts, to convergence; score it per robot.
 
-    The frozen actor collects rollouts on the training morphology distribution (the Go2 template with sampled
-    descriptors) and on each target robot, at each command, with sampled actions (stored and reused). Every
-    critic is built fresh and regressed on the Monte-Carlo returns of the training samples with the same optimiser,
-    epochs and batches, --seeds times, then scored like `morfic diagnose` (EV, |NVB|, NVE, ASA, Flip, CosGrad on
-    the frozen actor) on held-out training envs ('train') and on every robot. The table is each variant's mean
-    with a 95 % t interval over its fits; the verdicts of claims (a) and (c) come from Welch and t-contrast tests,
+    Each frozen actor (--actors: the unit of replication) collects rollouts on the training morphology distribution
+    (the Go2 template with sampled descriptors) and on each target robot, at each command, with sampled actions
+    (stored and reused). Every critic is built fresh and regressed on the Monte-Carlo returns of that actor's
+    training samples with the same optimiser and batches, --seeds times, each fit stopped early on validation envs
+    (--val-envs, --patience, --max-epochs) and flagged when its validation EV stays below --min-ev or the cap
+    cut it short; then scored like
+    `morfic diagnose` (EV, NVB, NVE, ASA, Flip, CosGrad on the frozen actor) on held-out training envs ('train') and
+    on every robot. The table is each variant's mean over actors (each actor's converged fits averaged first) with
+    a 95 % t interval; the verdicts of claims (a) and (c) come from t tests over actors, paired by actor,
     Holm-corrected per claim (docs/report.md "How a verdict is read"). Stores ref diagnoses/critic-study.
+    The default study (5 actors) takes about 2.5 hours on 2 cores (docs/metrics.md "Critic study").
 
-    Example: morfic critic-study --actor runs/film-cpu-s0 --seeds 5
-    Example: morfic critic-study --variants film,concat --seeds 2 --robots aliengo --command-vx 1.0 --epochs 2
+    Example: morfic critic-study
+    Example: morfic critic-study --actors runs/film-cpu-s0,runs/film-cpu-s1 --variants film,concat --robots aliengo
     """
+    specs = [a.strip() for a in actors.split(",") if a.strip()] if actors else None
     check_args(store=store, out_dir=out, seed=seed, envs=target_envs, steps=steps, command_vx=command_vx,
-               robots=robots, specs=[actor] if actor else None, trust=trust_variant)
-    from morfic_cli.diagnostics.critic_study import STUDY_VARIANTS, StudyCfg, StudyProgress, check_cfg, run_study
-    from morfic_cli.diagnostics.fixed_rollout import default_actor
+               robots=robots, specs=specs, trust=trust_variant)
+    from morfic_cli.diagnostics.critic_study import (
+        DEFAULT_ACTORS,
+        STUDY_VARIANTS,
+        StudyCfg,
+        StudyProgress,
+        check_cfg,
+        run_study,
+    )
     from morfic_cli.evaluation.protocol import parse_commands
     from morfic_cli.morphology.distance import parse_robot_list
     from morfic_cli.rl.runner import load_trained
@@ -102,30 +122,35 @@ def critic_study(
     names = STUDY_VARIANTS if variants.strip().lower() == "all" else tuple(
         v.strip() for v in variants.split(",") if v.strip())
     trust_variants(names)  # the critics named by --variants: the user's consent to import them
-    cfg = StudyCfg(variants=names, seeds=seeds, commands=commands, robots=tuple(parse_robot_list(robots)),
-                   train_envs=train_envs, held_out=held_out, target_envs=target_envs, steps=steps, seed=seed,
-                   stride=stride, epochs=epochs, minibatch=minibatch, trunc_eps=trunc_eps)
+    cfg = StudyCfg(actors=tuple(specs or DEFAULT_ACTORS), variants=names, seeds=seeds, commands=commands,
+                   robots=tuple(parse_robot_list(robots)), train_envs=train_envs, held_out=held_out,
+                   val_envs=val_envs, target_envs=target_envs, steps=steps, seed=seed, stride=stride,
+                   max_epochs=max_epochs, patience=patience, min_ev=min_ev, minibatch=minibatch, trunc_eps=trunc_eps)
     check_cfg(cfg)
     st = Store(store)
-    spec = actor or default_actor(st, note_skipped)
-    trained = load_trained(st, spec)  # a bad ref fails here, before any work
+    missing = [a for a in cfg.actors if not specs and not st.has_ref(a)]
+    if missing:
+        raise MorficError(f"the default actors {', '.join(missing)} are not in store {st.root}; import their weights "
+                          "(`morfic store import artifacts/bundles/<run>.tar`, artifacts/README.md) or name the "
+                          "actors with --actors.")
+    trained = {spec: load_trained(st, spec) for spec in cfg.actors}  # a bad checkpoint fails before any work
     with StepBar("critic-study", 0, quiet) as bar:
-        result = run_study(st, spec, cfg, actor=trained, progress=StudyProgress(phase=bar.phase, advance=bar.step))
+        result = run_study(st, cfg, actors=trained, progress=StudyProgress(phase=bar.phase, advance=bar.step))
     _write_out(out, st, result.id)
+    from morfic_cli.diagnostics.study_summary import cell_summary, convergence_text, study_claims
+
     if not quiet:
         s = result.seconds
-        n_fits = len({(r["variant"], r["fit_seed"]) for r in result.fits})
+        n_fits = len({(r["actor"], r["variant"], r["fit_seed"]) for r in result.fits})
         info(f"stored diagnoses/critic-study@{result.version} ({result.id[:12]}): {n_fits} fits in {s['fits']:.0f} s "
              f"({s['fits'] / max(n_fits, 1):.0f} s a fit), rollouts {s['rollouts']:.0f} s, "
-             f"scoring {s['scoring']:.0f} s")
-    from morfic_cli.diagnostics.study_summary import cell_summary, study_claims
-
-    summary = [r for r in cell_summary(result.rows) if r["metric"] in ("ev", "flip", "cos_grad")]
+             f"scoring {s['scoring']:.0f} s; {convergence_text(result.rows)}")
+    summary = [r for r in cell_summary(result.rows) if r["metric"] in ("ev", "nve", "flip", "cos_grad")]
     wide: dict[tuple, dict] = {}
     for r in summary:
         row = wide.setdefault((r["command_vx"], r["robot"], r["variant"]),
                               {"command_vx": r["command_vx"], "robot": r["robot"], "variant": r["variant"],
-                               "n": r["n"]})
+                               "n": r["n"], "unit": r["unit"], "n_fits": r["n_fits"], "n_flagged": r["n_flagged"]})
         row[r["metric"]] = _interval(r)
         row[f"{r['metric']}_mean"], row[f"{r['metric']}_lo"], row[f"{r['metric']}_hi"] = r["mean"], r["lo"], r["hi"]
     emit_rows(
@@ -136,13 +161,16 @@ def critic_study(
             Column("robot", "robot"),
             Column("variant", "variant"),
             Column("ev", "EV [95 %]", justify="right"),
+            Column("nve", "NVE [95 %]", justify="right"),
             Column("flip", "Flip [95 %]", justify="right"),
             Column("cos_grad", "CosGrad [95 %]", justify="right"),
-            Column("n", "fits", justify="right"),
+            Column("n", "n", justify="right"),
+            Column("n_flagged", "left out", justify="right"),
         ],
-        title=f"critic study (actor {result.rows[0]['actor'] if result.rows else spec})",
-        caption="mean over fit seeds [95 % t interval]; 'train' = held-out envs of the training "
-        "distribution; higher is better: EV, CosGrad; lower: Flip",
+        title=f"critic study ({len(cfg.actors)} actor{'s' if len(cfg.actors) > 1 else ''})",
+        caption=f"mean over {'actors' if len(cfg.actors) > 1 else 'fit seeds (one actor)'} [95 % t interval], n of "
+        "them; 'left out': unconverged fits; 'train' = held-out envs of the training distribution; higher is "
+        "better: EV, CosGrad; lower: NVE, Flip",
     )
     if not quiet:
         for c in study_claims(result.rows):
@@ -151,10 +179,17 @@ def critic_study(
 
 
 def _write_out(out: Path | None, st, manifest_id: str) -> None:
-    """``--out DIR``: the study's files."""
+    """``--out DIR``: the study's files; a figure a results-only bundle left out is drawn from ``summary.csv``."""
     if out is None:
         return
     out.mkdir(parents=True, exist_ok=True)
     manifest = st.read_manifest(manifest_id)
+    omitted = st.omitted_files(manifest)
     for name in manifest.files:
-        (out / name).write_bytes(st.read_file(manifest_id, name))
+        if name == "critic_study.png" and name in omitted and "summary.csv" in manifest.files:
+            from morfic_cli.diagnostics.figures import critic_study_figure
+            from morfic_cli.report.gather import read_csv_rows
+
+            (out / name).write_bytes(critic_study_figure(read_csv_rows(st.read_file(manifest_id, "summary.csv"))))
+        elif name not in omitted:
+            (out / name).write_bytes(st.read_file(manifest_id, name))

@@ -1,27 +1,36 @@
 """``morfic critic-study``: the conditioning alone, with the policy held fixed (docs/metrics.md "Critic study").
 
 The paper's fixed-rollout analysis scores critics that were trained beside their own actors, so a critic's score
-mixes its conditioning with the data its own actor produced. This study removes the actor from the comparison:
+mixes its conditioning with the data its own actor produced. This study removes the actor from the comparison and
+replicates over actors:
 
-1. one frozen actor (the seed-0 ``film`` run by default) collects, at each command, a rollout on the *training*
-   morphology distribution (``train`` mode: the Go2 template with a descriptor drawn from the paper's support per
-   env, the evaluation env's settings otherwise) and a rollout on every target robot (descriptor mode), with
-   sampled actions and the observation groups every critic reads (:mod:`~morfic_cli.diagnostics.samples`);
-2. every variant's critic is built fresh (its own morphology encoder, not shared with an actor) and regressed on
-   the standardised Monte-Carlo returns G of the training rollouts' samples in I_eps (every ``stride``-th step,
-   pooled over the commands, the last ``held_out`` envs left out), all with the same optimiser, learning rate,
-   epochs, mini-batches and data order for a given seed (:func:`fit_critic`), several seeds each;
-3. each fit is scored on every robot's samples exactly as ``morfic diagnose`` scores a run's critic: EV, NVB,
-   NVE, ASA and Flip against G, and CosGrad on the frozen actor (:func:`score_fits`), per command; ``train`` rows
-   are the held-out envs of the training distribution (in-distribution calibration).
+1. each of several frozen actors (:data:`DEFAULT_ACTORS`: the three ``film`` seeds and the seed-0 ``actor-only``
+   and ``concat`` runs) collects, at each command, a rollout on the *training* morphology distribution (``train``
+   mode: the Go2 template with a descriptor drawn from the paper's support per env, the evaluation env's settings
+   otherwise) and a rollout on every target robot (descriptor mode), with sampled actions and the observation
+   groups every critic reads (:mod:`~morfic_cli.diagnostics.samples`);
+2. for each actor, every variant's critic is built fresh (its own morphology encoder, not shared with an actor) and
+   regressed on the standardised Monte-Carlo returns G of that actor's training rollouts in I_eps (every
+   ``stride``-th step, pooled over the commands), all with the same optimiser, learning rate, mini-batches and data
+   order for a given fit seed, **to convergence**: after each epoch the loss on ``val_envs`` validation envs
+   decides early stopping (``patience`` epochs without an improvement of ``min_delta``, at most ``max_epochs``;
+   the best epoch's weights are kept, :class:`EarlyStopping`, :func:`fit_critic`); a fit whose validation EV stays
+   below ``min_ev``, or that early stopping did not end, is flagged (``converged`` False) and left out of every
+   average;
+3. each fit is scored on its actor's samples of every robot exactly as ``morfic diagnose`` scores a run's critic:
+   EV, NVB, NVE, ASA and Flip against G, and CosGrad on the frozen actor (:func:`score_fits`), per command; ``train``
+   rows are the last ``held_out`` envs of the training rollout (never fitted on nor used to stop).
 
-A variant's critic is the same module as in training (:func:`~morfic_cli.rl.runner.build_models`), so ``ppo``'s and
-``actor-only``'s critics (both unconditioned) are one architecture: the study fits it once, as ``ppo``.
+The unit of replication is the actor: a cell's fits are averaged within each actor first, then over actors
+(:mod:`~morfic_cli.diagnostics.study_summary`). A variant's critic is the same module as in training
+(:func:`~morfic_cli.rl.runner.build_models`), so ``ppo``'s and ``actor-only``'s critics (both unconditioned) are one
+architecture: the study fits it once, as ``ppo``.
 
-Store: one ``diagnosis`` manifest per call (ref ``diagnoses/critic-study``) with ``critic_study.csv``
-(:data:`STUDY_COLUMNS`, a row per command, robot, variant and fit seed), ``summary.csv`` (each cell's mean and
-interval), ``verdicts.csv`` (claims (a) and (c)), ``fits.csv`` (each fit's loss curve and wall time) and the
-figure ``critic_study.png``; inputs ``actor`` and every ``rollout/<command>/<robot>``.
+Store: one ``diagnosis`` manifest per call (ref ``diagnoses/critic-study``, config ``layout``
+:data:`STUDY_LAYOUT`) with ``critic_study.csv`` (:data:`STUDY_COLUMNS`, a row per command, robot, variant, actor
+and fit seed), ``summary.csv`` (each cell's mean and interval over actors), ``verdicts.csv`` (claims (a) and (c)),
+``fits.csv`` (each fit's training and validation curves) and the figure ``critic_study.png``; inputs
+``actor/<run>`` and every ``rollout/<run>/<command>/<robot>``.
 """
 
 from __future__ import annotations
@@ -42,6 +51,7 @@ from morfic_cli.diagnostics.metrics import cos_grad, critic_advantage, critic_me
 from morfic_cli.diagnostics.samples import DiagnoseCfg, Samples, collect_samples
 from morfic_cli.diagnostics.scoring import actor_gradients, critic_values
 from morfic_cli.errors import MorficError
+from morfic_cli.runs import RUNS_PREFIX, run_name
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
@@ -56,23 +66,37 @@ critic is ppo's)."""
 CRITIC_ALIASES: dict[str, str] = {"actor-only": "ppo"}
 """Variants whose critic is another's (same class, same config): fitted once, under the other's name."""
 
+STUDY_LAYOUT = 2
+"""The study's store layout, in its config (``layout``): 1 (no key) = one actor, 6 fixed epochs, the fit seed as
+the unit; 2 = several actors, fits to convergence with a ``converged`` flag. :func:`check_layout` refuses newer."""
+ACTOR_RUNS: tuple[tuple[str, int], ...] = (("film", 0), ("film", 1), ("film", 2), ("actor-only", 0), ("concat", 0))
+"""(variant, seed) of the default study's frozen actors (the unit of replication): three ``film`` seeds and two
+other variants' seed-0 runs."""
+DEFAULT_ACTORS: tuple[str, ...] = tuple(RUNS_PREFIX + run_name(v, s, "cpu") for v, s in ACTOR_RUNS)
+"""``ACTOR_RUNS`` under the ``cpu`` preset (the shipped runs): ``runs/film-cpu-s0`` ... ``runs/concat-cpu-s0``."""
+
 #: Columns of ``critic_study.csv``, in order.
 STUDY_COLUMNS: tuple[str, ...] = (
     "command_vx", "robot", "variant", "fit_seed", "multiplicative", "ev", "nvb", "abs_nvb", "nve", "asa", "flip",
-    "cos_grad", "cell", "n_samples", "g_mean", "g_std", "v_mean", "fit_loss", "fit_seconds", "actor", "rollout",
+    "cos_grad", "cell", "n_samples", "g_mean", "g_std", "v_mean", "fit_loss", "fit_seconds", "epochs", "best_epoch",
+    "val_ev", "converged", "actor", "rollout",
 )
-#: Columns of ``fits.csv``.
-FIT_COLUMNS: tuple[str, ...] = ("variant", "fit_seed", "epoch", "loss", "seconds", "parameters", "n_train")
+#: Columns of ``fits.csv`` (a row per epoch of each fit).
+FIT_COLUMNS: tuple[str, ...] = ("actor", "variant", "fit_seed", "epoch", "loss", "val_loss", "val_ev", "best_epoch",
+                                "stopped_early", "converged", "seconds", "parameters", "n_train", "n_val")
 
 
 @dataclass(frozen=True)
 class StudyCfg:
     """What the critic study collects, how it fits, and what it scores (defaults: docs/metrics.md)."""
 
+    actors: tuple[str, ...] = DEFAULT_ACTORS
+    """The frozen actors' checkpoints (the unit of replication), each with its own rollouts and fits."""
     variants: tuple[str, ...] = STUDY_VARIANTS
     """Critics to fit: stock names or a user's ``module:Class``."""
-    seeds: int = 5
-    """Fits per variant (fit seeds 0 .. seeds-1: initial weights and mini-batch order)."""
+    seeds: int = 2
+    """Fits per variant and actor (fit seeds 0 .. seeds-1: initial weights and mini-batch order), averaged within
+    the actor."""
     commands: tuple[float, ...] = (1.0, 2.0)
     """Forward commands (m/s); a fit is made and scored per command."""
     robots: tuple[str, ...] = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")
@@ -80,7 +104,9 @@ class StudyCfg:
     train_envs: int = 128
     """Envs of the training-distribution rollout per command, one sampled morphology each (plus one per fall)."""
     held_out: int = 16
-    """Of those, the last envs, kept out of the fit and scored as ``train`` (in-distribution)."""
+    """Of those, the last envs, never fitted on, scored as ``train`` (in-distribution)."""
+    val_envs: int = 16
+    """The envs before those: the validation split that stops the fit and decides ``converged``."""
     target_envs: int = 32
     """Envs per target robot."""
     steps: int = 800
@@ -90,8 +116,15 @@ class StudyCfg:
     stride: int = 4
     """Every how many policy steps of the window a training sample is taken (consecutive steps at 50 Hz are nearly
     the same state)."""
-    epochs: int = 6
-    """Passes over the fit set."""
+    max_epochs: int = 100
+    """Most passes over the fit set (the cap of early stopping)."""
+    patience: int = 8
+    """Epochs without a validation improvement after which a fit stops."""
+    min_delta: float = 1e-3
+    """An improvement: the validation loss (in units of Var(G) of the fit set) below the best by more than this."""
+    min_ev: float = 0.1
+    """A fit whose validation EV at its kept epoch is below this (it learned too little of the data), or that was
+    still improving at ``max_epochs``, is flagged unconverged and left out of every average."""
     minibatch: int = 256
     """Samples per gradient step."""
     learning_rate: float = 1e-3
@@ -119,8 +152,9 @@ def check_cfg(cfg: StudyCfg) -> None:
     """Refuse settings that cannot give a study.
 
     Raises:
-        MorficError: No variant, robot or command, an unknown variant, a command named twice, seeds < 1,
-            held_out outside [1, train_envs), epochs, minibatch or a stride < 1.
+        MorficError: No actor, variant, robot or command, an unknown variant, an actor or command named twice,
+            seeds < 1, held_out or val_envs < 1 or leaving no fit env, max_epochs, patience, minibatch or a
+            stride < 1, min_delta < 0, min_ev > 1.
     """
     if not cfg.variants:
         raise MorficError("--variants is empty; give 'all' or names such as film,concat.")
@@ -130,11 +164,17 @@ def check_cfg(cfg: StudyCfg) -> None:
         raise MorficError("--command-vx is empty; give one or more speeds such as 1.0,2.0.")
     if cfg.seeds < 1:
         raise MorficError(f"--seeds must be at least 1, got {cfg.seeds}; intervals need 2 or more.")
-    if not 1 <= cfg.held_out < cfg.train_envs:
-        raise MorficError(f"--held-out must be between 1 and --train-envs - 1 ({cfg.train_envs - 1}), got "
-                          f"{cfg.held_out}.")
-    if min(cfg.epochs, cfg.minibatch, cfg.stride, cfg.cos_stride) < 1:
-        raise MorficError("--epochs, --minibatch and the strides must be at least 1.")
+    if not cfg.actors:
+        raise MorficError("--actors is empty; give one or more runs such as runs/film-cpu-s0,runs/film-cpu-s1.")
+    if len(set(cfg.actors)) != len(cfg.actors):
+        raise MorficError(f"--actors names a run twice: {', '.join(cfg.actors)}; give each once.")
+    if cfg.held_out < 1 or cfg.val_envs < 1 or cfg.held_out + cfg.val_envs >= cfg.train_envs:
+        raise MorficError(f"--held-out ({cfg.held_out}) and --val-envs ({cfg.val_envs}) must each be at least 1 and "
+                          f"leave fit envs: together at most --train-envs - 1 ({cfg.train_envs - 1}).")
+    if min(cfg.max_epochs, cfg.patience, cfg.minibatch, cfg.stride, cfg.cos_stride) < 1:
+        raise MorficError("--max-epochs, --patience, --minibatch and the strides must be at least 1.")
+    if cfg.min_delta < 0 or not cfg.min_ev <= 1:
+        raise MorficError(f"--min-delta must be >= 0 and --min-ev <= 1, got {cfg.min_delta} and {cfg.min_ev}.")
     from morfic_cli.rl.variants import resolve_variant
 
     for variant in cfg.variants:
@@ -177,6 +217,10 @@ class FitData:
         """(G - g_mean) / g_std. Shape: (n,)."""
         return (self.G - self.g_mean) / self.g_std
 
+    def target_as(self, other: FitData) -> torch.Tensor:
+        """G standardised with ``other``'s map (a validation set with the fit set's): (G - m) / s. Shape: (n,)."""
+        return (self.G - other.g_mean) / other.g_std
+
 
 class Denormalized(torch.nn.Module):
     """A critic fitted on standardised returns, in return units: V = g_mean + g_std * critic(obs). (N, 1)."""
@@ -193,10 +237,13 @@ CRITIC_GROUPS: tuple[str, ...] = ("critic", "privileged", "morphology")
 """The observation groups a critic reads."""
 
 
-def split_train(samples: Samples, held_out: int) -> tuple[Samples, Samples]:
-    """The training rollout split by env: (fit envs, the last ``held_out`` envs). Arrays (T, N, ...) -> views."""
+def split_train(samples: Samples, held_out: int, val_envs: int = 0) -> tuple[Samples, Samples, Samples]:
+    """The training rollout split by env: (fit envs, the ``val_envs`` before the last, the last ``held_out``).
+
+    Arrays (T, N, ...) -> views (T, N - val_envs - held_out, ...), (T, val_envs, ...), (T, held_out, ...).
+    """
     n = samples.action.shape[1]
-    fit, out = slice(0, n - held_out), slice(n - held_out, n)
+    cut_val, cut_held = n - held_out - val_envs, n - held_out
 
     def part(envs: slice) -> Samples:
         return dataclasses.replace(
@@ -204,7 +251,7 @@ def split_train(samples: Samples, held_out: int) -> tuple[Samples, Samples]:
             reward=samples.reward[:, envs], value=samples.value[:, envs], done=samples.done[:, envs],
             time_out=samples.time_out[:, envs])
 
-    return part(fit), part(out)
+    return part(slice(0, cut_val)), part(slice(cut_val, cut_held)), part(slice(cut_held, n))
 
 
 def fit_data(parts: Sequence[Samples], gamma: float, cfg: DiagnoseCfg, stride: int = 1) -> FitData:
@@ -255,40 +302,101 @@ def build_critic(actor_cfg: Any, variant: str, seed: int) -> torch.nn.Module:
 
 
 @dataclass
+class EarlyStopping:
+    """Early stopping on a validation loss: stop after ``patience`` epochs without an improvement.
+
+    An epoch improves when its loss is below the best so far by more than ``min_delta`` (a NaN never does); the
+    kept epoch is the last that improved. Epochs count from 1.
+    """
+
+    patience: int
+    min_delta: float = 0.0
+    best: float = math.inf
+    best_epoch: int = 0
+    epoch: int = 0
+
+    def update(self, loss: float) -> bool:
+        """Record the next epoch's validation loss; True when the fit should stop now."""
+        self.epoch += 1
+        if loss < self.best - self.min_delta:
+            self.best, self.best_epoch = loss, self.epoch
+        return self.epoch - self.best_epoch >= self.patience
+
+
+@dataclass
 class Fit:
-    """One fitted critic: its variant, seed, loss per epoch and wall time."""
+    """One fitted critic: its actor, variant, seed, curves, kept epoch, validation EV and wall time.
+
+    Attributes:
+        losses: Mean training loss of each epoch run (units of Var(G) of the fit set).
+        val_losses: Validation loss after each epoch (same units).
+        val_evs: Validation EV after each epoch.
+        best_epoch: The epoch whose weights the critic holds (1-based; 0 without validation).
+        stopped_early: Whether early stopping ended the fit (False: it ran to ``max_epochs``).
+        min_ev: The flag's threshold: ``converged`` needs val EV at ``best_epoch`` >= it.
+    """
 
     variant: str
     seed: int
     critic: torch.nn.Module
+    actor: str = ""
     losses: list[float] = field(default_factory=list)
+    val_losses: list[float] = field(default_factory=list)
+    val_evs: list[float] = field(default_factory=list)
+    best_epoch: int = 0
+    stopped_early: bool = False
     seconds: float = 0.0
+    min_ev: float = -math.inf
 
     @property
     def parameters(self) -> int:
         """Trainable parameters of the critic."""
         return sum(p.numel() for p in self.critic.parameters() if p.requires_grad)
 
+    @property
+    def val_ev(self) -> float:
+        """Validation EV of the kept weights (NaN without validation)."""
+        return self.val_evs[self.best_epoch - 1] if self.best_epoch else math.nan
 
-def fit_critic(critic: torch.nn.Module, data: FitData, cfg: StudyCfg, seed: int,
-               on_batch: Callable[[], None] | None = None) -> tuple[list[float], float]:
-    """Regress V_phi on the standardised G of the fit set: Adam, mean squared error, ``cfg.epochs`` shuffled passes.
+    @property
+    def converged(self) -> bool:
+        """Early stopping ended the fit and its kept weights reach ``min_ev`` on the validation envs (NaN: False)."""
+        return self.stopped_early and bool(self.val_ev >= self.min_ev)
 
+
+def _predict(critic: torch.nn.Module, obs: TensorDict, chunk: int = 4096) -> torch.Tensor:
+    """The critic's output on every sample, without gradients, in chunks. Shape: (n,)."""
+    with torch.no_grad():
+        return torch.cat([critic(obs[i : i + chunk]).reshape(-1) for i in range(0, obs.batch_size[0], chunk)])
+
+
+def fit_critic(critic: torch.nn.Module, data: FitData, cfg: StudyCfg, seed: int, val: FitData | None = None,
+               on_epoch: Callable[[], None] | None = None) -> Fit:
+    """Regress V_phi on the standardised G of the fit set (Adam, mean squared error, shuffled passes) to convergence.
+
+    After each epoch the loss and EV on ``val`` (standardised with the fit set's map) are taken; the fit stops when
+    :class:`EarlyStopping` (``cfg.patience``, ``cfg.min_delta``) says so or after ``cfg.max_epochs``, and the critic
+    keeps the weights of its best validation epoch. Without ``val``, ``cfg.max_epochs`` passes and the last weights.
     The mini-batch order comes from a generator seeded with ``seed``, so two variants with the same seed see the
     same batches in the same order.
 
     Returns:
-        (mean loss of each epoch, in units of Var(G), wall seconds).
+        The :class:`Fit` (variant and actor left empty for the caller), its critic in eval mode.
     """
+    from morfic_cli.diagnostics.metrics import explained_variance
+
     critic.train()
     params = [p for p in critic.parameters() if p.requires_grad]
     optimizer = torch.optim.Adam(params, lr=cfg.learning_rate)
     gen = torch.Generator().manual_seed(seed)
     n = data.G.shape[0]
     target = data.target
-    losses: list[float] = []
+    val_target = val.target_as(data) if val is not None else None
+    fit = Fit("", seed, critic, min_ev=cfg.min_ev)
+    stopper = EarlyStopping(cfg.patience, cfg.min_delta)
+    best_state: dict[str, torch.Tensor] | None = None
     start = time.perf_counter()
-    for _ in range(cfg.epochs):
+    for _ in range(cfg.max_epochs):
         order = torch.randperm(n, generator=gen)
         total, count = 0.0, 0
         for i in range(0, n, cfg.minibatch):
@@ -301,16 +409,33 @@ def fit_critic(critic: torch.nn.Module, data: FitData, cfg: StudyCfg, seed: int,
             optimizer.step()
             total += float(loss.detach()) * idx.numel()
             count += idx.numel()
-            if on_batch is not None:
-                on_batch()
-        losses.append(total / count)
+        fit.losses.append(total / count)
+        if on_epoch is not None:
+            on_epoch()
+        if val is None or val_target is None:
+            continue
+        critic.eval()
+        pred = _predict(critic, val.obs)
+        critic.train()
+        fit.val_losses.append(float(torch.nn.functional.mse_loss(pred, val_target)))
+        fit.val_evs.append(explained_variance(val_target, pred))
+        stop = stopper.update(fit.val_losses[-1])
+        if stopper.best_epoch == stopper.epoch:
+            best_state = {k: v.detach().clone() for k, v in critic.state_dict().items()}
+        if stop:
+            fit.stopped_early = True
+            break
+    if best_state is not None:
+        critic.load_state_dict(best_state)
+    fit.best_epoch = stopper.best_epoch
+    fit.seconds = time.perf_counter() - start
     critic.eval()
-    return losses, time.perf_counter() - start
+    return fit
 
 
-def batches_per_fit(n: int, cfg: StudyCfg) -> int:
-    """Gradient steps of one fit of ``n`` samples."""
-    return cfg.epochs * math.ceil(n / cfg.minibatch)
+def batches_per_epoch(n: int, cfg: StudyCfg) -> int:
+    """Gradient steps of one epoch over ``n`` samples."""
+    return math.ceil(n / cfg.minibatch)
 
 
 def score_fits(actor: torch.nn.Module, fits: Sequence[Fit], samples: Samples, gamma: float, cfg: DiagnoseCfg,
@@ -343,10 +468,23 @@ def score_fits(actor: torch.nn.Module, fits: Sequence[Fit], samples: Samples, ga
     return rows
 
 
-def study_config(actor_spec: str, cfg: StudyCfg) -> dict[str, Any]:
-    """The config of a stored study: the actor's spec and every setting (variants as fitted, aliases folded)."""
+def study_config(cfg: StudyCfg) -> dict[str, Any]:
+    """The config of a stored study: every setting (actors as given, variants as fitted) and :data:`STUDY_LAYOUT`."""
     doc = {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(cfg).items()}
-    return {"actor": actor_spec, **doc, "variants": canonical_variants(cfg.variants)}
+    return {**doc, "variants": canonical_variants(cfg.variants), "layout": STUDY_LAYOUT}
+
+
+def check_layout(config: dict[str, Any]) -> int:
+    """The layout of a stored study's config (1 when it has none: the one-actor design).
+
+    Raises:
+        MorficError: A layout newer than :data:`STUDY_LAYOUT` (written by a newer morfic).
+    """
+    layout = int(config.get("layout", 1))
+    if layout > STUDY_LAYOUT:
+        raise MorficError(f"the critic study was stored with layout {layout}, newer than this morfic reads "
+                          f"({STUDY_LAYOUT}); upgrade morfic, or run `morfic critic-study` again.")
+    return layout
 
 
 @dataclass
@@ -368,20 +506,95 @@ class StudyProgress:
     advance: Callable[[], None] = lambda: None
 
 
-def run_study(store: Store, actor_spec: str, cfg: StudyCfg, *, actor: TrainedModels | None = None,
+def _fit_rows(fit: Fit, n_train: int, n_val: int) -> list[dict[str, Any]]:
+    """The rows of ``fits.csv`` of one fit: one per epoch run."""
+    val = fit.val_losses + [math.nan] * (len(fit.losses) - len(fit.val_losses))
+    evs = fit.val_evs + [math.nan] * (len(fit.losses) - len(fit.val_evs))
+    return [{"actor": fit.actor, "variant": fit.variant, "fit_seed": fit.seed, "epoch": e + 1, "loss": loss,
+             "val_loss": v, "val_ev": ev, "best_epoch": fit.best_epoch, "stopped_early": fit.stopped_early,
+             "converged": fit.converged,
+             "seconds": fit.seconds, "parameters": fit.parameters, "n_train": n_train, "n_val": n_val}
+            for e, (loss, v, ev) in enumerate(zip(fit.losses, val, evs, strict=True))]
+
+
+def _study_actor(store: Store, spec: str, trained: TrainedModels, cfg: StudyCfg, variants: Sequence[str],
+                 multiplicative: dict[str, bool | None], progress: StudyProgress, seconds: dict[str, float],
+                 inputs: dict[str, str]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """One actor's part of the study: its rollouts, its fits, their scores. Returns (rows, fit rows)."""
+    gamma, clip = trained.cfg.ppo.gamma, trained.cfg.ppo.clip_param
+    check_horizon(gamma, cfg.diagnose_cfg(cfg.commands[0], True))
+    label = run_label(trained, spec)
+    inputs[f"actor/{label}"] = trained.checkpoint_id
+    held: dict[float, Samples] = {}
+    targets: dict[float, dict[str, Samples]] = {}
+    fit_parts: list[Samples] = []
+    val_parts: list[Samples] = []
+    t0 = time.perf_counter()
+    for command in cfg.commands:  # 1. the frozen actor's rollouts (reused from the store when there)
+        train_cfg, target_cfg = cfg.diagnose_cfg(command, True), cfg.diagnose_cfg(command, False)
+        joint = bool(target_cfg.batch)  # every target stepped as one env: one bar pass for all of them
+        progress.phase(f"{label}: rollouts at {command:g} m/s", (2 if joint else 1 + len(cfg.robots)) * cfg.steps)
+        step = lambda _t: progress.advance()  # noqa: E731
+        train = collect_samples(store, trained, "go2", train_cfg, on_step=step)
+        inputs[f"rollout/{label}/{command:g}/{TRAIN_ROBOT}"] = train.rollout_id
+        fit_part, val_part, held[command] = split_train(train, cfg.held_out, cfg.val_envs)
+        fit_parts.append(fit_part)
+        val_parts.append(val_part)
+        targets[command] = {}
+        for k, robot in enumerate(cfg.robots):
+            targets[command][robot] = collect_samples(store, trained, robot, target_cfg,
+                                                      on_step=step if k == 0 or not joint else None)
+            inputs[f"rollout/{label}/{command:g}/{robot}"] = targets[command][robot].rollout_id
+    seconds["rollouts"] += time.perf_counter() - t0
+    diag = cfg.diagnose_cfg(cfg.commands[0], True)  # eps and sigma_eps: the same for every command
+    data = fit_data(fit_parts, gamma, diag, cfg.stride)  # 2. one fit set over every command
+    val = fit_data(val_parts, gamma, diag, cfg.stride)
+    del fit_parts, val_parts
+    fits: list[Fit] = []
+    fit_rows: list[dict[str, Any]] = []
+    progress.phase(f"{label}: fitting {len(variants)} x {cfg.seeds} critics on {data.G.shape[0]} samples "
+                   f"(at most {cfg.max_epochs} epochs)", len(variants) * cfg.seeds * cfg.max_epochs)
+    for variant in variants:
+        for seed in range(cfg.seeds):
+            fit = fit_critic(build_critic(trained.cfg, variant, seed), data, cfg, seed, val, progress.advance)
+            for _ in range(cfg.max_epochs - len(fit.losses)):  # the epochs early stopping saved
+                progress.advance()
+            fit.variant, fit.actor = variant, label
+            fit.critic = Denormalized(fit.critic, data.g_mean, data.g_std).eval()
+            fits.append(fit)
+            seconds["fits"] += fit.seconds
+            fit_rows += _fit_rows(fit, int(data.G.shape[0]), int(val.G.shape[0]))
+    rows: list[dict[str, Any]] = []
+    t0 = time.perf_counter()
+    for command in cfg.commands:  # 3. every fit scored on every sample set of its actor
+        sets = {TRAIN_ROBOT: held[command], **targets[command]}
+        progress.phase(f"{label}: scoring {len(fits)} critics at {command:g} m/s", len(sets))
+        for robot, samples in sets.items():
+            scores = score_fits(trained.actor, fits, samples, gamma, diag, clip, cfg.cos_stride)
+            for fit, score in zip(fits, scores, strict=True):
+                rows.append({"command_vx": command, "robot": robot, "variant": fit.variant, "fit_seed": fit.seed,
+                             "multiplicative": multiplicative[fit.variant], **score,
+                             "fit_loss": fit.losses[-1], "fit_seconds": fit.seconds, "epochs": len(fit.losses),
+                             "best_epoch": fit.best_epoch, "val_ev": fit.val_ev, "converged": fit.converged,
+                             "actor": label, "rollout": samples.rollout_id})
+            progress.advance()
+    seconds["scoring"] += time.perf_counter() - t0
+    return rows, fit_rows
+
+
+def run_study(store: Store, cfg: StudyCfg, *, actors: dict[str, TrainedModels] | None = None,
               progress: StudyProgress | None = None) -> StudyResult:
-    """The critic study of ``actor_spec``'s frozen actor (module docstring); stored as a ``diagnosis``.
+    """The critic study of ``cfg.actors`` (module docstring); stored as a ``diagnosis``.
 
     Args:
         store: Artifact store (rollouts are reused from it or written to it).
-        actor_spec: The frozen actor's checkpoint (``runs/film-cpu-s0``).
         cfg: Study settings (:func:`check_cfg` is applied).
-        actor: The checkpoint already loaded (else loaded here).
+        actors: Spec -> the checkpoint already loaded (the others are loaded here, one at a time).
         progress: Phase and step callbacks.
 
     Raises:
         MorficError: Bad settings, a spec that is not a checkpoint, a user variant that cannot be imported, or
-            ``cfg.steps`` too short for the actor's discount.
+            ``cfg.steps`` too short for an actor's discount.
     """
     from morfic_cli.diagnostics.figures import critic_study_figure
     from morfic_cli.diagnostics.study_summary import (
@@ -397,68 +610,27 @@ def run_study(store: Store, actor_spec: str, cfg: StudyCfg, *, actor: TrainedMod
 
     check_cfg(cfg)
     progress = progress or StudyProgress()
-    trained = actor if actor is not None else load_trained(store, actor_spec)
-    gamma, clip = trained.cfg.ppo.gamma, trained.cfg.ppo.clip_param
+    actors = dict(actors or {})
     variants = canonical_variants(cfg.variants)
     # user classes were resolved by check_cfg (consent, import); a user's critic is neither group of claim (a) (None)
     multiplicative = {v: (resolve_variant(v).multiplicative if v in STOCK else None) for v in variants}
-    check_horizon(gamma, cfg.diagnose_cfg(cfg.commands[0], True))
-    label = run_label(trained, actor_spec)
     rows: list[dict[str, Any]] = []
     fit_rows: list[dict[str, Any]] = []
-    inputs = {"actor": trained.checkpoint_id}
+    inputs: dict[str, str] = {}
     seconds = {"rollouts": 0.0, "fits": 0.0, "scoring": 0.0}
-    held: dict[float, Samples] = {}
-    targets: dict[float, dict[str, Samples]] = {}
-    fit_parts: list[Samples] = []
-    t0 = time.perf_counter()
-    for command in cfg.commands:  # 1. the frozen actor's rollouts (reused from the store when there)
-        train_cfg, target_cfg = cfg.diagnose_cfg(command, True), cfg.diagnose_cfg(command, False)
-        joint = bool(target_cfg.batch)  # every target stepped as one env: one bar pass for all of them
-        progress.phase(f"{label}: rollouts at {command:g} m/s", (2 if joint else 1 + len(cfg.robots)) * cfg.steps)
-        step = lambda _t: progress.advance()  # noqa: E731
-        train = collect_samples(store, trained, "go2", train_cfg, on_step=step)
-        inputs[f"rollout/{command:g}/{TRAIN_ROBOT}"] = train.rollout_id
-        fit_part, held[command] = split_train(train, cfg.held_out)
-        fit_parts.append(fit_part)
-        targets[command] = {}
-        for k, robot in enumerate(cfg.robots):
-            targets[command][robot] = collect_samples(store, trained, robot, target_cfg,
-                                                      on_step=step if k == 0 or not joint else None)
-            inputs[f"rollout/{command:g}/{robot}"] = targets[command][robot].rollout_id
-    seconds["rollouts"] = time.perf_counter() - t0
-    diag = cfg.diagnose_cfg(cfg.commands[0], True)  # eps and sigma_eps: the same for every command
-    data = fit_data(fit_parts, gamma, diag, cfg.stride)  # 2. one fit set over every command
-    del fit_parts
-    fits: list[Fit] = []
-    progress.phase(f"fitting {len(variants)} x {cfg.seeds} critics on {data.G.shape[0]} samples",
-                   len(variants) * cfg.seeds * batches_per_fit(data.G.shape[0], cfg))
-    for variant in variants:
-        for seed in range(cfg.seeds):
-            critic = build_critic(trained.cfg, variant, seed)
-            losses, secs = fit_critic(critic, data, cfg, seed, on_batch=progress.advance)
-            fit = Fit(variant, seed, Denormalized(critic, data.g_mean, data.g_std).eval(), losses, secs)
-            fits.append(fit)
-            seconds["fits"] += secs
-            fit_rows += [{"variant": variant, "fit_seed": seed, "epoch": e + 1, "loss": loss, "seconds": secs,
-                          "parameters": fit.parameters, "n_train": int(data.G.shape[0])}
-                         for e, loss in enumerate(losses)]
-    t0 = time.perf_counter()
-    for command in cfg.commands:  # 3. every fit scored on every sample set
-        sets = {TRAIN_ROBOT: held[command], **targets[command]}
-        progress.phase(f"scoring {len(fits)} critics at {command:g} m/s", len(sets))
-        for robot, samples in sets.items():
-            scores = score_fits(trained.actor, fits, samples, gamma, diag, clip, cfg.cos_stride)
-            for fit, score in zip(fits, scores, strict=True):
-                rows.append({"command_vx": command, "robot": robot, "variant": fit.variant, "fit_seed": fit.seed,
-                             "multiplicative": multiplicative[fit.variant], **score,
-                             "fit_loss": fit.losses[-1], "fit_seconds": fit.seconds, "actor": label,
-                             "rollout": samples.rollout_id})
-            progress.advance()
-    seconds["scoring"] = time.perf_counter() - t0
+    labels = []
+    for spec in cfg.actors:
+        trained = actors.pop(spec, None) or load_trained(store, spec)
+        labels.append(run_label(trained, spec))
+        if labels.count(labels[-1]) > 1:
+            raise MorficError(f"--actors names run {labels[-1]} twice (as {spec}); give each run once.")
+        part, part_fits = _study_actor(store, spec, trained, cfg, variants, multiplicative, progress, seconds,
+                                       inputs)
+        rows += part
+        fit_rows += part_fits
+        del trained
     summary = cell_summary(rows)
     claims = verdict_rows(study_claims(rows))
-    config = study_config(actor_spec, cfg)
     files = {
         "critic_study.csv": rows_to_csv(rows, STUDY_COLUMNS),
         "summary.csv": rows_to_csv(summary, SUMMARY_COLUMNS),
@@ -466,7 +638,10 @@ def run_study(store: Store, actor_spec: str, cfg: StudyCfg, *, actor: TrainedMod
         "fits.csv": rows_to_csv(fit_rows, FIT_COLUMNS),
         "critic_study.png": critic_study_figure(summary),
     }
-    pub = store.publish("diagnosis", STUDY_REF, config=config, inputs=inputs, files=files,
-                        meta={"actor": label, "variants": variants, "seeds": cfg.seeds,
+    n_fits = len({(r["actor"], r["variant"], r["fit_seed"]) for r in fit_rows})
+    n_flagged = len({(r["actor"], r["variant"], r["fit_seed"]) for r in fit_rows if not r["converged"]})
+    pub = store.publish("diagnosis", STUDY_REF, config=study_config(cfg), inputs=inputs, files=files,
+                        meta={"actor": ", ".join(labels), "actors": labels, "variants": variants, "seeds": cfg.seeds,
+                              "fits": n_fits, "unconverged": n_flagged, "layout": STUDY_LAYOUT,
                               "seconds": {k: round(v, 1) for k, v in seconds.items()}})
     return StudyResult(rows, fit_rows, pub.id, pub.version, seconds)

@@ -44,6 +44,8 @@ class RunInfo:
         device: cpu or cuda.
         finished: Reached max_iterations.
         created: Manifest creation time.
+        machine: The machine it trained on, where the checkpoint's meta records one (``machine`` or ``host``), else
+            "".
     """
 
     spec: str
@@ -59,6 +61,7 @@ class RunInfo:
     device: str
     finished: bool
     created: str
+    machine: str = ""
 
 
 @dataclass(frozen=True)
@@ -80,9 +83,11 @@ class StoreData:
         evals: eval.csv rows (+ ``run``, ``variant``, ``seed``, ``preset``, ``checkpoint``, ``artifact``).
         calibration: calibration.csv rows (+ the same keys).
         fixed: fixed_rollout.csv rows of critics among the runs and their MC reference rows (+ ``artifact``).
-        study: critic_study.csv rows of the newest critic study whose frozen actor is one of the runs
+        study: critic_study.csv rows of the newest critic study one of whose frozen actors is one of the runs
             (+ ``artifact``); ``study_meta`` is that manifest's meta (actor, seconds).
         curves: Run name -> training-curve rows of its checkpoint.
+        params: Checkpoint id -> (actor, critic) parameter counts, ``sum(p.numel())`` of the models its stored config
+            builds (:func:`parameter_counts`; stock variants only).
         provenance: Every artifact used.
     """
 
@@ -93,6 +98,7 @@ class StoreData:
     study: list[dict[str, Any]] = field(default_factory=list)
     study_meta: dict[str, Any] = field(default_factory=dict)
     curves: dict[str, list[dict[str, float]]] = field(default_factory=dict)
+    params: dict[str, tuple[int, int]] = field(default_factory=dict)
     provenance: list[Provenance] = field(default_factory=list)
 
     def input_ids(self) -> dict[str, str]:
@@ -121,6 +127,7 @@ def run_info(store: Store, spec: str) -> RunInfo:
         iteration=int(meta.get("iteration", 0)), max_iterations=int(meta.get("max_iterations", 0)),
         env_steps=int(meta.get("env_steps", 0)), wall_time_s=float(meta.get("wall_time_s", 0.0)),
         device=str(meta.get("device", "cpu")), finished=bool(meta.get("finished", False)), created=manifest.created,
+        machine=str(meta.get("machine") or meta.get("host") or ""),
     )
 
 
@@ -216,6 +223,39 @@ def _run_keys(run: RunInfo) -> dict[str, Any]:
             "checkpoint": run.checkpoint}
 
 
+def parameter_counts(store: Store, runs: Sequence[RunInfo]) -> dict[str, tuple[int, int]]:
+    """Checkpoint id -> (actor, critic) parameter counts of each run of a stock variant.
+
+    Each count is ``sum(p.numel() for p in model.parameters())`` of the model its stored config builds
+    (:func:`~morfic_cli.rl.runner.build_models`; a parameter the two share, e.g. the morphology encoder, counts in
+    both). A user variant's run is left out (counting would import its code), as is a run whose stored config this
+    morfic cannot read. One build per distinct config: the seeds of a variant share it.
+    """
+    import json
+
+    from morfic_cli.rl.variants import STOCK
+
+    stock = [r for r in runs if r.variant in STOCK]
+    if not stock:
+        return {}
+    from morfic_cli.rl.runner import build_models
+    from morfic_cli.validation import check_stored_cfg
+
+    out: dict[str, tuple[int, int]] = {}
+    built: dict[str, tuple[int, int]] = {}
+    for run in stock:
+        doc = store.read_manifest(run.checkpoint).config
+        key = json.dumps({k: doc.get(k) for k in ("variant", "model", "env")}, sort_keys=True, default=str)
+        if key not in built:
+            try:
+                actor, critic = build_models(check_stored_cfg(doc, run.spec))
+            except MorficError:
+                continue
+            built[key] = (sum(p.numel() for p in actor.parameters()), sum(p.numel() for p in critic.parameters()))
+        out[run.checkpoint] = built[key]
+    return out
+
+
 def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> StoreData:
     """Collect every stored result of ``runs`` (see the module docstring for the rules)."""
     data = StoreData(runs=list(runs))
@@ -250,7 +290,11 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                     key = (run.checkpoint, row["robot"], row["mode"], row_command(row))
                     _keep(calib, key, {**row, **_run_keys(run), "artifact": manifest.id})
             elif kind == "diagnosis" and "critic_study.csv" in manifest.files:
-                if manifest.inputs.get("actor") in by_ckpt:  # oldest first: the newest study wins
+                actors = [v for k, v in manifest.inputs.items() if k == "actor" or k.startswith("actor/")]
+                if any(a in by_ckpt for a in actors):  # oldest first: the newest study wins
+                    from morfic_cli.diagnostics.critic_study import check_layout
+
+                    check_layout(manifest.config)  # a study laid out by a newer morfic is refused, not misread
                     data.study = [{**row, "artifact": manifest.id}
                                   for row in read_csv_rows(store.read_file(manifest.id, "critic_study.csv"))]
                     data.study_meta = dict(manifest.meta)
@@ -284,5 +328,6 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
             manifest = store.read_manifest(run.checkpoint)
             if "curve.csv" in manifest.files and "curve.csv" not in store.omitted_files(manifest):
                 data.curves[run.name] = read_curve_csv(store.read_file(run.checkpoint, "curve.csv"))
+    data.params = parameter_counts(store, runs)
     data.provenance = list(used.values())
     return data

@@ -197,6 +197,25 @@ def mean_difference(a: Sequence[float], b: Sequence[float], *, alpha: float = AL
                   math.sqrt(unit[0] / x.size + unit[1] / y.size), unit)
 
 
+def paired_effect(differences: Sequence[float], *, alpha: float = ALPHA) -> Effect:
+    """Effect = mean of per-unit differences (paired by unit: each frozen actor of the critic study), one-sample t.
+
+    SE = s / sqrt(n), df = n - 1 (``n_a = n_b = n``, the units that have both sides); ``unit_var`` is (s²,), so
+    :func:`seeds_needed` gives units (actors) for the paired test. No test below :data:`MIN_SEEDS` units; every
+    difference equal: exact (p 0, or 1 for all zero).
+    """
+    d = _clean(differences)
+    if d.size == 0:
+        return Effect(math.nan, math.nan, math.nan, 0, 0, why="no unit has both sides")
+    est = float(d.mean())
+    if d.size < MIN_SEEDS:
+        return Effect(est, math.nan, math.nan, d.size, d.size, why=NO_TEST)
+    var = float(d.var(ddof=1))
+    _, se, df, p, lo, hi = contrast(np.array([est]), np.array([var]), np.array([float(d.size)]), np.array([1.0]),
+                                    alpha)
+    return Effect(est, float(lo), float(hi), d.size, d.size, float(p), float(df), float(se), (var,))
+
+
 def equivalence_p(effect: Effect, tol: float) -> tuple[float, int]:
     """(p, outcome) of "|difference| < tol": the equivalence p or the "beyond" p, whichever is smaller.
 
