@@ -7,7 +7,8 @@ robot stack has to get right. Every control step (``control.dt`` = 20 ms):
 1. read the state: base orientation, base linear and angular velocity, joint positions and velocities
    (here from MuJoCo's qpos/qvel; on a robot from the IMU, a velocity estimator and the joint encoders);
 2. build o_t (48) by the metadata's observation layout, scales and clip;
-3. push o_t into the 15-step history (oldest first; filled with the first o_t at start);
+3. push o_t into the history of ``observation.history_len`` frames (16; 15 for runs trained before issue 16),
+   oldest first, o_t last; filled with the first o_t at start;
 4. run the policy with onnxruntime: ``actions = session.run(history[, morphology])``;
 5. joint targets ``q* = clamp(q0 + action_scale * clip(a), q_min, q_max)``, held for ``decimation`` physics steps
    by PD with the metadata's Kp / Kd and torque limits.

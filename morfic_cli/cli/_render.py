@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import unicodedata
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -14,7 +15,7 @@ from rich.table import Table
 from rich.text import Text
 
 from morfic_cli.cli._options import OutputFormat
-from morfic_cli.errors import printable
+from morfic_cli.errors import UNPRINTABLE, printable
 
 #: Human messages (progress, "wrote artifact ...") go here, never to stdout.
 err_console = Console(stderr=True, soft_wrap=True)  # messages are not hard-wrapped; the terminal wraps them
@@ -88,7 +89,8 @@ def emit_rows(
     """
     rows = list(rows)
     if fmt == OutputFormat.json:
-        sys.stdout.write(json.dumps(json_safe(list(rows)), indent=2, default=str, ensure_ascii=False) + "\n")
+        text = json.dumps(json_safe(list(rows)), indent=2, default=str, ensure_ascii=False)
+        sys.stdout.write(_json_text(text) + "\n")
         return
     if fmt == OutputFormat.csv:
         import pandas as pd
@@ -116,6 +118,10 @@ def emit_rows(
     out_console.print(table)
 
 
+FOLD_FLOOR = 12
+"""A whole column (a run name, a ref) folds down to this width before any other column folds."""
+
+
 def _longest_word(text: str) -> int:
     return max((len(word) for word in text.split()), default=0)
 
@@ -126,8 +132,10 @@ def fit_columns(cols: Sequence[Column], cells: Sequence[Sequence[str]], width: i
 
     While the columns at their longest cells are wider than ``width``, the column with the highest ``drop`` is
     left out (rows stay one line). If the rest is still too wide, the widest wrapping columns give up characters,
-    never below their longest word; whole and ``no_wrap`` columns keep their longest cell. Whole columns are only
-    ever folded (wrapped at any character, nothing lost) when nothing else is left to shrink.
+    never below their longest word; whole and ``no_wrap`` columns keep their longest cell. When nothing else is
+    left to shrink, the whole columns fold (wrap at any character, nothing lost), widest first, down to
+    :data:`FOLD_FLOOR` characters: a long run name takes two lines and the numbers keep their width. Only then do
+    the other columns fold, and last the whole ones below the floor.
 
     Args:
         cols: The columns, n of them.
@@ -161,8 +169,10 @@ def fit_columns(cols: Sequence[Column], cells: Sequence[Sequence[str]], width: i
     excess = sum(widths[i] for i in keep) - room(keep)
     while excess > 0:
         shrinkable = [i for i in keep if widths[i] > least[i]]
-        if not shrinkable:  # even at their least the columns do not fit: the lesser ones fold, then the whole ones
-            shrinkable = ([i for i in keep if widths[i] > 1 and not cols[i].is_whole]
+        if not shrinkable:  # even at their least the columns do not fit: the whole ones fold (nothing is lost) down
+            # to FOLD_FLOOR, widest first, so numbers keep their width; then the lesser ones; then the whole ones
+            shrinkable = ([i for i in keep if widths[i] > FOLD_FLOOR and cols[i].is_whole]
+                          or [i for i in keep if widths[i] > 1 and not cols[i].is_whole]
                           or [i for i in keep if widths[i] > 1])
             if not shrinkable:
                 break
@@ -206,6 +216,14 @@ def _plain(value: Any) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value)
+
+
+def _json_text(text: str) -> str:
+    r"""JSON text with each character that :func:`~morfic_cli.errors.printable` escapes written as ``\uXXXX``.
+
+    The same data once parsed (such characters occur only inside strings), and nothing a terminal acts on.
+    """
+    return "".join(json.dumps(c)[1:-1] if c != "\n" and unicodedata.category(c) in UNPRINTABLE else c for c in text)
 
 
 def emit_object(obj: Any, fmt: OutputFormat, title: str | None = None) -> None:

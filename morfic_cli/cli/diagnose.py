@@ -31,6 +31,21 @@ def _num(v: float | None) -> str:
     return "-" if v is None or v != v else f"{v:.3f}"
 
 
+CALIBRATION_TABLE = [
+    Column("run", "run"),
+    Column("variant", "variant", drop=3),  # the run's name says it (runs/<variant>-<preset>-s<seed>)
+    Column("robot", "robot"),
+    Column("d", "d", fmt=_num, justify="right", drop=1),
+    Column("ev", "EV", fmt=_num, justify="right"),
+    Column("cell", "|NVB|/NVE/ASA", justify="right"),
+    Column("flip", "Flip", fmt=_num, justify="right"),
+    Column("cos_grad", "CosGrad", fmt=_num, justify="right"),
+    Column("n_samples", "|I_eps|", justify="right", drop=2),
+]
+"""The calibration table's columns: at 80 columns variant, |I_eps| and d are left out (the caption says so) and a long
+run name folds (:func:`~morfic_cli.cli._render.fit_columns`), so the metrics keep their width."""
+
+
 def diagnose(
     runs: Annotated[
         list[str] | None,
@@ -159,17 +174,7 @@ def _calibration(st, specs: list[str], cfg, out: Path | None, fmt: OutputFormat,
     emit_rows(
         result.rows,
         fmt,
-        columns=[
-            Column("run", "run"),
-            Column("variant", "variant"),
-            Column("robot", "robot"),
-            Column("d", "d", fmt=_num, justify="right"),
-            Column("ev", "EV", fmt=_num, justify="right"),
-            Column("cell", "|NVB|/NVE/ASA", justify="right"),
-            Column("flip", "Flip", fmt=_num, justify="right"),
-            Column("cos_grad", "CosGrad", fmt=_num, justify="right"),
-            Column("n_samples", "|I_eps|", justify="right"),
-        ],
+        columns=CALIBRATION_TABLE,
         title="critic calibration",
         caption="higher is better: EV, ASA, CosGrad; lower: |NVB|, NVE, Flip (over I_eps, vs Monte-Carlo G)",
     )
@@ -195,7 +200,7 @@ def _fixed(
         fmt,
         columns=[
             Column("critic", "critic"),
-            Column("variant", "variant"),
+            Column("variant", "variant", drop=1),
             Column("flip", "Flip", fmt=_num, justify="right"),
             Column("cos_grad", "Cos.", fmt=_num, justify="right"),
             Column("asa", "ASA", fmt=_num, justify="right"),

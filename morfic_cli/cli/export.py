@@ -74,10 +74,13 @@ def export(
     Example: morfic export runs/film-cpu-s0 --robot go1 --to onnx --out deploy/go1
     """
     check_args(store=store, out_dir=out, specs=[run], trust=trust_variant)
-    from morfic_cli.export.artifact import ExportCfg, export_policy
     from morfic_cli.store import Store
 
     st = Store(store)
+    if not (check and Path(run).is_dir()):
+        st.resolve(run)  # an unknown ref fails here in a second, before torch and the exporters are imported
+    from morfic_cli.export.artifact import ExportCfg, export_policy
+
     if check:
         _check(st, run, samples, quiet, fmt)
         return

@@ -44,12 +44,11 @@ def play(
     check_args(trust=trust_variant)
     from morfic_cli.evaluation.play import PlayCfg
     from morfic_cli.evaluation.play import play as run_play
-    from morfic_cli.morphology.robots import list_robots
+    from morfic_cli.morphology.robots import load_robot
     from morfic_cli.rl.runner import load_trained
     from morfic_cli.store import Store
 
-    if robot not in list_robots():
-        raise MorficError(f"unknown robot '{robot}'; valid robots are: {', '.join(list_robots())}.")
+    load_robot(robot)  # an unknown name: the error every command gives (UnknownNameError, the library's order)
     if envs < 1 or steps < 0 or not 0 <= port <= 65535:
         raise MorficError("--envs must be positive, --steps >= 0 and --port in 0..65535.")
     if not host.strip():  # an empty host would bind every interface
@@ -77,8 +76,13 @@ def play(
              f"or {live.app_url()}")
         info("Ctrl-C stops")
 
+    def behind(rate: float, target: float) -> None:
+        if not quiet:
+            info(f"note: this machine runs {rate:.0f} policy steps/s, behind real time ({target:.0f} steps/s): the "
+                 f"robot moves at {rate / target:.2f}x speed; fewer --envs or a less busy machine keep up.")
+
     try:
-        n = run_play(trained, cfg, on_ready=ready)
+        n = run_play(trained, cfg, on_ready=ready, on_behind=behind)
     except OSError as exc:  # e.g. the port is taken
         raise MorficError(f"could not serve on {host}:{port} ({exc}); pick another --port.") from exc
     if not quiet:

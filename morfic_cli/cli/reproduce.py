@@ -71,8 +71,8 @@ def reproduce(
                           "imported, and added to your allow-list of trusted variants: `morfic trust`).")
     ] = "all",
     out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Folder for the report's files (default "
-                                  "<store>/reports/<preset>).")
+        Path | None, typer.Option("--out", "-o", help="Folder for the report's files (default: "
+                                  "reports/<preset> in the store's folder).")
     ] = None,
     overrides: Annotated[
         list[str] | None, typer.Option("--set", help="Training config override key=value for every run "
@@ -90,7 +90,7 @@ def reproduce(
     device: DeviceOpt = Device.cpu,
     executor: Annotated[
         Executor, typer.Option("--executor", help="local: every step here, one after another (default). ray: "
-                               "train/eval/diagnose/fixed-rollout jobs as Ray tasks, results imported into the "
+                               "train, eval, diagnose and fixed-rollout jobs as Ray tasks, results imported into the "
                                "store (pip install 'morfic[cluster]'; docs/cluster.md).")
     ] = Executor.local,
     address: Annotated[
@@ -234,21 +234,38 @@ def _run_ray(pipeline, view, address: str | None, retries: int, quiet: bool, fmt
 
 
 def _summary(result, quiet: bool, fmt, out_dir: Path) -> None:
+    """The result on stdout, then the summary and the ``report:`` line on stderr, last, where the eye lands.
+
+    The table gives the report's files as counts by type (hundreds of figure paths would push the report line off
+    the screen); ``--format json`` and ``csv`` list every path.
+    """
     rep = result.report
     done = result.work_done
+    files = [str(p) for p in rep.out_files] if rep else []
+    emit_object({
+        "report": rep.ref if rep else None, "id": rep.id if rep else None, "out": str(out_dir),
+        "files": files_summary(rep.out_files if rep else []) if fmt == OutputFormat.table else files,
+        "steps": len(result.steps), "work_done": done,
+        "skipped": len(result.steps) - done, "wall_time_s": round(result.seconds, 1),
+    }, fmt)
     if not quiet:
         info(f"reproduce: {done} step(s) did work, {len(result.steps) - done} skipped, {result.seconds:.1f} s")
         if rep is not None:
+            if rep.pdf_error:
+                info(f"note: no PDF: {rep.pdf_error.splitlines()[0]}")
             main = next((p for p in rep.out_files if p.name == "report.pdf"),
                         next((p for p in rep.out_files if p.name == "report.md"), out_dir))
             info(f"[bold]report:[/] {main}  (folder {out_dir}; store ref {rep.ref}, id {rep.id[:12]})")
-            if rep.pdf_error:
-                info(f"note: no PDF: {rep.pdf_error.splitlines()[0]}")
-    emit_object({
-        "report": rep.ref if rep else None, "id": rep.id if rep else None, "out": str(out_dir),
-        "files": [str(p) for p in rep.out_files] if rep else [], "steps": len(result.steps), "work_done": done,
-        "skipped": len(result.steps) - done, "wall_time_s": round(result.seconds, 1),
-    }, fmt)
+
+
+def files_summary(paths: list[Path]) -> str:
+    """``219 files: 150 .png, 60 .pdf, 8 .csv, 1 .md`` (most frequent type first; ``0 files`` for none)."""
+    counts: dict[str, int] = {}
+    for path in paths:
+        suffix = Path(path).suffix or "(no extension)"
+        counts[suffix] = counts.get(suffix, 0) + 1
+    kinds = ", ".join(f"{n} {suffix}" for suffix, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
+    return f"{len(paths)} files" + (f": {kinds}" if kinds else "")
 
 
 class _View:

@@ -40,8 +40,9 @@ def human_size(size: Any) -> str:
 def _left_out(omitted: Any, files: Any = ()) -> str:
     """The note on what a weights-only or results-only export left out (``omitted``, ``files``: their ids)."""
     if files:
-        return (f"{len(omitted)} trainer state(s) and {len(files)} weight, rollout-log and curve file(s) left out "
-                "(results only: `morfic report` reads it; it cannot evaluate, diagnose or resume)")
+        return (f"{len(omitted)} trainer state(s) and {len(files)} weight, rollout-log, curve and figure file(s) left "
+                "out (results only: `morfic report` reads it and draws the figures; it cannot evaluate, diagnose or "
+                "resume)")
     return f"{len(omitted)} trainer state(s) left out (weights only: evaluates and exports, cannot be resumed)"
 
 
@@ -77,19 +78,29 @@ def ls(
         Optional[str], typer.Option("--kind", help=f"Only this kind: {', '.join(MANIFEST_KINDS)}.")
     ] = None,
     all_: Annotated[
-        bool, typer.Option("--all", help="Also list old ref versions (shown as name@N).")
+        bool, typer.Option("--all", help="Also list unnamed artifacts (the inputs refs point to: trainer states, "
+                           "rollouts, ...) and old ref versions (shown as name@N).")
     ] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
-    """List the artifacts (manifests) in the store, oldest first.
+    """List the artifacts (manifests) a ref names, oldest first; --all lists every one.
+
+    Unnamed artifacts (a run's trainer states, an eval's rollouts, ...) are counted on stderr, not listed: a store
+    with the results bundles imported holds a thousand of them.
 
     Example: morfic store ls --kind run --format json
     """
     rows = Store(store).ls(kind, include_superseded=all_)
-    if not rows:
+    unnamed = [] if all_ else [r for r in rows if r["ref"] is None]
+    rows = rows if all_ else [r for r in rows if r["ref"] is not None]
+    if not rows and not unnamed:
         info(f"no artifacts{f' of kind {kind}' if kind else ''} in store {escape(str(store))}")
     _emit(rows, fmt, _LS_COLUMNS, title=f"artifacts in {store}")
+    if unnamed:
+        size = human_size(sum(r["size"] or 0 for r in unnamed))
+        info(f"{len(unnamed)} unnamed artifact(s) not listed ({size} held here; the inputs of the refs above, such as "
+             "trainer states and rollouts); --all lists them and the old ref versions.")
 
 
 @app.command("show")
@@ -163,8 +174,8 @@ def verify(store: StoreOpt = DEFAULT_STORE) -> None:
         if report.temp_files else ""
     omitted = f"; {report.omitted} trainer state(s) left out by a weights-only import" if report.omitted else ""
     if report.omitted_files:
-        omitted = (f"; {report.omitted} trainer state(s) and {report.omitted_files} weight, rollout-log and curve "
-                   "file(s) left out by a results-only import")
+        omitted = (f"; {report.omitted} trainer state(s) and {report.omitted_files} weight, rollout-log, curve and "
+                   "figure file(s) left out by a results-only import")
     info(f"store {escape(str(store))} OK: {report.objects} objects ({human_size(report.bytes)}), "
          f"{report.manifests} manifests, {report.refs} refs checked{leftovers}{omitted}")
 
@@ -209,9 +220,9 @@ def export(
         "state, RNG; most of a run's size); it evaluates and exports, but cannot be resumed.")] = False,
     results_only: Annotated[bool, typer.Option(
         "--results-only", help="A results-only bundle of the named runs (runs/NAME; other refs are an error): each "
-        "run's current checkpoint (config, curves) and every eval, diagnosis and check made from it (tables, "
-        "figures), without weights, trainer states, rollout logs or other runs' curves. `morfic report` reads it; it "
-        "cannot evaluate, diagnose or resume.")] = False,
+        "run's current checkpoint (config, curve table) and every eval, diagnosis and check made from it (tables), "
+        "without weights, trainer states, rollout logs, rendered figures or other runs' curves. `morfic report` "
+        "reads it and draws its figures from the tables; it cannot evaluate, diagnose or resume.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the tar if it exists.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,

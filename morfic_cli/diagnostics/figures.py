@@ -14,10 +14,15 @@ EV_LINEAR_FLOOR = -1.0
 never cut; within [-1, 1] the axis is linear."""
 
 
+LABEL_PT = 22.0
+"""Width of a bar's value label (``-0.55`` at 7 pt), in points: narrower bars get upright labels."""
+
+
 def ev_plot(rows: Sequence[dict[str, Any]]):
     """The EV figure (a matplotlib Figure): grouped bars, robots on the x axis, one bar per run.
 
-    Every bar is drawn to its value and labelled with it; when some EV is below :data:`EV_LINEAR_FLOOR` the y
+    Every bar is drawn to its value and labelled with it (upright when the bar is narrower than its label, so labels
+    never overlap); when some EV is below :data:`EV_LINEAR_FLOOR` the y
     axis is symmetric-log (linear in [-1, 1]) and says so. Missing values (NaN) get no bar and an "n/a" mark.
 
     Args:
@@ -33,9 +38,12 @@ def ev_plot(rows: Sequence[dict[str, Any]]):
     ev = {(r["run"], r["robot"]): r["ev"] for r in rows}
     finite = [v for v in ev.values() if v is not None and not math.isnan(v)]
     width = 0.8 / max(len(runs), 1)
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.0 * len(robots) * max(1.0, len(runs) / 3)), 4.0),
-                           constrained_layout=True)
+    fig_width = max(6.0, 1.0 * len(robots) * max(1.0, len(runs) / 3))
+    fig, ax = plt.subplots(figsize=(fig_width, 4.0), constrained_layout=True)
     log_below = bool(finite) and min(finite) < EV_LINEAR_FLOOR
+    # a label wider than its bar would run into its neighbours' ("-0.550.55"): then it stands upright on the bar
+    bar_pt = fig_width * 72.0 * 0.85 / max(len(robots), 1) * width * 0.92
+    upright = bar_pt < LABEL_PT
     for k, (run, variant) in enumerate(runs):
         xs = [i + (k - (len(runs) - 1) / 2) * width for i in range(len(robots))]
         values = [ev.get((run, robot), math.nan) for robot in robots]
@@ -44,25 +52,26 @@ def ev_plot(rows: Sequence[dict[str, Any]]):
         ax.bar(xs, values, width=width * 0.92, label=label, color=f"C{k}")
         for x, v in zip(xs, values, strict=True):
             if math.isnan(v):
-                ax.annotate("n/a", (x, 0.0), ha="center", va="bottom", fontsize=7, color="grey")
+                ax.annotate("n/a", (x, 0.0), ha="center", va="bottom", fontsize=7, color="grey",
+                            rotation=90 if upright else 0)
             else:
                 ax.annotate(f"{v:.2f}" if abs(v) < 10 else f"{v:.1f}", (x, v), ha="center",
                             va="bottom" if v >= 0 else "top", fontsize=7, xytext=(0, 2 if v >= 0 else -2),
-                            textcoords="offset points")
+                            textcoords="offset points", rotation=90 if upright else 0)
     ax.axhline(0.0, color="black", lw=0.8)
     ax.axhline(1.0, color="grey", lw=0.8, ls="--")
     ax.set_xticks(range(len(robots)), robots, fontsize=9)
     if log_below:
-        bottom = min(finite) * 3.0
+        bottom = min(finite) * (6.0 if upright else 3.0)  # room for the labels below the longest bar
         ax.set_yscale("symlog", linthresh=1.0, linscale=1.5)
         decades = [-(10.0 ** k) for k in range(1, int(math.ceil(math.log10(-min(finite)))) + 1)]
         ticks = sorted([t for t in decades if t >= bottom] + [-1.0, -0.5, 0.0, 0.5, 1.0])
         ax.set_yticks(ticks, [f"{t:g}" for t in ticks], fontsize=8)
         ax.axhspan(bottom, -1.0, color="grey", alpha=0.07, lw=0)
-        ax.set_ylim(bottom, 1.5)
+        ax.set_ylim(bottom, 2.5 if upright else 1.5)
         ax.set_ylabel("explained variance EV\n(linear in [-1, 1], log below)", fontsize=9)
     else:
-        ax.set_ylim(min([0.0, *finite]) - 0.12, 1.12)
+        ax.set_ylim(min([0.0, *finite]) - (0.3 if upright else 0.12), 1.3 if upright else 1.12)
         ax.set_ylabel("explained variance EV", fontsize=9)
     ax.set_title("Critic calibration under morphology shift (higher is better, 1 = perfect, dashed)", fontsize=10)
     ax.grid(axis="y", alpha=0.3)
@@ -102,7 +111,7 @@ STUDY_LABELS: dict[str, str] = {"ppo": "PPO = Actor-only (no z_m)"}
 def critic_study_plot(summary: Sequence[dict[str, Any]]):
     """The critic study figure: one row per command, columns EV / Flip / CosGrad, robots on x, a marker per variant.
 
-    Each marker is a variant's mean over its fit seeds with its 95 % bootstrap interval as an error bar
+    Each marker is a variant's mean over the study's unit (actors) with its 95 % t interval as an error bar
     (:func:`~morfic_cli.diagnostics.study_summary.cell_summary`); multiplicative critics are filled, additive ones
     hollow. EV below -1 is drawn at -1 with a downward triangle (EV is unbounded below on robots that fall).
 
@@ -162,8 +171,9 @@ def critic_study_plot(summary: Sequence[dict[str, Any]]):
     handles.append(Line2D([], [], marker="v", ls="none", ms=6, mec="grey", mfc="white", label="EV below -1"))
     if variants:
         fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
-    fig.suptitle("Critic study: critics fitted from scratch on one frozen actor's data (mean and 95 % interval over "
-                 "fit seeds; filled = multiplicative)", fontsize=10)
+    unit = "actors" if any(r.get("unit") == "actor" for r in summary) else "fit seeds of one actor"
+    fig.suptitle("Critic study: critics fitted from scratch on frozen actors' data (mean and 95 % t interval over "
+                 f"{unit}; filled = multiplicative)", fontsize=10)
     return fig
 
 

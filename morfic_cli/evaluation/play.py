@@ -2,9 +2,9 @@
 
 The env is the evaluation env (:func:`~morfic_cli.evaluation.rollout.rollout_env_cfg`: no randomisation, the
 command fixed to (vx, 0, 0), episodes reset at falls and time-outs), the actor's mean action, one policy step per
-``dt`` of wall-clock time (slower when the machine cannot keep up). Each step goes to the sinks: a
-:class:`~morfic_cli.recording.live.LiveView` (Foxglove WebSocket server), a rollout log (``--record``, the same
-channels as ``morfic eval``'s logs) and/or MuJoCo's passive viewer (``--viewer``, env 0).
+``dt`` of wall-clock time (slower when the machine cannot keep up: :class:`PaceCheck` says so once). Each step goes
+to the sinks: a :class:`~morfic_cli.recording.live.LiveView` (Foxglove WebSocket server), a rollout log
+(``--record``, the same channels as ``morfic eval``'s logs) and/or MuJoCo's passive viewer (``--viewer``, env 0).
 """
 
 from __future__ import annotations
@@ -44,6 +44,37 @@ class PlayCfg:
     viewer: bool = False
 
 
+class PaceCheck:
+    """Whether a real-time loop keeps up: the achieved steps/s over windows of ``window_s``, reported once.
+
+    ``update(steps, now)`` after each step (``steps`` run so far, ``now`` a ``time.perf_counter()`` reading) returns
+    the achieved rate the first time a whole window ran below ``tolerance`` x the target ``1 / dt``, else None. The
+    first window starts at the first call (after the first step, which opens the sinks).
+    """
+
+    def __init__(self, dt: float, window_s: float = 2.0, tolerance: float = 0.9) -> None:
+        self.target = 1.0 / dt
+        """Steps per second of real time."""
+        self.window_s, self.tolerance = window_s, tolerance
+        self.reported = False
+        self._start: tuple[int, float] | None = None
+
+    def update(self, steps: int, now: float) -> float | None:
+        """The achieved steps/s of the window just ended, if it is the first one behind real time; else None."""
+        if self._start is None:
+            self._start = (steps, now)
+            return None
+        n0, t0 = self._start
+        if now - t0 < self.window_s:
+            return None
+        self._start = (steps, now)
+        rate = (steps - n0) / (now - t0)
+        if self.reported or rate >= self.tolerance * self.target:
+            return None
+        self.reported = True
+        return rate
+
+
 def has_display() -> bool:
     """Whether a window can open (an X11 or Wayland display on Linux; assumed elsewhere)."""
     if not sys.platform.startswith("linux"):
@@ -52,7 +83,8 @@ def has_display() -> bool:
 
 
 def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None] | None = None,
-         on_step: Callable[[int], None] | None = None) -> int:
+         on_step: Callable[[int], None] | None = None,
+         on_behind: Callable[[float, float], None] | None = None) -> int:
     """Run the policy until ``cfg.steps`` steps or Ctrl-C.
 
     Ctrl-C (SIGINT) only asks the loop to stop after the current step, so the simulation, the server and the
@@ -64,6 +96,8 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
         on_ready: Called once the sinks are open, with the :class:`~morfic_cli.recording.live.LiveView`
             (None with ``--viewer``), e.g. to print the URL.
         on_step: Called with each step index.
+        on_behind: Called once, with (achieved steps/s, real-time steps/s), when the machine cannot keep up
+            (:class:`PaceCheck`: a 2 s window below 90 % of real time).
 
     Returns:
         The number of policy steps run.
@@ -100,6 +134,7 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
         nominal = env.params.nominal_height.float()
         obs = env.get_observations()
         term_names = None
+        pace = PaceCheck(env.dt)
         start = time.perf_counter()
         with torch.no_grad():
             while not stop.is_set() and (cfg.steps <= 0 or steps_run < cfg.steps):
@@ -138,7 +173,11 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
                 steps_run += 1
                 if on_step is not None:
                     on_step(steps_run - 1)
-                delay = start + steps_run * env.dt - time.perf_counter()
+                now = time.perf_counter()
+                behind = pace.update(steps_run, now)
+                if behind is not None and on_behind is not None:
+                    on_behind(behind, pace.target)
+                delay = start + steps_run * env.dt - now
                 if delay > 0:
                     stop.wait(delay)
     except KeyboardInterrupt:

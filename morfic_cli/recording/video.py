@@ -47,6 +47,10 @@ CAMERA_AZIMUTH = 120.0
 image; 120 turns it into a three-quarter view from the front right."""
 CAMERA_ELEVATION = -25.0
 """Tracking camera elevation, deg (negative looks down; at -25 the horizon is just above the image)."""
+FAR_CLIP_M = 200.0
+"""Far clipping distance of the video camera, m (at least). MuJoCo's default, 50 x the model's extent (~40 m for a
+quadruped), cut the floor off below the top of the image when the base was high (a jump, a fall, a tall robot):
+black wedges at the top of the frame. At 200 m the floor reaches the image's top edge for a base up to ~2 m high."""
 SHADOW_MAP_SIZE = 1024
 """Shadow map size used for rendering (mujoco's default 4096 costs ~5x the frame time in software)."""
 FLOOR_GRID_SPACING = 0.5
@@ -319,7 +323,10 @@ def render_frames(models: Sequence[mujoco.MjModel], qpos: np.ndarray, *, every: 
     option = mujoco.MjvOption()
     line_width = max(1.0, height / 240.0)
     renderers: dict[tuple[Any, ...], mujoco.Renderer] = {}
+    zfar = {id(m): (m, m.vis.map.zfar) for m in models}  # mjv_updateScene reads it: set while rendering, restored
     try:
+        for m, saved in zfar.values():
+            m.vis.map.zfar = max(saved, FAR_CLIP_M / max(float(m.stat.extent), 1e-6))
         env_renderers = []
         for m in models:
             key = _asset_key(m)
@@ -347,6 +354,8 @@ def render_frames(models: Sequence[mujoco.MjModel], qpos: np.ndarray, *, every: 
     finally:
         for renderer in renderers.values():
             renderer.close()
+        for m, saved in zfar.values():
+            m.vis.map.zfar = saved
     sep = max(1, width // 320)  # white separators between tiles (drawn over the tiles' edges)
     for c in range(1, cols):
         frames[:, :, c * width - sep:c * width + sep] = 255

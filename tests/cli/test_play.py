@@ -120,6 +120,7 @@ def test_play_bad_input(run_cli, smoke_store, monkeypatch):
     monkeypatch.setenv("MORFIC_STORE", str(smoke_store))
     code, _, err = run_cli("play", "runs/film-s0", "--robot", "go3")
     assert code == 1 and "unknown robot 'go3'" in err
+    assert run_cli("eval", "runs/film-s0", "--robots", "go3")[2] == err  # one message, one order of the robots
     code, _, err = run_cli("play", "runs/nothing")
     assert code == 1 and "Error:" in err
     monkeypatch.delenv("DISPLAY", raising=False)
@@ -127,3 +128,17 @@ def test_play_bad_input(run_cli, smoke_store, monkeypatch):
     if sys.platform.startswith("linux"):
         code, _, err = run_cli("play", "runs/film-s0", "--viewer", "--steps", "1")
         assert code == 1 and "needs a display" in err
+
+
+def test_pace_check_says_once_when_the_loop_falls_behind_real_time():
+    """50 steps/s wanted (dt 0.02 s); windows of 2 s: at 32 steps/s the first full window reports it, once."""
+    from morfic_cli.evaluation.play import PaceCheck
+
+    slow = PaceCheck(0.02)
+    reports = [slow.update(n, 1.0 + n / 32.0) for n in range(1, 400)]  # 32 steps/s from the first step on
+    hits = [(n, r) for n, r in enumerate(reports, start=1) if r is not None]
+    assert hits == [(1 + 64, 32.0)]  # the window from step 1 to step 65: 64 steps in 2.0 s
+    on_time = PaceCheck(0.02)
+    assert all(on_time.update(n, 1.0 + n * 0.02) is None for n in range(1, 400))
+    just_above = PaceCheck(0.02)  # 46 steps/s: within 90 % of real time, not worth a line
+    assert all(just_above.update(n, n / 46.0) is None for n in range(1, 400))

@@ -54,21 +54,27 @@ def test_ls_json_on_empty_store():
 
 
 def test_ls_json_rows(filled):
-    rows = json.loads(_invoke("ls", "--format", "json").stdout)
+    result = _invoke("ls", "--format", "json")
+    rows = json.loads(result.stdout)
     by_id = {r["id"]: r for r in rows}
-    assert set(by_id) == {filled["ckpt"], filled["new"]}  # runs/film-s0@1 only with --all
+    assert set(by_id) == {filled["new"]}  # the unnamed checkpoint and runs/film-s0@1 only with --all
     assert by_id[filled["new"]]["ref"] == "runs/film-s0"
-    assert by_id[filled["ckpt"]]["ref"] is None
     assert by_id[filled["new"]]["kind"] == "run" and by_id[filled["new"]]["created"].endswith("Z")
-    rows = json.loads(_invoke("ls", "--all", "--format", "json").stdout)
-    assert {r["id"]: r["ref"] for r in rows}[filled["old"]] == "runs/film-s0@1"
-    runs = json.loads(_invoke("ls", "--kind", "checkpoint", "--format", "json").stdout)
+    assert "1 unnamed artifact(s) not listed (1 B held here;" in result.stderr and "--all lists them" in result.stderr
+    result = _invoke("ls", "--all", "--format", "json")
+    assert {r["id"]: r["ref"] for r in json.loads(result.stdout)} == {
+        filled["ckpt"]: None, filled["old"]: "runs/film-s0@1", filled["new"]: "runs/film-s0"}
+    assert "unnamed" not in result.stderr
+    runs = _invoke("ls", "--kind", "checkpoint", "--format", "json")
+    assert json.loads(runs.stdout) == [] and "1 unnamed artifact(s)" in runs.stderr
+    assert "no artifacts" not in runs.stderr
+    runs = json.loads(_invoke("ls", "--kind", "checkpoint", "--all", "--format", "json").stdout)
     assert [r["id"] for r in runs] == [filled["ckpt"]]
 
 
 def test_ls_csv_and_table(filled):
     csv = _invoke("ls", "--format", "csv").stdout.splitlines()
-    assert csv[0] == "ref,id,kind,created,files,size" and len(csv) == 3
+    assert csv[0] == "ref,id,kind,created,files,size" and len(csv) == 2  # runs/film-s0
     table = _invoke("ls").stdout
     assert "runs/film-s0" in table and filled["new"][:12] in table
 

@@ -114,3 +114,36 @@ def test_eval_table_at_80_columns_shows_robot_and_mode_whole(console, run_cli, t
     (row,) = json.loads(out)
     assert row["robot"] == "aliengo" and row["mode"] == "descriptor"
     assert isinstance(row["vx_peak_1s_mean"], float) and isinstance(row["tracking_ratio"], float)
+
+
+def test_diagnose_table_keeps_the_metrics_whole_at_80_columns_with_a_long_run_name(console):
+    """A user variant's run name (35 characters) folds; the metric columns keep their width; lesser ones leave."""
+    from morfic_cli.cli.diagnose import CALIBRATION_TABLE
+
+    run = "custom_variant.GatedCritic-smoke-s0"
+    rows = [{"run": run, "variant": "custom_variant:GatedCritic", "robot": robot, "d": 0.25, "ev": -1.234,
+             "cell": "0.412/1.038/0.611", "flip": 0.421, "cos_grad": -0.125, "n_samples": 12345}
+            for robot in ("go2", "mini_cheetah")]
+    con = console(80)
+    emit_rows(rows, OutputFormat.table, CALIBRATION_TABLE, title="critic calibration")
+    text = con.text()
+    assert "…" not in text and max(len(line) for line in text.splitlines()) <= 80
+    for cell in ("-1.234", "0.412/1.038/0.611", "0.421", "-0.125", "mini_cheetah"):  # each on one line, whole
+        assert text.count(cell) == 2 if cell != "mini_cheetah" else text.count(cell) == 1, (cell, text)
+    assert "CosGrad" in text and "|NVB|/NVE/ASA" in text  # headers on one line too
+    run_cells = "".join(line.split("│")[1].strip() for line in text.splitlines() if line.startswith("│"))
+    assert run_cells == run * 2  # folded over lines, every character
+    assert "left out at this terminal width: variant, d, |I_eps|" in " ".join(text.split())
+    con = console(160)  # wide enough: every column, the name on one line
+    emit_rows(rows, OutputFormat.table, CALIBRATION_TABLE)
+    assert run in con.text() and "left out" not in con.text()
+
+
+@pytest.mark.parametrize("command", ["train", "eval", "play", "export", "diagnose", "reproduce"])
+def test_help_at_80_columns_cuts_no_option_help(run_cli, monkeypatch, command):
+    """A word longer than the help column is cut with an ellipsis (`[default: 2.0; 1.0 with --training-condit…`)."""
+    monkeypatch.setenv("COLUMNS", "80")
+    code, out, _ = run_cli(command, "--help")
+    assert code == 0
+    assert max(len(line) for line in out.splitlines()) <= 80  # the width was honoured
+    assert "…" not in out, [line for line in out.splitlines() if "…" in line]

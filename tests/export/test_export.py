@@ -309,3 +309,17 @@ def test_check_catches_edited_onnx_props(store, tmp_path):
     onnx.save(model, str(out / "policy.onnx"))
     problems = check_export(store, str(out), samples=4).problems
     assert any("metadata_props" in p for p in problems)
+
+
+@pytest.mark.parametrize("extra", [[], ["--to", "rsl-rl"], ["--check"]])
+def test_an_unknown_ref_fails_before_torch_is_imported(tmp_path, extra):
+    """The ref is resolved first: the error comes without importing torch and the exporters (11 s on 2 busy cores)."""
+    import subprocess
+
+    code = ("import sys\nfrom morfic_cli.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit as exc:\n"
+            "    print('exit', exc.code)\nprint(sorted(m for m in ('torch', 'morfic_cli.export.artifact') "
+            "if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", code, "export", "runs/nothing", *extra, "--store",
+                           str(tmp_path / "store")], capture_output=True, text=True, timeout=120, check=False)
+    assert proc.stdout.split("\n")[:2] == ["exit 1", "[]"], proc.stdout + proc.stderr
+    assert proc.stderr.startswith("Error: no artifact 'runs/nothing'"), proc.stderr

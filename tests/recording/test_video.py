@@ -147,6 +147,23 @@ def test_different_robots(gl_backend, go2):
     assert not np.array_equal(both[0, :, 2:W - 2], both[0, :, W + 2:2 * W - 2])
 
 
+def test_a_raised_base_shows_floor_up_to_the_top_edge(gl_backend, go2):
+    """The floor is not clipped by the far plane (black wedges at the top) with the base 1.5-2 m up; zfar restored."""
+    qpos = _walk(go2, n_env=1, steps=2)
+    qpos[:, 0, :3] = [[30.0, -10.0, 1.5], [30.0, -10.0, 2.0]]  # a jump far from the origin
+    zfar = go2.vis.map.zfar
+    frames = render_frames([go2], qpos, every=1, width=320, height=240)
+    assert go2.vis.map.zfar == zfar
+    top = frames[:, :24]  # the top tenth: far floor, no background (black) wherever it is
+    assert int((top.sum(axis=-1) < 30).sum()) == 0  # 1,600 and 3,326 black pixels with mujoco's default far plane
+
+
+def test_on_frame_counts_the_rendered_frames(gl_backend, go2):
+    calls = []
+    render_frames([go2], _walk(go2, n_env=1, steps=5), every=2, width=W, height=H, on_frame=lambda: calls.append(1))
+    assert len(calls) == 3  # steps 0, 2, 4
+
+
 def test_unknown_track_body(gl_backend, go2):
     with pytest.raises(MorficError, match="no body"):
         render_frames([go2], _walk(go2, n_env=1), track_body="tail")
