@@ -116,6 +116,48 @@ class GeometryRandCfg:
 
 
 @dataclass(frozen=True)
+class ActuationRandCfg:
+    """Heavier bodies and the actuators that carry them, with a morphology curriculum (docs/training.md, issue 58).
+
+    Off by default. On (train mode with ``DomainRandCfg.enabled``, the CPU backend), at every reset each env's link
+    and base masses (the descriptor's five, of the support sample or of its generated robot) are multiplied by one
+    factor s_m, log-uniform in [``mass_scale[0]``, the current upper bound]; then Kp and Kd are set as a deployer
+    sets them, the template's x (M / M_template) (M: the env's total mass after scaling), and the torque limits the
+    template's x (M / M_template)^``torque_mass_exponent``, each times a log-uniform jitter factor
+    (:mod:`morfic_cli.envs.actuation`). The curriculum starts the upper bound at ``curriculum_init`` and multiplies
+    it by ``curriculum_step`` whenever the finished episodes' tracking (the command curriculum's measure) reaches
+    ``curriculum_threshold``, up to ``mass_scale[1]``; without it the whole range is used from the start (the fixed
+    wide support).
+    """
+
+    enabled: bool = False
+    """Scale masses and set gains and torque limits at every reset (train mode only; evaluation never does)."""
+    mass_scale: tuple[float, float] = (1.0, 1.0)
+    """Range of the total-mass factor s_m, log-uniform (e.g. (0.8, 4.0): B1's 62.6 kg is Go2's 16.1 kg x 3.9)."""
+    gains_with_mass: bool = True
+    """Kp and Kd = the template's x M / M_template (a deployer's rule: the same stiffness per kilogram)."""
+    torque_mass_exponent: float = 0.75
+    """Torque limits = the template's x (M / M_template)^this. 0.75: a log-log fit of the seven robots' torque
+    limits (robots/*.toml) against their total masses gives 0.72-0.74 (hip, thigh, calf; docs/robots.md, "Extended
+    descriptor"), between geometric similarity's 2/3 and the same torque per kilogram (1); 0 keeps the motors."""
+    kp_factor: tuple[float, float] = (1.0, 1.0)
+    """Log-uniform jitter of Kp around the mass rule (real robots set 1-3x Go2's stiffness per kilogram)."""
+    kd_factor: tuple[float, float] = (1.0, 1.0)
+    """Log-uniform jitter of Kd around the mass rule."""
+    torque_factor: tuple[float, float] = (1.0, 1.0)
+    """Log-uniform jitter of the torque limits around the mass rule."""
+    curriculum: bool = False
+    """Widen the mass range's upper bound as the policy masters it (the paper's suggested morphology curriculum)."""
+    curriculum_init: float = 1.25
+    """The upper bound of s_m at the start of training (with ``curriculum``)."""
+    curriculum_step: float = 1.25
+    """Factor by which the upper bound grows per widening (a step of log 1.25 in log-mass width)."""
+    curriculum_threshold: float = 0.7
+    """Widen (checked once per max episode length, with the command curriculum) when the finished episodes' r_lin
+    summed over the max episode length reaches this fraction of its maximum (a fall counts as poor tracking)."""
+
+
+@dataclass(frozen=True)
 class DomainRandCfg:
     """Domain randomisation (docs/concepts.md; paper appendix "Domain Randomization")."""
 
@@ -148,6 +190,8 @@ class DomainRandCfg:
     the N envs of an evaluation would be identical copies and their spread meaningless)."""
     geometry: GeometryRandCfg = field(default_factory=GeometryRandCfg)
     """Procedural geometry (off by default)."""
+    actuation: ActuationRandCfg = field(default_factory=ActuationRandCfg)
+    """Heavier masses, gains and torque limits with mass, and the morphology curriculum (off by default)."""
 
 
 @dataclass(frozen=True)
@@ -175,6 +219,10 @@ class ObsCfg:
     with o_t the newest (morfic before this field; runs recorded without it read as True)."""
     clip: float = 100.0
     """Observations are clipped to [-clip, clip]."""
+    extended_morphology: bool = False
+    """The ``morphology`` group carries the extended descriptor (N, 28: the 11-D descriptor, total mass, Kp, Kd,
+    torque limits and geometry), log-scaled and bounded (:func:`morfic_cli.envs.observations.extended_morphology_obs`,
+    docs/robots.md, "Extended descriptor") instead of the paper's normalised 11-D descriptor (False)."""
     body_tokens: bool = False
     """Also give URMA's per-joint and per-foot groups ``joint_description``, ``foot_description`` and ``foot_state``
     (:mod:`morfic_cli.envs.observations`; variant ``urma`` turns it on; CPU backend only)."""

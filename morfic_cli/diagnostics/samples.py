@@ -41,8 +41,11 @@ clean history, privileged, morphology); :func:`kept_groups` adds URMA's token gr
 
 
 def kept_groups(env_cfg: Any) -> tuple[str, ...]:
-    """The groups a rollout in this env config keeps: :data:`OBS_GROUPS`, plus URMA's token groups
-    (:data:`~morfic_cli.envs.observations.BODY_TOKEN_GROUPS`) when ``env_cfg.obs.body_tokens``."""
+    """The groups a rollout in this env config keeps.
+
+    :data:`OBS_GROUPS`, plus URMA's token groups (:data:`~morfic_cli.envs.observations.BODY_TOKEN_GROUPS`) when
+    ``env_cfg.obs.body_tokens``.
+    """
     from morfic_cli.envs.observations import BODY_TOKEN_GROUPS
 
     return OBS_GROUPS + (BODY_TOKEN_GROUPS if env_cfg.obs.body_tokens else ())
@@ -125,8 +128,10 @@ class Samples:
 
 
 def rollout_config(robot: str, cfg: DiagnoseCfg, obs_groups: tuple[str, ...] = OBS_GROUPS) -> dict[str, Any]:
-    """The config of a diagnostic rollout manifest: everything that changes the samples (``obs_groups``: what it
-    keeps, :func:`kept_groups`)."""
+    """The config of a diagnostic rollout manifest: everything that changes the samples.
+
+    ``obs_groups``: the groups it keeps (:func:`kept_groups`).
+    """
     return {
         "purpose": ROLLOUT_PURPOSE,
         "robot": robot,

@@ -5,7 +5,10 @@ carries its own morphology: in ``train`` mode an 11-D descriptor is sampled from
 training support at every reset and applied to the Go2 template (with procedural geometry on, ``env.rand.geometry``,
 each env instead draws a generated robot from a pool at every reset, docs/robots.md); in ``descriptor`` mode every env
 is the Go2 template with one target's descriptor (the paper's zero-shot protocol); in ``full``
-mode every env is the target's own generated model. See docs/concepts.md ("The environment").
+mode every env is the target's own generated model; ``actuation-matched`` is descriptor mode with the target's Kp, Kd
+and torque limits matched to its mass (docs/eval.md). With ``env.rand.actuation`` (train mode) masses get a heavier
+tail and gains and torque limits follow them, under a morphology curriculum (:mod:`morfic_cli.envs.actuation`). See
+docs/concepts.md ("The environment").
 
 Every buffer, random draw and log value lives on the backend's device (``backend.device``: the CPU for the CPU
 backend, the GPU or warp's CPU device for the warp backend), so a step on the GPU keeps its tensors there. The step
@@ -25,6 +28,14 @@ from tensordict import TensorDict
 
 from morfic_cli.config import EnvCfg
 from morfic_cli.envs import observations as O
+from morfic_cli.envs.actuation import (
+    Actuation,
+    initial_upper,
+    matched_actuation,
+    sample_actuation,
+    scale_masses,
+    widen_mass_scale,
+)
 from morfic_cli.envs.commands import CommandRanges, sample_commands, widen_vx
 from morfic_cli.envs.gait import advance_phase, desired_contact, foot_phases
 from morfic_cli.envs.math import projected_gravity, yaw_quat
@@ -40,6 +51,7 @@ from morfic_cli.envs.terminations import compute_terminations
 from morfic_cli.errors import MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.morphology.descriptor import LIMIT_PAIRS, TRAIN_MAX, TRAIN_MIN, as_descriptor
+from morfic_cli.morphology.extended import geometry_vector
 from morfic_cli.morphology.procedural import GeometryPool, generate_pool
 from morfic_cli.morphology.robots import RobotSpec, load_robot
 from morfic_cli.sim import sync
@@ -47,8 +59,10 @@ from morfic_cli.sim.args import NUM_JOINTS
 from morfic_cli.sim.backend import SimFrame, SimParams
 from morfic_cli.sim.factory import make_backend
 
-Mode = Literal["train", "descriptor", "full"]
-MODES: tuple[str, ...] = ("train", "descriptor", "full")
+Mode = Literal["train", "descriptor", "full", "actuation-matched"]
+MODES: tuple[str, ...] = ("train", "descriptor", "full", "actuation-matched")
+TEMPLATE_MODES: tuple[str, ...] = ("descriptor", "actuation-matched")
+"""The evaluation modes that put a target's descriptor on the Go2 template."""
 LIMIT_DIMS: list[int] = [i for pair in LIMIT_PAIRS for i in pair]
 """The descriptor's joint-limit dimensions (5..10)."""
 TEMPLATE = "go2"
@@ -61,7 +75,8 @@ class LocomotionEnv(VecEnv):
 
     Observation groups (TensorDict keys), N = num_envs:
         ``policy`` (N, 48), ``history`` (N, 16, 48) = [h_t, o_t], ``critic`` (N, 16, 48, clean),
-        ``privileged`` (N, 18), ``morphology`` (N, 11); with ``cfg.obs.body_tokens`` (variant ``urma``) also
+        ``privileged`` (N, 18), ``morphology`` (N, 11; (N, 28) with ``cfg.obs.extended_morphology``); with
+        ``cfg.obs.body_tokens`` (variant ``urma``) also
         ``joint_description`` (N, 12, 18), ``foot_description`` (N, 4, 6) and ``foot_state`` (N, 4, 2)
         (:mod:`morfic_cli.envs.observations`).
     """
@@ -79,16 +94,19 @@ class LocomotionEnv(VecEnv):
         Args:
             cfg: Env config (``cfg.num_envs`` envs).
             mode: "train" (sample descriptors from the support), "descriptor" (Go2 template with
-                ``robot``'s descriptor) or "full" (``robot``'s own model).
+                ``robot``'s descriptor), "full" (``robot``'s own model) or "actuation-matched" (descriptor mode
+                with Kp, Kd and torque limits x the env's total mass / Go2's,
+                :func:`~morfic_cli.envs.actuation.matched_actuation`).
             robot: Target robot for "descriptor" / "full" modes (ignored in "train"). In "descriptor" mode also
-                one target per env (a sequence of ``cfg.num_envs`` names): env i is the Go2 template with
+                one target per env (a sequence of ``cfg.num_envs`` names; also in "actuation-matched"): env i is
+                the Go2 template with
                 ``robot[i]``'s descriptor, so several targets share one batch (``self.target`` is ``robot[0]``'s).
             seed: Seed of every random draw the env makes.
         """
         if mode not in MODES:
             raise ValueError(f"unknown env mode '{mode}'; valid modes are: {', '.join(MODES)}.")
         per_env = None if isinstance(robot, str) else tuple(robot)
-        if per_env is not None and (mode != "descriptor" or len(per_env) != cfg.num_envs):
+        if per_env is not None and (mode not in TEMPLATE_MODES or len(per_env) != cfg.num_envs):
             raise ValueError(f"one robot per env needs descriptor mode and {cfg.num_envs} names, got mode '{mode}' "
                              f"and {len(per_env)} names.")
         self.cfg = cfg
@@ -105,17 +123,21 @@ class LocomotionEnv(VecEnv):
         self._support_lo = torch.as_tensor(TRAIN_MIN, dtype=torch.float32, device=self.device)
         self._support_hi = torch.as_tensor(TRAIN_MAX, dtype=torch.float32, device=self.device)
         self._alloc_buffers()
+        self._init_actuation()
         self.geometry_pool: GeometryPool | None = None
         if mode == "train" and cfg.rand.enabled and cfg.rand.geometry.enabled:
             self._init_geometry(seed)
-        if mode == "descriptor" and per_env is None:
+        if mode in TEMPLATE_MODES and per_env is None:
             desc = torch.as_tensor(as_descriptor(self.target.descriptor), dtype=torch.float64)
             self.backend.set_morphology(self._all_ids, desc.expand(self.num_envs, -1).clone())
-        elif mode == "descriptor":
+        elif mode in TEMPLATE_MODES:
             specs = {name: load_robot(name) for name in dict.fromkeys(per_env)}
             desc = torch.stack([torch.as_tensor(as_descriptor(specs[name].descriptor), dtype=torch.float64)
                                 for name in per_env])
             self.backend.set_morphology(self._all_ids, desc)
+        if mode == "actuation-matched":
+            self._set_actuation(self._all_ids, matched_actuation(self.backend.params().total_mass,
+                                                                 self._template_actuation, self._template_mass))
         self.params: SimParams = self.backend.params()
         self._reset_envs(self._all_ids)
         if self.body_tokens and mode != "train":
@@ -169,6 +191,33 @@ class LocomotionEnv(VecEnv):
         self.joint_description = self.joint_description.index_put((ids,), O.joint_description_obs(joints.float()))
         self.foot_description = self.foot_description.index_put((ids,), O.foot_description_obs(feet.float()))
 
+    def _init_actuation(self) -> None:
+        """Each env's gains and geometry entries (the extended descriptor's) and the mass curriculum's bound."""
+        spec, n, dev = self.spec, self.num_envs, self.device
+        act = self.cfg.rand.actuation
+        self.actuation_rand = self.mode == "train" and self.cfg.rand.enabled and act.enabled
+        """Whether masses, gains and torque limits are drawn at reset (``env.rand.actuation``)."""
+        self._template_mass = spec.total_mass
+        self._template_actuation = Actuation(
+            torch.tensor([spec.kp], dtype=torch.float64, device=dev),
+            torch.tensor([spec.kd], dtype=torch.float64, device=dev),
+            torch.as_tensor(spec.torque_limit, dtype=torch.float64, device=dev)[None])
+        self.kp = torch.full((n,), float(spec.kp), dtype=torch.float64, device=dev)
+        """Each env's Kp (N m/rad). Shape: (N,)."""
+        self.kd = torch.full((n,), float(spec.kd), dtype=torch.float64, device=dev)
+        """Each env's Kd (N m s/rad). Shape: (N,)."""
+        geometry = torch.as_tensor(geometry_vector(spec), dtype=torch.float64, device=dev)
+        self.geometry_vec = geometry.expand(n, -1).clone()
+        """Each env's geometry entries of the extended descriptor (m). Shape: (N, 11)."""
+        self.mass_upper = torch.tensor(initial_upper(act), dtype=torch.float64, device=dev)
+        """The mass factor's current upper bound (the morphology curriculum's). Shape: ()."""
+
+    def _set_actuation(self, ids: torch.Tensor, act: Actuation) -> None:
+        """Write some envs' gains and torque limits to the backend and remember them."""
+        self.backend.set_actuation(ids, act.kp, act.kd, act.torque_limit)
+        self.kp[ids] = act.kp.to(self.kp)
+        self.kd[ids] = act.kd.to(self.kd)
+
     def _init_geometry(self, seed: int) -> None:
         """Generate and compile the pool of procedural robots (docs/robots.md, "Procedural geometry")."""
         pool = generate_pool(self.spec, self.cfg.rand.geometry, seed)
@@ -180,6 +229,10 @@ class LocomotionEnv(VecEnv):
         self._pool_foot_pos_b = torch.as_tensor(pool.nominal_foot_pos_b, dtype=torch.float32, device=dev)
         self.geometry_ids = torch.zeros(self.num_envs, dtype=torch.long, device=dev)
         """Each env's robot in :attr:`geometry_pool`. Shape: (N,)."""
+        f64 = {"dtype": torch.float64, "device": dev}
+        self._pool_kp = torch.tensor([r.kp for r in pool.robots], **f64)
+        self._pool_kd = torch.tensor([r.kd for r in pool.robots], **f64)
+        self._pool_geometry = torch.stack([torch.as_tensor(geometry_vector(r), **f64) for r in pool.robots])
 
     def _reset_geometry(self, ids: torch.Tensor) -> None:
         """Draw each env's robot from the pool and apply it with its descriptor (limits from the support if asked)."""
@@ -192,7 +245,11 @@ class LocomotionEnv(VecEnv):
             u = torch.rand((k, DESCRIPTOR_DIM), generator=self.gen, dtype=torch.float64, device=self.device)
             lo, hi = self._support_lo.double(), self._support_hi.double()
             desc[:, LIMIT_DIMS] = (lo + (hi - lo) * u)[:, LIMIT_DIMS]
+        if self.actuation_rand:
+            desc = scale_masses(desc, self.mass_upper, self.cfg.rand.actuation, self.gen)
         self.backend.set_morphology(ids, desc)
+        self.kp[ids], self.kd[ids] = self._pool_kp[pick], self._pool_kd[pick]
+        self.geometry_vec[ids] = self._pool_geometry[pick]
         self.nominal_foot_pos_b[ids] = self._pool_foot_pos_b[pick]
 
     @property
@@ -313,10 +370,17 @@ class LocomotionEnv(VecEnv):
         elif self.mode == "train":
             u = torch.rand((k, DESCRIPTOR_DIM), generator=self.gen, dtype=torch.float64, device=self.device)
             lo, hi = self._support_lo.double(), self._support_hi.double()
-            self.backend.set_morphology(ids, lo + (hi - lo) * u)
+            desc = lo + (hi - lo) * u
+            if self.actuation_rand:
+                desc = scale_masses(desc, self.mass_upper, self.cfg.rand.actuation, self.gen)
+            self.backend.set_morphology(ids, desc)
         dyn = sample_dynamics(k, self.cfg.rand, self.gen)
         self.backend.set_dynamics(ids, dyn.friction, dyn.restitution, dyn.com_offset, dyn.joint_friction)
         self.params = self.backend.params()
+        if self.actuation_rand:  # gains and torque limits follow the mass just drawn
+            self._set_actuation(ids, sample_actuation(self.params.total_mass[ids], self._template_actuation,
+                                                      self._template_mass, self.cfg.rand.actuation, self.gen))
+            self.params = self.backend.params()
         if self.body_tokens and self.mode == "train":  # a new morphology at every reset
             self._describe(ids)
         p = self.params
@@ -365,11 +429,21 @@ class LocomotionEnv(VecEnv):
                     p.friction.float(), p.restitution.float(), p.base_mass.float(), p.com_offset.float(),
                     p.joint_friction.float(),
                 ),
-                "morphology": O.morphology_obs(p.descriptor.float(), self._support_lo, self._support_hi),
+                "morphology": (self._extended_obs() if self.cfg.obs.extended_morphology
+                               else O.morphology_obs(p.descriptor.float(), self._support_lo, self._support_hi)),
             },
             batch_size=[self.num_envs],
             device=self.device,
         )
+
+    def extended_descriptor(self) -> torch.Tensor:
+        """Each env's extended descriptor in raw units (:mod:`morfic_cli.morphology.extended`). Shape: (N, 28)."""
+        p = self.params
+        return torch.cat([p.descriptor.double(), p.total_mass.double()[:, None], self.kp[:, None], self.kd[:, None],
+                          p.torque_limit.double()[:, :3], self.geometry_vec], dim=1)
+
+    def _extended_obs(self) -> torch.Tensor:
+        return O.extended_morphology_obs(self.extended_descriptor())
 
     def _body_token_groups(self, contact: torch.Tensor, reset_ids: torch.Tensor) -> dict[str, torch.Tensor]:
         """Advance the feet's touchdown clocks (0 at reset) and give URMA's three groups. Contact: (N, 4) bool."""
@@ -441,6 +515,9 @@ class LocomotionEnv(VecEnv):
         tracking = self._tracking_sum / self._tracking_count
         log["/curriculum/lin_tracking"] = tracking
         widen_vx(self.command_ranges, tracking, self.cfg.commands)
+        if self.actuation_rand and self.cfg.rand.actuation.curriculum:
+            widen_mass_scale(self.mass_upper, tracking, self.cfg.rand.actuation)
+            log["/curriculum/mass_scale_max"] = self.mass_upper.clone()
         self._tracking_sum = torch.zeros_like(self._tracking_sum)
         self._tracking_count = 0
 
@@ -479,8 +556,12 @@ class LocomotionEnv(VecEnv):
             },
             "backend": self.backend.state_dict(),
             **({"geometry_ids": self.geometry_ids.cpu().clone()} if self.geometry_pool is not None else {}),
+            **({"actuation": {"kp": self.kp.cpu().clone(), "kd": self.kd.cpu().clone(),
+                              "torque_limit": p.torque_limit[:, :3].cpu().clone(),
+                              "mass_upper": float(self.mass_upper)}} if self.actuation_rand else {}),
             **({"body_tokens": {"foot_touchdown_time": self.foot_touchdown_time.cpu().clone(),
-                                "foot_contact_prev": self.foot_contact_prev.cpu().clone()}} if self.body_tokens else {}),
+                                "foot_contact_prev": self.foot_contact_prev.cpu().clone()}}
+               if self.body_tokens else {}),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -498,11 +579,18 @@ class LocomotionEnv(VecEnv):
         if self.geometry_pool is not None:
             self.geometry_ids.copy_(state["geometry_ids"])
             self.backend.set_geometry(self._all_ids, self.geometry_ids)
+            self.kp.copy_(self._pool_kp[self.geometry_ids])
+            self.kd.copy_(self._pool_kd[self.geometry_ids])
+            self.geometry_vec.copy_(self._pool_geometry[self.geometry_ids])
         if self.mode != "full":
             self.backend.set_morphology(self._all_ids, prm["descriptor"])
         self.backend.set_dynamics(
             self._all_ids, prm["friction"], prm["restitution"], prm["com_offset"], prm["joint_friction"]
         )
+        if "actuation" in state:
+            a, dev = state["actuation"], self.device
+            self._set_actuation(self._all_ids, Actuation(a["kp"].to(dev), a["kd"].to(dev), a["torque_limit"].to(dev)))
+            self.mass_upper.fill_(float(a["mass_upper"]))
         self.params = self.backend.params()
         self.backend.load_state_dict(state["backend"])
         if self.body_tokens:

@@ -8,6 +8,8 @@
 - ``critic``: the same history with clean values (the critic sees clean observations).
 - ``privileged``: p_t (18) = [ground friction, restitution, base mass, COM offset (3), joint friction (12)].
 - ``morphology``: the 11-D descriptor normalised to [-1, 1] over the training support.
+  With ``ObsCfg.extended_morphology`` it is the extended descriptor (N, 28; :mod:`morfic_cli.morphology.extended`),
+  log-scaled and bounded in (-3, 3) (:func:`extended_morphology_obs`).
 
 With ``ObsCfg.body_tokens`` (variant ``urma``; URMA's tokens, docs/training.md, "External baselines"), also:
 
@@ -25,6 +27,7 @@ import torch
 
 from morfic_cli.config import ObsCfg
 from morfic_cli.envs.state import EnvState
+from morfic_cli.morphology import extended as E
 
 POLICY_DIM = 48
 PRIVILEGED_DIM = 18
@@ -211,6 +214,28 @@ def morphology_obs(descriptor: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor)
         Shape: (N, 11).
     """
     return 2.0 * (descriptor - lo) / (hi - lo) - 1.0
+
+
+def extended_morphology_obs(raw: torch.Tensor) -> torch.Tensor:
+    """The bounded encoding of extended descriptors (docs/robots.md, "Extended descriptor").
+
+    t = log(x + eps) on the log-scaled entries (x on the joint limits), z = 2 (t - lo) / (hi - lo) - 1 over the fixed
+    support, then 3 tanh(z / 3): z within 3.6 % inside the support, never beyond +-3 outside it. The numpy
+    :func:`morfic_cli.morphology.extended.encode` is the same function.
+
+    Args:
+        raw: Extended descriptors (:data:`~morfic_cli.morphology.extended.EXTENDED_NAMES`, raw units). Shape: (N, 28).
+
+    Returns:
+        Shape: (N, 28), float32.
+    """
+    lo, hi = (torch.as_tensor(v, dtype=torch.float64, device=raw.device) for v in E.extended_support())
+    mask = torch.as_tensor(E.LOG_SCALED, device=raw.device)
+    eps = torch.as_tensor(E.log_eps(), dtype=torch.float64, device=raw.device)
+    x = raw.double()
+    t = torch.where(mask, torch.log(torch.where(mask, x, torch.ones_like(x)) + eps), x)
+    z = 2.0 * (t - lo) / (hi - lo) - 1.0
+    return (E.BOUND * torch.tanh(z / E.BOUND)).float()
 
 
 def push_history(history: torch.Tensor, obs: torch.Tensor) -> torch.Tensor:

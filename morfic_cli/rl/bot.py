@@ -94,7 +94,8 @@ class BodyEncoder(nn.Module):
         self.root_embedding = nn.Linear(root_dim, d_model)
         self.joint_embedding = NodeLinear(NUM_NODES - 1, joint_dim, d_model)
         self.node_embedding = nn.Embedding(NUM_NODES, d_model)
-        layer = nn.TransformerEncoderLayer(d_model, nhead, dim_feedforward, dropout=0.0, batch_first=True)
+        layer = nn.TransformerEncoderLayer(d_model, nhead, dim_feedforward, dropout=0.0, activation="relu",
+                                           batch_first=True, norm_first=False)
         self.encoder = nn.TransformerEncoder(layer, num_layers, enable_nested_tensor=False)
         init_transformer_weights(self.encoder)
         init_transformer_weights(self.node_embedding)
@@ -106,21 +107,43 @@ class BodyEncoder(nn.Module):
         return tokens + self.node_embedding.weight.to(tokens.dtype)
 
     def forward(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
-        """Node features after the encoder. Shapes: (N, root_dim), (N, 12, joint_dim) -> (N, 13, d_model)."""
-        return self.encoder(self.tokens(root, joints), mask=self.mask)
+        """Node features after the encoder. Shapes: (N, root_dim), (N, 12, joint_dim) -> (N, 13, d_model).
 
-    def forward_exportable(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
-        """:meth:`forward` written out layer by layer (post-norm, ReLU), for ONNX and TorchScript export.
-
-        torch's encoder runs inference through a fused kernel (``_transformer_encoder_layer_fwd``) that ONNX cannot
-        translate; this is the same computation in the operations it is made of. Shapes as :meth:`forward`.
+        The encoder's layers compute what ``self.encoder(tokens, mask=self.mask)`` computes (post-norm, ReLU, no
+        dropout; tested equal), written out with the attention's softmax over a non-last axis: torch's CPU softmax
+        over a last axis of 13 entries, and its flash-attention kernel on 13 tokens, made the update several times
+        slower (docs/training.md, "External baselines"). The plain operations also export to ONNX (torch's fused
+        inference kernel does not).
         """
         x = self.tokens(root, joints)
+        bias = torch.zeros(self.mask.shape, dtype=x.dtype, device=x.device).masked_fill(self.mask, float("-inf"))
         for layer in self.encoder.layers:
-            attn = layer.self_attn(x, x, x, attn_mask=self.mask, need_weights=False)[0]
-            x = layer.norm1(x + attn)
-            x = layer.norm2(x + layer.linear2(torch.relu(layer.linear1(x))))
+            x = encoder_layer(layer, x, bias)
         return x
+
+
+def encoder_layer(layer: nn.TransformerEncoderLayer, x: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+    """One post-norm ``nn.TransformerEncoderLayer`` (ReLU, no dropout) on ``x`` with an additive attention mask.
+
+    Args:
+        layer: The layer (its parameters are used as they are).
+        x: Tokens. Shape: (N, L, d).
+        bias: Added to the attention logits of query i and key j at [i, j] (0 or -inf). Shape: (L, L).
+
+    Returns:
+        Shape: (N, L, d).
+    """
+    attn = layer.self_attn
+    n, length, d = x.shape
+    heads = attn.num_heads
+    qkv = nn.functional.linear(x, attn.in_proj_weight, attn.in_proj_bias).view(n, length, 3, heads, d // heads)
+    q, k, v = qkv.unbind(2)  # (N, L, h, d_h) each
+    # logits[n, h, j, i] for key j and query i: the softmax runs over axis 2 (keys), not the last axis
+    logits = torch.einsum("njhc,nihc->nhji", k, q) * (d // heads) ** -0.5 + bias.T.to(q.dtype)
+    weights = torch.softmax(logits, dim=2)
+    out = torch.einsum("nhji,njhc->nihc", weights.to(v.dtype), v).reshape(n, length, d)
+    x = layer.norm1(x + attn.out_proj(out))
+    return layer.norm2(x + layer.linear2(torch.relu(layer.linear1(x))))
 
 
 def _frame(obs: TensorDict, group: str) -> torch.Tensor:
@@ -150,7 +173,10 @@ class BotActor(TokenModel):
             obs_groups: ``obs_groups[obs_set]`` = [the history group], e.g. ``["history"]`` (N, H, 48).
             obs_set: ``"actor"``.
             output_dim: 12.
-            d_model, nhead, num_layers, dim_feedforward: The encoder (BoT-Hard: 64, 2, 8, 128).
+            d_model: Token width (BoT-Hard: 64).
+            nhead: Attention heads (2).
+            num_layers: Encoder layers (8).
+            dim_feedforward: Feed-forward width (128).
             distribution_cfg: rsl-rl output distribution (Gaussian, state-independent std).
         """
         super().__init__(obs, obs_groups, obs_set, output_dim, distribution_cfg)
@@ -192,7 +218,10 @@ class BotCritic(TokenModel):
             obs_groups: ``obs_groups[obs_set]`` = [the clean history group, ``privileged_group``].
             obs_set: ``"critic"``.
             output_dim: 1.
-            d_model, nhead, num_layers, dim_feedforward: The encoder (BoT-Hard: 64, 2, 8, 128).
+            d_model: Token width (BoT-Hard: 64).
+            nhead: Attention heads (2).
+            num_layers: Encoder layers (8).
+            dim_feedforward: Feed-forward width (128).
             privileged_group: Group holding p_t (N, 18), spread over the root and joint tokens; None: o_t only.
         """
         super().__init__(obs, obs_groups, obs_set, output_dim)
@@ -244,7 +273,7 @@ class _ExportedBot(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Action means from the newest frame (the last 48 entries). Shape: (N, H * 48) -> (N, 12)."""
         root, joints = split_frame(x[:, -POLICY_DIM:])
-        return self.heads(self.body.forward_exportable(root, joints)[:, 1:]).squeeze(-1)
+        return self.heads(self.body(root, joints)[:, 1:]).squeeze(-1)
 
     @torch.jit.export
     def reset(self) -> None:

@@ -103,8 +103,10 @@ class _Float32Linear(nn.Linear):
 
 
 def _output_layers(model: nn.Module) -> list[nn.Linear]:
-    """The last ``nn.Linear`` of a model's MLP head (the action mean, or the value); none for a model whose output
-    layers compute in float32 themselves (``float32_outputs``: the external baselines, :mod:`morfic_cli.rl.external`).
+    """The output layers to keep in float32: the last ``nn.Linear`` of a model's MLP head (action mean, or value).
+
+    None for a model whose output layers compute in float32 themselves (``float32_outputs``: the external
+    baselines, :mod:`morfic_cli.rl.external`).
     """
     if getattr(model, "float32_outputs", False):
         return []
@@ -283,8 +285,10 @@ class MorficPPO(PPO):
         return kl, clip_fraction
 
     def _adaptation_step(self, batch: RolloutStorage.Batch) -> torch.Tensor:
-        """One optimiser step on L_adapt for one mini-batch; returns the error before the step (NaN without an
-        adaptation module). Shape: ()."""
+        """One optimiser step on L_adapt for one mini-batch; returns the error before the step. Shape: ().
+
+        NaN, and no step, for models without an adaptation module (the external baselines).
+        """
         if not self.adapts:
             return torch.full((), float("nan"))
         obs = batch.observations

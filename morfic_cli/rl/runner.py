@@ -47,6 +47,7 @@ from morfic_cli import __version__
 from morfic_cli.envs import observations as O
 from morfic_cli.errors import ArtifactNotFoundError, MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
+from morfic_cli.morphology.extended import EXTENDED_DIM
 from morfic_cli.rl import trainer_state
 from morfic_cli.rl.config import TrainCfg, apply_overrides, train_cfg_from_dict, train_cfg_to_dict
 from morfic_cli.rl.models import link_morphology_encoder
@@ -66,10 +67,17 @@ def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
     """The rsl-rl runner config (``obs_groups``, ``algorithm``, ``actor``, ``critic``, ...) of a TrainCfg.
 
     Raises:
-        MorficError: A user variant whose module cannot be imported (:func:`~morfic_cli.rl.variants.resolve_variant`).
+        MorficError: A user variant whose module cannot be imported (:func:`~morfic_cli.rl.variants.resolve_variant`),
+            or a variant that reads observation groups the env config does not give.
     """
     variant = resolve_variant(cfg.variant)
     actor, critic, obs_groups = variant.model_cfgs()
+    given = dummy_observations(cfg).keys()
+    missing = [g for groups in obs_groups.values() for g in groups if g not in given]
+    if missing:  # e.g. urma with --set env.obs.body_tokens=false
+        raise MorficError(f"variant {cfg.variant} reads the observation groups {', '.join(dict.fromkeys(missing))}, "
+                          "which this env config does not give; keep the variant's env settings (for urma "
+                          "env.obs.body_tokens=true).")
     if "distribution_cfg" in actor:
         actor["distribution_cfg"]["init_std"] = cfg.model.init_std
     if not variant.own_models:  # the external baselines keep their own sizes (model.*_hidden_dims are the MLPs')
@@ -106,7 +114,7 @@ def dummy_observations(cfg: TrainCfg, batch: int = 1) -> TensorDict:
             "history": torch.zeros(batch, h, O.POLICY_DIM),
             "critic": torch.zeros(batch, h, O.POLICY_DIM),
             "privileged": torch.zeros(batch, O.PRIVILEGED_DIM),
-            "morphology": torch.zeros(batch, DESCRIPTOR_DIM),
+            "morphology": torch.zeros(batch, EXTENDED_DIM if cfg.env.obs.extended_morphology else DESCRIPTOR_DIM),
             **({"joint_description": torch.zeros(batch, NUM_JOINTS, O.JOINT_DESCRIPTION_DIM),
                 "foot_description": torch.zeros(batch, 4, O.FOOT_DESCRIPTION_DIM),
                 "foot_state": torch.zeros(batch, 4, O.FOOT_STATE_DIM)} if cfg.env.obs.body_tokens else {}),

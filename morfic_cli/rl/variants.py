@@ -79,7 +79,8 @@ class Variant:
         name: The ``--variant`` name (``film``), or the import path of a user variant (``pkg.mod:Class``).
         label: Its name in the paper's tables and our figures (``MorFiC-F``).
         tables: The paper's transfer tables it is a column of: ``main`` (zero-shot transfer), ``ablation``,
-            ``external`` (the external baselines, Table "External baselines vs. MorFiC").
+            ``external`` (the external baselines, Table "External baselines vs. MorFiC"); ``actuation`` (issue 58's
+            variants) is none of the paper's.
         actor_class: rsl-rl ``class_name`` of the actor.
         critic_class: rsl-rl ``class_name`` of the critic.
         actor_morphology: Whether the actor sees z_m (False only for ``ppo``).
@@ -183,6 +184,18 @@ def _external(name: str, label: str, actor: dict[str, Any], critic: dict[str, An
 _URMA_GROUPS = ["joint_description", "foot_description", "foot_state"]
 
 
+ACTUATION_ENV: dict[str, Any] = {
+    "rand.geometry.enabled": True, "rand.geometry.limits_from_support": True,
+    "rand.actuation.enabled": True, "rand.actuation.mass_scale": [0.8, 4.0],
+    "rand.actuation.kp_factor": [0.8, 3.2], "rand.actuation.kd_factor": [0.6, 5.0],
+    "rand.actuation.torque_factor": [0.8, 2.0], "rand.actuation.curriculum": True,
+    "obs.extended_morphology": True,
+}
+"""The env of ``film-act`` and ``ppo-act`` (docs/training.md, "Actuation variants"): procedural geometry with the
+support's joint limits, total masses x 0.8-4 (log-uniform, under the morphology curriculum) with Kp, Kd and torque
+limits following the mass and jittered to cover robots/*.toml's own gains, and z_m of the extended descriptor."""
+
+
 STOCK: dict[str, Variant] = {v.name: v for v in (
     _stock("ppo", "PPO", ("main",), "none", actor_morphology=False),
     _stock("actor-only", "Actor-only", ("main",), "none"),
@@ -198,20 +211,31 @@ STOCK: dict[str, Variant] = {v.name: v for v in (
     _external("urma", "URMA",
               {"class_name": "morfic_cli.rl.urma:UrmaActor", "state_group": "history",
                "distribution_cfg": dict(_GAUSSIAN)},
-              {"class_name": "morfic_cli.rl.urma:UrmaCritic", "state_group": "critic", "privileged_group": "privileged"},
+              {"class_name": "morfic_cli.rl.urma:UrmaCritic", "state_group": "critic",
+               "privileged_group": "privileged"},
               {"actor": ["history", *_URMA_GROUPS], "critic": ["critic", "privileged", *_URMA_GROUPS]},
               {"obs.body_tokens": True}),
     # GenLoco (Feng et al. 2022): ppo's networks, trained on procedurally generated robots (docs/training.md)
     Variant("genloco", "GenLoco", ("external",), actor_morphology=False, critic_morphology=False,
             critic_defaults={"conditioning": "none", "conditioning_scale": 1.0, "hidden_dims": list(PAPER_TRUNK)},
             env_overrides={"rand.geometry.enabled": True}),
+    # issue 58: film and ppo on generated, heavier bodies whose gains follow their mass (ACTUATION_ENV)
+    Variant("film-act", "MorFiC-F(act)", ("actuation",),
+            critic_defaults={"conditioning": "film", "conditioning_scale": 0.1, "hidden_dims": list(PAPER_TRUNK)},
+            env_overrides=dict(ACTUATION_ENV)),
+    Variant("ppo-act", "PPO(act)", ("actuation",), actor_morphology=False, critic_morphology=False,
+            critic_defaults={"conditioning": "none", "conditioning_scale": 1.0, "hidden_dims": list(PAPER_TRUNK)},
+            env_overrides=dict(ACTUATION_ENV)),
 )}
 """The paper's variants, in the order of its tables (sizes: paper Tables "architecture", "conditioning variants"), then
 the external baselines re-implemented in morfic's pipeline (table ``external``: paper Table "External baselines vs.
-MorFiC")."""
+MorFiC"), then the actuation variants of issue 58 (table ``actuation``, in none of the paper's)."""
 
 VARIANTS: tuple[str, ...] = tuple(STOCK)
 """The stock ``--variant`` names, in the paper's order."""
+
+REPRODUCE_VARIANTS: tuple[str, ...] = tuple(v.name for v in STOCK.values() if "actuation" not in v.tables)
+"""What ``reproduce --variants all`` trains: every stock variant but issue 58's (trained by name, docs/training.md)."""
 
 
 def table_variants(table: str) -> tuple[str, ...]:
@@ -393,7 +417,12 @@ def _trust_key(create: bool = False) -> bytes | None:
     except OSError as exc:
         raise MorficError(f"cannot read the key of the allow-list {path} ({exc.strerror}); fix its permissions, or "
                           "pass --trust-variant to this command.") from exc
-    return text.encode() if _KEY.fullmatch(text) else None
+    if _KEY.fullmatch(text):
+        return text.encode()
+    if create:
+        raise MorficError(f"the key of the allow-list {path} is not one `morfic trust` wrote (64 hex digits); remove "
+                          "it and run `morfic trust` again for each variant you trust.")
+    return None
 
 
 def _signature(key: bytes, names: list[str]) -> str:
@@ -439,7 +468,7 @@ def _write_allow_list(names: list[str]) -> None:
     path = allow_list_path()
     path.parent.mkdir(parents=True, exist_ok=True)
     key = _trust_key(create=True)
-    assert key is not None  # just created
+    assert key is not None  # created, or an error
     lines = ["# User variants morfic may import when a stored run names them. Written by `morfic trust` "
              "(docs/extending.md): a line added by hand voids the signature, and with it the list.",
              SIGNATURE + _signature(key, names), *names]

@@ -175,6 +175,15 @@ class SimBackend(Protocol):
         """
         ...
 
+    def set_actuation(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor,
+                      torque_limit: torch.Tensor) -> None:
+        """Set some envs' PD gains and torque limits, absolute values (the CPU backend only).
+
+        For ``env.rand.actuation`` and the eval mode ``actuation-matched``. Shapes: (k,), (k,), (k,), (k, 3) hip /
+        thigh / calf.
+        """
+        ...
+
     def set_geometry(self, env_ids: torch.Tensor, robot_ids: torch.Tensor) -> None:
         """Give some envs a pool robot's model (its geometry, masses, gains, descriptor), at rest at its home.
 
@@ -185,8 +194,9 @@ class SimBackend(Protocol):
         ...
 
     def body_description(self, env_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """URMA's raw joint (k, 12, 18) and foot (k, 4, 6) descriptions of some envs' models
-        (:mod:`morfic_cli.morphology.description`). Only the CPU backend implements it; warp raises ``MorficError``.
+        """URMA's raw joint (k, 12, 18) and foot (k, 4, 6) descriptions of some envs' models.
+
+        :mod:`morfic_cli.morphology.description`. Only the CPU backend implements it; warp raises ``MorficError``.
         """
         ...
 

@@ -464,6 +464,40 @@ class CpuBackend:
             self.state[env] = self._home_state(env)
             self._bad[env] = False
 
+    def set_actuation(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor,
+                      torque_limit: torch.Tensor) -> None:
+        """Set some envs' position-actuator gains and torque limits (absolute values, every leg alike).
+
+        Kp is ``actuator_gainprm[0]`` and ``-actuator_biasprm[1]``, Kd ``-actuator_biasprm[2]`` (MuJoCo's position
+        actuator with ``kv``), the limit ``actuator_forcerange`` = +-limit. They last until the next call or
+        :meth:`set_geometry` (which copies a generated robot's own).
+
+        Args:
+            env_ids: Envs to change. Shape: (k,).
+            kp: Stiffness (N m/rad). Shape: (k,).
+            kd: Damping (N m s/rad). Shape: (k,).
+            torque_limit: Hip, thigh and calf limits (N m). Shape: (k, 3).
+
+        Raises:
+            ValueError: wrong shapes, or a non-finite or non-positive gain or limit (Kd may be 0).
+        """
+        ids = self._ids(env_ids)
+        k = ids.size
+        kp_, kd_ = self._rows(kp, k, (), "kp"), self._rows(kd, k, (), "kd")
+        tau = np.tile(self._rows(torque_limit, k, (3,), "torque_limit"), (1, len(LEGS)))
+        if not (np.isfinite(kp_).all() and np.isfinite(kd_).all() and np.isfinite(tau).all()
+                and (kp_ > 0).all() and (kd_ >= 0).all() and (tau > 0).all()):
+            raise ValueError("set_actuation needs finite gains and limits, Kp and limits > 0 and Kd >= 0.")
+        act = self.info.actuator_ids
+        for j, env in enumerate(ids):
+            model = self.models[env]
+            model.actuator_gainprm[act, 0] = kp_[j]
+            model.actuator_biasprm[act, 1] = -kp_[j]
+            model.actuator_biasprm[act, 2] = -kd_[j]
+            model.actuator_forcerange[act, 0] = -tau[j]
+            model.actuator_forcerange[act, 1] = tau[j]
+        self._torque_limit[ids] = tau
+
     def body_description(self, env_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """URMA's raw joint and foot descriptions of some envs' models (:mod:`morfic_cli.morphology.description`).
 

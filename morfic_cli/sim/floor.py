@@ -86,18 +86,6 @@ class BatchStepper:
         """Number of envs N."""
         return len(self.models)
 
-    def set_model(self, env: int, model: mujoco.MjModel) -> None:
-        """Step env ``env`` with ``model`` from now on (procedural geometry swaps an env's model at reset).
-
-        Raises:
-            ValueError: ``model``'s state, control or sensor sizes differ from the others'.
-        """
-        if (mujoco.mj_stateSize(model, STATE_SPEC), model.nu, model.nv, model.nsensordata) != (
-                self.nstate, self.nu, self.nv, self.nsensordata):
-            raise ValueError("BatchStepper models must have the same state, control and sensor sizes.")
-        self.models[env] = model
-        self._dt[env] = model.opt.timestep
-
     def _buffers_for(self, nsteps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if nsteps not in self._buffers:
             n = self.num_envs

@@ -770,9 +770,20 @@ class WarpBackend:
         """See :meth:`set_geometry_pool`. Raises MorficError."""
         raise MorficError(GEOMETRY_NEEDS_CPU)
 
+    def set_actuation(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor,
+                      torque_limit: torch.Tensor) -> None:
+        """Not supported: per-env gains and torque limits run on the CPU backend only.
+
+        (``env.rand.actuation``, eval mode ``actuation-matched``.) Raises MorficError.
+        """
+        raise MorficError("per-env gains and torque limits (env.rand.actuation, eval mode actuation-matched) run on "
+                          "the cpu backend only; train with --set env.sim.backend=cpu (no --device cuda), or turn "
+                          "them off with --set env.rand.actuation.enabled=false.")
+
     def body_description(self, env_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Not supported: URMA's joint and foot descriptions (``env.obs.body_tokens``, variant ``urma``) are read
-        from per-env ``MjModel`` objects, which only the CPU backend keeps.
+        """Not supported: URMA's joint and foot descriptions (``env.obs.body_tokens``, variant ``urma``).
+
+        They are read from per-env ``MjModel`` objects, which only the CPU backend keeps.
 
         Raises:
             MorficError: always.

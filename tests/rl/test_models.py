@@ -9,7 +9,11 @@ from tensordict import TensorDict
 
 from morfic_cli.errors import MorficError, UnknownNameError
 from morfic_cli.rl.models import MorficActor, MorficCritic
-from morfic_cli.rl.variants import VARIANTS, model_cfgs
+from morfic_cli.rl.variants import STOCK, VARIANTS, model_cfgs
+
+MLP_VARIANTS = tuple(v for v in VARIANTS if not STOCK[v].own_models and "actuation" not in STOCK[v].tables)
+"""film-act and ppo-act are film's and ppo's networks on another env (tests/envs/test_actuation.py)."""
+"""The variants built of MorficActor / MorficCritic (the external baselines': tests/rl/test_baselines.py)."""
 
 N = 8
 CONDITIONED = ("concat", "film", "film-scaled", "adaln", "hyper")
@@ -82,7 +86,7 @@ def n_params(module: torch.nn.Module) -> int:
     return sum(p.numel() for p in module.parameters())
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", MLP_VARIANTS)
 def test_forward_shapes_at_paper_sizes(variant):
     obs = make_obs()
     actor, critic = build(variant, obs, tiny=False)
@@ -158,7 +162,7 @@ def _value_loss_grads(variant: str) -> tuple[MorficActor, MorficCritic]:
     return actor, critic
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", MLP_VARIANTS)
 def test_value_loss_reaches_a_morphology_encoder_only_when_the_critic_is_conditioned(variant):
     actor, critic = _value_loss_grads(variant)
     assert all(p.grad is None for p in actor.parameters())  # separate encoders: the value loss never hits the actor
@@ -182,7 +186,7 @@ def test_value_gradient_to_morphology_encoder_is_zero_at_init(variant):
     assert all(p.grad.abs().sum() == 0 for p in critic.morphology_encoder.parameters())
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", MLP_VARIANTS)
 def test_actor_morphology_path_exists_except_for_ppo(variant):
     torch.manual_seed(0)
     obs = make_obs()

@@ -11,7 +11,11 @@ from rsl_rl.runners import OnPolicyRunner
 from tensordict import TensorDict
 
 from morfic_cli.rl.ppo import EXTRA_LOSS_KEYS, MorficPPO, algorithm_cfg, explained_variance
-from morfic_cli.rl.variants import VARIANTS, model_cfgs
+from morfic_cli.rl.variants import STOCK, VARIANTS, model_cfgs
+
+MLP_VARIANTS = tuple(v for v in VARIANTS if not STOCK[v].own_models and "actuation" not in STOCK[v].tables)
+"""film-act and ppo-act are film's and ppo's networks on another env (tests/envs/test_actuation.py)."""
+"""The variants built of MorficActor / MorficCritic (the external baselines': tests/rl/test_baselines.py)."""
 
 NUM_ENVS = 8
 STEPS = 4
@@ -116,7 +120,7 @@ def test_explained_variance_of_constant_returns_is_nan():
     assert math.isnan(explained_variance(torch.ones(4), torch.zeros(4)))
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", MLP_VARIANTS)
 def test_runner_trains_every_variant_and_logs_the_extra_metrics(variant):
     runner, losses = run(variant)
     assert isinstance(runner.alg, MorficPPO)

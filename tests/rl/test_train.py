@@ -18,7 +18,7 @@ from smoke_runs import LEGACY_BUNDLE
 from morfic_cli.recording.curves import read_curve_csv
 from morfic_cli.rl.config import smoke_preset
 from morfic_cli.rl.runner import dummy_observations, load_trained, new_run, resume_run
-from morfic_cli.rl.variants import VARIANTS
+from morfic_cli.rl.variants import STOCK, VARIANTS
 from morfic_cli.store import Store
 
 TIMING = {"wall_time_s", "steps_per_s", "collect_s", "learn_s"}
@@ -51,7 +51,8 @@ def test_smoke_training_of_every_variant_through_the_cli(run_cli, variant):
     assert len(store.ref_history(f"runs/{variant}-smoke-s0")) == 1
     rows = read_curve_csv(store.read_file(manifest.id, "curve.csv"))
     assert [r["iteration"] for r in rows] == [1, 2]
-    assert {"explained_variance", "value_loss", "kl", "clip_fraction", "adaptation_error"} <= set(rows[0])
+    adapts = not STOCK[variant].own_models  # the external baselines adapt nothing: NaN, a blank cell
+    assert {"explained_variance", "value_loss", "kl", "clip_fraction", *(["adaptation_error"] * adapts)} <= set(rows[0])
     assert store.read_file(manifest.id, "curve.png")[:8] == b"\x89PNG\r\n\x1a\n"
     trained = load_trained(store, f"runs/{variant}-smoke-s0")
     with torch.no_grad():
@@ -100,15 +101,18 @@ def test_the_training_clock_counts_what_the_user_waits_for():
     start = time.perf_counter()
     run.train()
     first = time.perf_counter() - start
-    assert run.wall_time_s == pytest.approx(first, rel=0.05)
-    assert store.read_manifest("runs/clocked").meta["wall_time_s"] == pytest.approx(first, rel=0.05)
+    assert run.wall_time_s == pytest.approx(first, rel=0.05)  # what `morfic train` prints
+    # the stored time is read as the last checkpoint is written: after the last hook, before its own write
+    stored = store.read_manifest("runs/clocked").meta["wall_time_s"]
+    last_row = read_curve_csv(store.read_file("runs/clocked", "curve.csv"))[-1]["wall_time_s"]
+    assert last_row + 0.4 <= stored <= run.wall_time_s
 
     resumed = resume_run(store, "runs/clocked", ["max_iterations=5"])
     resumed.progress = lambda row: time.sleep(0.4)
     start = time.perf_counter()
     resumed.train()
     second = time.perf_counter() - start
-    assert resumed.wall_time_s == pytest.approx(first + second, rel=0.05)  # accumulated across the resume
+    assert resumed.wall_time_s == pytest.approx(stored + second, rel=0.05)  # accumulated across the resume
     rows = read_curve_csv(store.read_file("runs/clocked", "curve.csv"))
     assert rows[-1]["wall_time_s"] <= resumed.wall_time_s
     assert all(b["wall_time_s"] - a["wall_time_s"] >= 0.4 for a, b in zip(rows, rows[1:], strict=False))
@@ -133,7 +137,7 @@ def test_resume_extends_a_finished_run_with_set(run_cli):
         (["--set", "ppo.learnin_rate=1e-3"], "unknown config key 'ppo.learnin_rate'"),
         (["--set", "env.num_envs=many"], "takes an integer"),
         (["--set", "novalue"], "key=value"),
-        (["--variant", "filmm"], "valid variants are: actor-only, adaln, concat, film, film-scaled, hyper, ppo"),
+        (["--variant", "filmm"], "unknown variant 'filmm'; valid variants are: actor-only, adaln, "),
         (["--resume", "runs/nothing"], "no artifact 'runs/nothing'"),
     ],
 )

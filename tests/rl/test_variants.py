@@ -11,11 +11,14 @@ from morfic_cli.runs import run_name, run_of
 
 
 def test_the_registry_holds_the_papers_seven_in_table_order():
-    assert V.VARIANTS == ("ppo", "actor-only", "concat", "film", "film-scaled", "hyper", "adaln")
+    assert V.VARIANTS[:7] == ("ppo", "actor-only", "concat", "film", "film-scaled", "hyper", "adaln")
+    n_ext = len(V.table_variants("external"))
+    assert set(V.VARIANTS[7:7 + n_ext]) == set(V.table_variants("external"))  # then the external baselines
+    assert V.VARIANTS[7 + n_ext:] == V.table_variants("actuation") == ("film-act", "ppo-act")  # then issue 58's
     assert V.table_variants("main") == paper.ZERO_SHOT_TRANSFER.columns
     assert V.table_variants("ablation") == paper.CRITIC_CONDITIONING_ABLATION.columns
-    assert [V.variant_order(v) for v in V.VARIANTS] == list(range(7))
-    assert V.variant_order("my_lab:Critic") == 7
+    assert [V.variant_order(v) for v in V.VARIANTS] == list(range(len(V.VARIANTS)))
+    assert V.variant_order("my_lab:Critic") == len(V.VARIANTS)
     assert paper.METHOD_LABELS["film-scaled"] == V.STOCK["film-scaled"].label == "MorFiC-F(Scaled)"
 
 
