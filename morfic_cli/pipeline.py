@@ -27,7 +27,7 @@ from morfic_cli.errors import MorficError
 from morfic_cli.report.build import ReportCfg, ReportResult, build_report
 from morfic_cli.report.claims import PAPER_COMMAND
 from morfic_cli.report.paper import ROBOTS
-from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, VARIANTS, resolve_variant
+from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, REPRODUCE_VARIANTS, VARIANTS, resolve_variant
 from morfic_cli.runs import RUNS_PREFIX, run_name, run_of
 from morfic_cli.store import Store
 from morfic_cli.store.publish import find_manifest
@@ -39,7 +39,9 @@ class ReproduceCfg:
 
     Attributes:
         preset: Training budget (smoke, cpu, paper).
-        variants: Conditioning variants to train.
+        variants: Variants to train; default :data:`~morfic_cli.rl.variants.REPRODUCE_VARIANTS`, the paper's seven
+            and the external baselines (``bot``, ``urma``, ``genloco``: the report's external-baselines tables;
+            docs/report.md, "Which variants train by default").
         seeds: Seeds per variant (0 .. seeds-1).
         train_overrides: ``--set key=value`` items applied to every training config.
         robots: Evaluation and diagnosis targets.
@@ -69,7 +71,7 @@ class ReproduceCfg:
     """
 
     preset: str = "smoke"
-    variants: tuple[str, ...] = VARIANTS
+    variants: tuple[str, ...] = REPRODUCE_VARIANTS
     seeds: int = 1
     train_overrides: tuple[str, ...] = ()
     robots: tuple[str, ...] = ROBOTS
@@ -165,7 +167,7 @@ def reproduce_cfg(preset: str, *, seeds: int = 1, variants: tuple[str, ...] | No
         raise MorficError(f"--seeds must be at least 1, got {seeds}.")
     if preset == SHIPPED:
         return _shipped_cfg(seeds, variants, device, Path(bundles) if bundles else default_bundles(), full_protocol)
-    base = ReproduceCfg(preset=preset, seeds=seeds, variants=tuple(variants or VARIANTS), device=device)
+    base = ReproduceCfg(preset=preset, seeds=seeds, variants=tuple(variants or REPRODUCE_VARIANTS), device=device)
     if preset == "smoke":
         return dataclasses.replace(base, eval_envs=2, eval_steps=25, diagnose_envs=2, diagnose_steps=80,
                                    trunc_eps=0.5, torch_threads=1, critic_study=SMOKE_STUDY)

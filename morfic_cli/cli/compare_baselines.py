@@ -13,7 +13,7 @@ _TITLES = {
     "transfer": "zero-shot transfer (mean over seeds; σ over envs pooled)",
     "calibration": "critic calibration (mean over seeds)",
     "fixed_rollout": "fixed-rollout diagnostic (critic variants on one frozen actor's rollouts)",
-    "compute": "training compute",
+    "compute": "training compute (parameters: actor / critic, sum(p.numel()))",
     "verdicts": "the paper's claims: each primary comparison, Holm-corrected (docs/report.md)",
 }
 
@@ -66,10 +66,43 @@ def _columns(table: str, with_paper: bool) -> list[Column]:
             Column("iterations", "iters", fmt=lambda v: f"{v:,.0f}", justify="right"),
             Column("s_per_iteration", "s/iter", fmt=lambda v: _n(v, 2), justify="right"),
             Column("device_hours", "device-h", fmt=lambda v: _n(v, 4), justify="right"),
-            Column("device_hours_400m", "h@400M", fmt=lambda v: _n(v, 1), justify="right"), Column("device")]
+            Column("device_hours_400m", "h@400M", fmt=lambda v: _n(v, 1), justify="right"), Column("device"),
+            Column("actor_params", "params", fmt=lambda v: "-" if v is None else f"{v:,}", justify="right"),
+            Column("critic_params", "/ critic", fmt=lambda v: "-" if v is None else f"{v:,}", justify="right")]
     if with_paper:
-        cols += [Column("paper_s_per_iteration", "paper s/iter"), Column("paper_gpu_hours_400m", "paper GPU-h@400M")]
+        cols += [Column("paper_s_per_iteration", "paper s/iter"), Column("paper_gpu_hours", "paper GPU-h"),
+                 Column("paper_gpu_hours_400m", "paper GPU-h@400M")]
     return cols
+
+
+def _external_tables(rows: list[dict]) -> list[tuple[str, list[dict], list[Column]]]:
+    """The ``external`` rows as the paper lays them out: per (mode, command) a table of methods x robots.
+
+    Rows are the paper's group then ours (``group``), each cell ``v ± σ / S``.
+    """
+    from morfic_cli.report.compare import OURS_GROUP, PAPER_GROUP
+    from morfic_cli.report.paper import ROBOT_LABELS, ROBOTS
+
+    out = []
+    for mode, command in sorted({(r["mode"], r["command_vx"]) for r in rows}, key=lambda k: (k[0] != "descriptor",
+                                                                                           k[1])):
+        sel = [r for r in rows if (r["mode"], r["command_vx"]) == (mode, command)]
+        robots = [*ROBOTS, *sorted({r["robot"] for r in sel} - set(ROBOTS))]
+        wide: dict[tuple, dict] = {}
+        for r in sel:
+            key = (r["group"] != "paper", r["preset"] or "", r["label"])
+            seeds = "-" if r["n_seeds"] is None else str(r["n_seeds"])
+            row = wide.setdefault(key, {"group": "paper" if r["group"] == "paper" else "ours",
+                                        "preset": r["preset"] or "-", "label": r["label"], "n_seeds": seeds})
+            row[r["robot"]] = r["cell"]
+        cols = [Column("group", "group"), Column("preset", "preset"), Column("label", "method"),
+                Column("n_seeds", "seeds", justify="right"),
+                *(Column(robot, ROBOT_LABELS.get(robot, robot), fmt=lambda v: v or "-", justify="right")
+                  for robot in robots)]
+        title = (f"external baselines at {command:g} m/s, {mode} mode: {PAPER_GROUP[0].lower()}{PAPER_GROUP[1:]}, "
+                 f"then {OURS_GROUP.lower()}")
+        out.append((title, [wide[k] for k in sorted(wide, key=lambda k: k[:2])], cols))
+    return out
 
 
 def compare_baselines(
@@ -84,16 +117,24 @@ def compare_baselines(
     """Side-by-side tables over variants and seeds (mean ± std over seeds), from the store only.
 
     Runs are grouped by preset and variant; for each robot the stored evaluations (zero-shot transfer), critic
-    diagnoses and fixed-rollout diagnoses of their checkpoints are aggregated over seeds, plus training compute,
-    and the paper's claims' comparisons (Welch / t-contrast, Holm-corrected, with the seeds each undecided one
-    would need).
+    diagnoses and fixed-rollout diagnoses of their checkpoints are aggregated over seeds, plus training compute.
     --with-paper adds the paper's numbers for the same variant and robot (paper_* columns; empty where the paper
-    prints none). json/csv print every table's rows in one list, with a "table" column. The comparison is stored
-    as a table artifact (ref tables/compare-baselines).
+    prints none). The external baselines (bot, urma, genloco) have their own table beside the paper's rows for
+    them (table external: when one of them is among the runs, or with --with-paper). Last come the paper's claims'
+    comparisons (Welch / t-contrast, Holm-corrected, with the seeds each undecided one would need). json/csv
+    print every table's rows in one list, with a "table" column. The comparison is stored as a table artifact
+    (ref tables/compare-baselines).
 
     Example: morfic compare-baselines runs/film-cpu-s0 runs/ppo-cpu-s0 --with-paper --format csv
     """
-    from morfic_cli.report.compare import TABLE_ORDER, compare_tables, flat_rows, store_comparison
+    from morfic_cli.report.compare import (
+        PAPER_ONLY,
+        TABLE_ORDER,
+        compare_tables,
+        external_note,
+        flat_rows,
+        store_comparison,
+    )
     from morfic_cli.report.gather import gather, resolve_runs
     from morfic_cli.store import Store
 
@@ -111,5 +152,11 @@ def compare_baselines(
     if not tables:
         info("no evaluations or diagnoses of these runs in the store yet; run `morfic eval` / `morfic diagnose`.")
     for name in TABLE_ORDER:
-        if name in tables:
+        if name == "external" and name in tables:
+            for title, rows, columns in _external_tables(tables[name]):
+                emit_rows(rows, fmt, columns=columns, title=title)
+            if not any(r["group"] == "ours" for r in tables[name]):
+                info(external_note(False))
+            info(PAPER_ONLY["embodiment-scaling"])
+        elif name in tables:
             emit_rows(tables[name], fmt, columns=_columns(name, with_paper), title=_TITLES[name])

@@ -21,7 +21,7 @@ from morfic_cli.cli._options import (
     TrustOpt,
 )
 from morfic_cli.cli._render import emit_object, info
-from morfic_cli.rl.variants import VARIANTS
+from morfic_cli.rl.variants import REPRODUCE_VARIANTS, VARIANTS
 from morfic_cli.validation import check_args
 
 
@@ -67,8 +67,8 @@ def reproduce(
     seeds: Annotated[int, typer.Option("--seeds", help="Seeds per variant (0..N-1).")] = 1,
     variants: Annotated[
         str, typer.Option("--variants", help=f"Comma-separated variants to train, or 'all' (the paper's: "
-                          f"{', '.join(VARIANTS)}); a user variant by import path module:Class (named here, it is "
-                          "imported, and added to your allow-list of trusted variants: `morfic trust`).")
+                          f"{', '.join(REPRODUCE_VARIANTS)}); a user variant by import path module:Class (named "
+                          "here, it is imported, and added to your allow-list of trusted variants: `morfic trust`).")
     ] = "all",
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Folder for the report's files (default: "
@@ -129,10 +129,10 @@ def reproduce(
     from morfic_cli.rl.runner import check_device
     from morfic_cli.store import Store
 
-    names = VARIANTS if variants.strip().lower() == "all" else tuple(
+    names = REPRODUCE_VARIANTS if variants.strip().lower() == "all" else tuple(
         v.strip() for v in variants.split(",") if v.strip())
     shipped = preset is PipelinePreset.shipped
-    cfg = reproduce_cfg(preset.value, seeds=seeds, variants=None if shipped and names == VARIANTS else names,
+    cfg = reproduce_cfg(preset.value, seeds=seeds, variants=None if shipped and names == REPRODUCE_VARIANTS else names,
                         device=device.value, bundles=bundles, full_protocol=full_protocol)
     if overrides:
         import dataclasses

@@ -24,7 +24,14 @@ from morfic_cli import __version__
 from morfic_cli.report import paper
 from morfic_cli.report import tables as T
 from morfic_cli.report.claims import PAPER_COMMAND, Claim, at_command, check_claims, row_command
-from morfic_cli.report.compare import COMPARE_REF, compare_tables, store_comparison
+from morfic_cli.report.compare import (
+    COMPARE_REF,
+    EXTERNAL_TABLE_VARIANTS,
+    claim_rows,
+    compare_tables,
+    store_comparison,
+    without_external,
+)
 from morfic_cli.report.gather import Provenance, StoreData, filter_presets, gather, read_csv_rows, resolve_runs
 from morfic_cli.report.model import Table
 from morfic_cli.rl.variants import STOCK
@@ -34,8 +41,10 @@ from morfic_cli.store.publish import find_manifest
 REPORTS_PREFIX = "reports/"
 
 FIGURES: dict[str, str] = {
-    "ev": "Explained variance of each variant's critic per robot (higher is better, 1 = perfect); the axis is "
-          "logarithmic below -1, so no bar is cut.",
+    "ev": "Explained variance of the critic of each of the paper's variants per robot (higher is better, 1 = "
+          "perfect); the axis is logarithmic below -1, so no bar is cut.",
+    "ev-external": "Explained variance of the external baselines' critics and MorFiC-F's per robot, as trained here "
+                   "(the paper's Fig. \"Critic calibration under morphology shift\", right).",
     "distance": "Forward velocity at 2.0 m/s (error bars: std over envs) against the normalised morphology "
                 "distance to Go2, one point per robot.",
     "compute": "Training device-hours normalised to 400M transitions, per run (and the paper's methods).",
@@ -44,10 +53,13 @@ FIGURES: dict[str, str] = {
 
 #: The text above the claims (docs/results.md reads them with the reasons behind each).
 CLAIMS_INTRO = ("Each of the paper's five claims checked against the results below (morfic_cli/report/claims.py), "
-                "at 2.0 m/s and, where the store has evaluations there, at 1.0 m/s: every comparison is an effect "
-                "with a 95 % bootstrap interval over seeds, and the verdict is read from the interval: holds (on "
-                "every robot the claim names), holds partly, does not hold, or cannot tell (results missing, one "
-                "seed, or the interval contains the bound; docs/report.md \"How a verdict is read\").")
+                "at 2.0 m/s and, where the store has evaluations there, at 1.0 m/s. Each claim names its primary "
+                "comparisons; each is tested over training seeds (Welch's t, a t-contrast, an equivalence test or "
+                "Spearman's rho over the robots), the p-values are Holm-corrected together, and the verdict counts "
+                "the significant ones: holds (all in the claimed direction), holds partly (some, none against), "
+                "mixed, partly reversed, does not hold (all against), or cannot tell (none significant; one seed "
+                "per variant gives no test). Under each comparison that is not significant: the seeds per side "
+                "that would detect its effect with 80 % power (docs/report.md \"How a verdict is read\").")
 
 SPEED_PREFIX = "speed-"
 """Figure names ``speed-<run>-<robot>``: the eval figure of that run on that robot (descriptor mode, 2.0 m/s)."""
@@ -57,12 +69,33 @@ SPEED_PER_FIGURE = 6
 
 SPEED_CAPTION = ("Forward speed over time of {run} on each robot at a commanded 2.0 m/s (descriptor mode), as "
                  "`morfic eval` drew it: the mean over alive envs, the 10-90th percentile band, the command dashed "
-                 "and falls as red ticks (their count in the legend); below, the percentage of envs alive.")
+                 "and falls as red ticks (their count in the legend); below, the percentage of envs alive. A run "
+                 "imported from a results-only bundle, which leaves the time series out, has each drawn from its "
+                 "eval table instead: v_x and its best 1 s (mean and std), S and the share of valid envs.")
+
+
+def ev_external_figure(calibration: list[dict[str, Any]]) -> dict[str, tuple[bytes, bytes]]:
+    """``{"ev-external": (png, pdf)}``: the EV of the external baselines and MorFiC-F from their diagnoses.
+
+    The paper's Fig. "Critic calibration under morphology shift", right panel; empty without an external baseline's
+    diagnosis.
+    """
+    from morfic_cli.report import figures as F
+
+    rows = [r for r in calibration if r["variant"] in EXTERNAL_TABLE_VARIANTS]
+    if not any(r["variant"] != "film" for r in rows):
+        return {}
+    return {"ev-external": F.ev_figure(rows)}
 
 
 def eval_figures(store: Store, evals: list[dict[str, Any]]) -> dict[str, tuple[bytes, bytes]]:
-    """The stored eval figures of the main protocol (descriptor mode, 2.0 m/s), ``speed-<run>-<robot>``."""
-    from morfic_cli.evaluation.protocol import FIGURE_PDF, FIGURE_PNG, rollout_role
+    """The eval figures of the main protocol (descriptor mode, 2.0 m/s), ``speed-<run>-<robot>``.
+
+    The stored ones, or, for a rollout a results-only bundle left without its figure, one drawn from the eval row
+    (:func:`~morfic_cli.evaluation.figures.figure_or_table`).
+    """
+    from morfic_cli.evaluation.figures import figure_or_table
+    from morfic_cli.evaluation.protocol import rollout_role
 
     out: dict[str, tuple[bytes, bytes]] = {}
     for row in sorted(evals, key=lambda r: (r["run"], paper.ROBOTS.index(r["robot"])
@@ -72,10 +105,9 @@ def eval_figures(store: Store, evals: list[dict[str, Any]]) -> dict[str, tuple[b
         rid = store.read_manifest(row["artifact"]).inputs.get(rollout_role(row["robot"], "descriptor", 2.0))
         if rid is None:
             continue
-        files = store.read_manifest(rid).files
-        if FIGURE_PNG in files and FIGURE_PDF in files:
-            out[f"{SPEED_PREFIX}{row['run']}-{row['robot']}"] = (store.read_file(rid, FIGURE_PNG),
-                                                                 store.read_file(rid, FIGURE_PDF))
+        figure = figure_or_table(store, rid, row, f"{row['run']} on {row['robot']}, descriptor mode, command 2 m/s")
+        if figure is not None:
+            out[f"{SPEED_PREFIX}{row['run']}-{row['robot']}"] = figure
     return out
 
 
@@ -148,7 +180,7 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
     fixed, compute = tables.get("fixed_rollout", []), tables.get("compute", [])
     P = (lambda *ts: [T.paper_table(t) for t in ts]) if with_paper else (lambda *ts: [])  # noqa: E731
     out: list[_Section] = [_Section(
-        "The paper's claims", text=CLAIMS_INTRO, claims=check_claims(data.evals, data.calibration, data.fixed))]
+        "The paper's claims", text=CLAIMS_INTRO, claims=check_claims(*claim_rows(data)))]
 
     main = T.transfer_table(transfer, key="zero_shot_transfer", title="Zero-shot cross-morphology transfer",
                             command_vx=2.0, mode="descriptor", variants=T.MAIN_VARIANTS)
@@ -157,8 +189,7 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
     every = T.transfer_table(transfer, key="zero_shot_transfer_every", title="Zero-shot transfer, every variant",
                              command_vx=2.0, mode="descriptor", min_columns=2) \
         if any(r["variant"] not in T.MAIN_VARIANTS for r in transfer) else None
-    sec = _Section("Zero-shot transfer", [t for t in [main, every] if t] + P(paper.ZERO_SHOT_TRANSFER,
-                                                                              paper.CROSS_EMBODIMENT_BASELINES))
+    sec = _Section("Zero-shot transfer", [t for t in [main, every] if t] + P(paper.ZERO_SHOT_TRANSFER))
     if not main:
         sec.text = ("No descriptor-mode evaluation at 2.0 m/s of ppo / actor-only / concat / film runs in the store "
                     "(`morfic eval RUN --command-vx 2.0`).")
@@ -175,7 +206,7 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
 
     fast = T.transfer_table(transfer, key="transfer_25", title="Transfer at a higher commanded speed",
                             command_vx=2.5, mode="descriptor", use_max=True)
-    out.append(_Section("Transfer at 2.5 m/s", [t for t in [fast] if t] + P(paper.CROSS_EMBODIMENT_BASELINES_25),
+    out.append(_Section("Transfer at 2.5 m/s", [t for t in [fast] if t],
                         "" if fast else "No descriptor-mode evaluation at 2.5 m/s in the store."))
 
     full = [t for t in (T.transfer_table(transfer, key=f"transfer_full_{v:g}".replace(".", "_"),
@@ -186,14 +217,25 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
                             "The paper applies each target's 11-D descriptor to the Go2 template (descriptor mode); "
                             "here the policy runs on the target's own MJCF model (full mode)."))
 
+    matched = [t for t in (T.transfer_table(transfer, key=f"transfer_matched_{v:g}".replace(".", "_"),
+                                            title=f"Transfer with actuation matched to mass at {v:g} m/s",
+                                            command_vx=v, mode="actuation-matched") for v in (2.0, 2.5)) if t]
+    if matched:
+        out.append(_Section("Transfer with actuation matched to mass (morfic extension)", matched,
+                            "Descriptor mode with the target's Kp, Kd and torque limits set as a deployer sets them "
+                            "for its mass: Go2's x the target's total mass / Go2's (docs/eval.md)."))
+
+    out.append(_external_section(tables, with_paper))
+
     # ours at the paper's command, the paper's, then ours at each other command (a run's diagnoses at 2.0 and 1.0 m/s
-    # are separate rows, never two seeds of one)
+    # are separate rows, never two seeds of one); the external baselines' are in their own section
+    calib = without_external(calib)
     crit = [t for t in (T.ev_table(calib), T.critic_table(calib)) if t]
     crit_other = [t for c in _other_commands(calib)
                   for t in (T.ev_table(calib, command_vx=c), T.critic_table(calib, command_vx=c)) if t]
-    out.append(_Section("Critic diagnostics", crit + P(paper.CRITIC_METRICS_VARIANTS, paper.CRITIC_METRICS_EXTERNAL)
-                        + crit_other, "" if crit or crit_other else "No calibration diagnoses of these runs in the "
-                                                                    "store (`morfic diagnose`)."))
+    out.append(_Section("Critic diagnostics", crit + P(paper.CRITIC_METRICS_VARIANTS) + crit_other,
+                        "" if crit or crit_other else "No calibration diagnoses of these runs in the store "
+                                                      "(`morfic diagnose`)."))
     fx = [t for t in [T.fixed_rollout_table(fixed)] if t]
     fx_other = [t for t in (T.fixed_rollout_table(fixed, command_vx=c) for c in _other_commands(fixed)) if t]
     out.append(_Section("Fixed-rollout diagnostic", fx + P(paper.CAUSAL_ADV_ALL) + fx_other,
@@ -213,13 +255,63 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
     return out
 
 
+EXTERNAL_TEXT = ("The paper compares MorFiC with four cross-morphology methods using their released weights in "
+                 "their own simulators (its rows below, marked paper). Ours re-implement BodyTransformer (bot), URMA "
+                 "(urma) and GenLoco (genloco) in morfic's pipeline and train them on the Go2 template with "
+                 "MorFiC-F's rewards, curriculum and budget (docs/training.md, \"External baselines\"); GenLoco's "
+                 "motion-imitation reward is not reproduced. They are evaluated and diagnosed as every variant.")
+
+
+def _external_section(tables: dict[str, list[dict[str, Any]]], with_paper: bool) -> _Section:
+    """The external baselines' section: the paper's rows and ours, in transfer, critic metrics and compute.
+
+    Transfer at 2.0 and 2.5 m/s (the paper's rows and ours), ours on the targets' own models, our critics' EV and
+    metrics (the paper's with ``with_paper``), and the compute of both.
+    """
+    ext, compute = tables.get("external", []), tables.get("compute", [])
+    calib = [r for r in tables.get("calibration", []) if r["variant"] in EXTERNAL_TABLE_VARIANTS]
+    calib = calib if any(r["variant"] != "film" for r in calib) else []
+    found = [T.external_table(ext, c) for c in (2.0, 2.5)]
+    found += [T.external_table(ext, c, mode="full") for c in (2.0, 2.5)]
+    found += [T.ev_table(calib, key="critic_ev_external", title="Explained variance of the external baselines' "
+                         "critics"),
+              T.critic_table(calib, key="critic_metrics_external", title="Critic calibration of the external "
+                             "baselines")]
+    found += [T.paper_table(paper.CRITIC_METRICS_EXTERNAL)] if with_paper else []
+    return _Section("External baselines", [t for t in found if t] + [T.external_compute_table(compute)],
+                    EXTERNAL_TEXT)
+
+
+def seeds_note(data: StoreData) -> str:
+    """The report's first lines when a variant has one seed: why its claims read "cannot tell", and the full answer.
+
+    Empty when every variant has two seeds or more (or there are no runs).
+    """
+    seeds: dict[str, set[int]] = {}
+    for r in data.runs:
+        seeds.setdefault(r.variant, set()).add(r.seed)
+    single = sorted(v for v, s in seeds.items() if len(s) < 2)
+    if not single:
+        return ""
+    how = ("The experiment's answer (the README's findings: 3 seeds a variant) is in the shipped results bundles: "
+           "`morfic store import --append artifacts/bundles/results/*.tar`, then `morfic report` "
+           "(docs/reproducing.md).")
+    if len(single) == len(seeds):
+        return ("Read this first: this store has one training seed per variant, so no claim can be tested here "
+                "(a test compares seeds): every verdict below reads \"cannot tell\", which is not a finding. " + how)
+    return (f"Read this first: {', '.join(single)} {'has' if len(single) == 1 else 'have'} one training seed here, "
+            "so the comparisons that need them cannot be tested (\"cannot tell\" is then not a finding). " + how)
+
+
 def _intro(data: StoreData, with_paper: bool) -> str:
     presets = sorted({r.preset for r in data.runs})
     unfinished = [r.name for r in data.runs if not r.finished]
-    text = (f"Built by morfic {__version__} from {len(data.runs)} training run(s) ({', '.join(presets)} preset) and "
-            f"the results stored for them; every number traces to an artifact id listed under Provenance "
-            f"(`morfic store show ID`). Variant names follow the paper: "
-            + ", ".join(f"{v.label} = {name}" for name, v in STOCK.items()) + ".")
+    note = seeds_note(data)  # first: a one-seed store's verdicts differ from the README's, and why
+    text = (f"{note}\n\n" if note else "") + (
+        f"Built by morfic {__version__} from {len(data.runs)} training run(s) ({', '.join(presets)} preset) and "
+        f"the results stored for them; every number traces to an artifact id listed under Provenance "
+        f"(`morfic store show ID`). Variant names follow the paper: "
+        + ", ".join(f"{v.label} = {name}" for name, v in STOCK.items()) + ".")
     if "smoke" in presets:
         text += (" The smoke preset trains for seconds to exercise the pipeline: its numbers are not results.")
     if unfinished:
@@ -310,11 +402,14 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
     return files
 
 
-REPORT_LAYOUT = 5
+REPORT_LAYOUT = 7
 """The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
 shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor. 3: training curves as the mean
 and min-max band over seeds, legends off the data. 4: the critic-study section. 5: a run's diagnoses at two
-commands are separate rows, never two seeds (the critic and fixed-rollout tables at 2.0 m/s, then at 1.0 m/s)."""
+commands are separate rows, never two seeds (the critic and fixed-rollout tables at 2.0 m/s, then at 1.0 m/s).
+6: the claims' verdicts from Holm-corrected t tests, with the seeds each undecided comparison would need.
+7: the external baselines' section (the paper's rows and ours, their EV figure and compute); the paper's own
+variants' tables and claims without them."""
 
 
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:
@@ -360,7 +455,8 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
             from morfic_cli.report import figures as F
 
             figures = {
-                "ev": F.ev_figure(at_command(tables.get("calibration", []), PAPER_COMMAND)),
+                "ev": F.ev_figure(without_external(at_command(tables.get("calibration", []), PAPER_COMMAND))),
+                **ev_external_figure(at_command(tables.get("calibration", []), PAPER_COMMAND)),
                 "distance": F.distance_figure(tables.get("transfer", []), with_paper=cfg.with_paper),
                 "compute": F.compute_figure(tables.get("compute", []), with_paper=cfg.with_paper),
                 "curves": F.curves_figure(data.curves, {r.name: r.variant for r in runs},

@@ -41,8 +41,10 @@ from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, STOCK
 OOD_ROBOTS: tuple[str, ...] = ("aliengo", "mini_cheetah", "anymal_c")
 #: The robots of the fixed-rollout claim (c) (paper Table "causal advantage").
 FIXED_ROBOTS: tuple[str, ...] = ("aliengo", "mini_cheetah")
-#: Multiplicative and additive critics (claim (a)) among the stock variants.
-MULTIPLICATIVE: tuple[str, ...] = tuple(n for n, v in STOCK.items() if v.multiplicative)
+#: Multiplicative and additive critics (claim (a)) among the paper's variants (tables main / ablation; not issue 58's
+#: film-act, which shares film's critic but not its training distribution).
+MULTIPLICATIVE: tuple[str, ...] = tuple(n for n, v in STOCK.items()
+                                        if v.multiplicative and {"main", "ablation"} & set(v.tables))
 #: The additive ones are the paper's PPO variants (Fig. 3); the external baselines (bot, genloco) are in neither.
 ADDITIVE: tuple[str, ...] = ("ppo", "actor-only", "concat")
 #: The paper's seven PPO variants: claim (e)'s variants.

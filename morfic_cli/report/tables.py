@@ -18,7 +18,17 @@ from typing import Any
 
 from morfic_cli.report import paper
 from morfic_cli.report.claims import PAPER_COMMAND, at_command, is_paper_command
-from morfic_cli.report.compare import robot_order
+from morfic_cli.report.compare import (
+    EXTERNAL_PAPER_TABLES,
+    EXTERNAL_TABLE_VARIANTS,
+    OURS_GROUP,
+    PAPER_GROUP,
+    PAPER_ONLY,
+    external_note,
+    method_name,
+    our_variant,
+    robot_order,
+)
 from morfic_cli.report.model import Part, Row, Table, bold_best
 from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, table_variants, variant_order
 
@@ -91,8 +101,10 @@ def transfer_table(rows: Sequence[dict[str, Any]], *, key: str, title: str, comm
             for c, vb, sb in zip(cells, v_bold, s_bold, strict=True))))
     quantity = r"$v_x^{\max} \pm \sigma / S$" if use_max else r"$\bar{v}_x \pm \sigma / S$"
     meaning = r" ($v_x^{\max}$ as the paper uses it: the mean forward speed under this command)" if use_max else ""
-    where = (f"the target descriptor on the Go2 template ({protocol_text(sel)})" if mode == "descriptor"
-             else f"the target robot model itself ({protocol_text(sel)})")
+    where = {"descriptor": "the target descriptor on the Go2 template",
+             "actuation-matched": "the target descriptor on the Go2 template with Kp, Kd and torque limits x the "
+                                  "target's mass / Go2's"}.get(mode, "the target robot model itself")
+    where = f"{where} ({protocol_text(sel)})"
     caption = (f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s{meaning}, "
                f"σ over all alive env-steps, {where}; bold: best speed and best survival per robot.")
     return Table(key, title, caption, "Target", tuple(method_label(v, p, multi) for p, v in cols),
@@ -118,7 +130,8 @@ def protocol_text(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
-                 command_vx: float = PAPER_COMMAND) -> Table | None:
+                 command_vx: float = PAPER_COMMAND, *, key: str = "critic_metrics_variants",
+                 title: str = "Critic calibration diagnostics") -> Table | None:
     """Robots x variants, cells ``|NVB|/NVE/ASA``; bold lowest |NVB| and NVE, highest ASA per robot.
 
     Only the diagnoses at ``command_vx`` (m/s) are shown.
@@ -141,13 +154,14 @@ def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
     caption = (r"Each cell is $|\mathrm{NVB}|$/NVE/ASA of the critic against Monte-Carlo returns on its own "
                "actor's rollouts; "
                r"lower $|\mathrm{NVB}|$ and NVE, higher ASA are better; bold: best per robot and metric.")
-    key, title = _command_key("critic_metrics_variants", "Critic calibration diagnostics", command_vx)
+    key, title = _command_key(key, title, command_vx)
     return Table(key, title, caption, "Target",
                  tuple(method_label(v, p, multi) for p, v in cols), tuple(out_rows), notes=(_seed_note(sel),))
 
 
 def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
-             command_vx: float = PAPER_COMMAND) -> Table | None:
+             command_vx: float = PAPER_COMMAND, *, key: str = "critic_ev",
+             title: str = "Explained variance of the critics") -> Table | None:
     """Robots x variants, explained variance EV (higher is better; 1 is perfect).
 
     Only the diagnoses at ``command_vx`` (m/s) are shown.
@@ -167,7 +181,7 @@ def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
                                                                                                    strict=True))))
     caption = (r"$\mathrm{EV} = 1 - \mathrm{Var}(G - V) / \mathrm{Var}(G)$ over $I_\epsilon$ (± std over seeds "
                "where there are several); bold: best.")
-    key, title = _command_key("critic_ev", "Explained variance of the critics", command_vx)
+    key, title = _command_key(key, title, command_vx)
     return Table(key, title, caption, "Target",
                  tuple(method_label(v, p, multi) for p, v in cols), tuple(out_rows), notes=(_seed_note(sel),))
 
@@ -321,3 +335,115 @@ def paper_compute_table() -> Table:
                  "Total transitions, PPO iterations, seconds per iteration, single-GPU hours and GPU-hours per 400M "
                  "transitions.", "Method", ("Transitions", "Iters.", "Sec/iter", "GPU-h", "GPU-h@400M", "Notes"),
                  tuple(rows), math=False, source="paper")
+
+
+# ---------------------------------------------------------------------------- the external baselines
+def _paper_external(command_vx: float) -> paper.PaperTable | None:
+    """The paper's external-baselines table at ``command_vx`` (2.0 or 2.5 m/s), else None."""
+    return next((t for t in EXTERNAL_PAPER_TABLES if abs(float(t.command_vx or 0.0) - command_vx) < 1e-9), None)
+
+
+def external_table(rows: Sequence[dict[str, Any]], command_vx: float, *, mode: str = "descriptor") -> Table | None:
+    """Methods x robots, cells ``v ± σ / S`` at ``command_vx``, in two row groups: the paper's, then ours.
+
+    The paper's group is its Table "External baselines vs. MorFiC" (2.0 m/s) or the 2.5 m/s one, as printed (its
+    bold marks: the best of its five methods). Ours are the ``ours`` rows of the ``external`` comparison table
+    (:func:`~morfic_cli.report.compare.external_rows`): mean over seeds, σ over all alive env-steps, bold the best
+    speed and survival per robot among ours. The groups come from different simulators, robot models and rewards,
+    so no bold compares across them. Without a run of ours the group says "not trained yet" (and the note how).
+    Full mode (morfic's extension) has ours only. None when there is nothing to show.
+    """
+    src = _paper_external(command_vx) if mode == "descriptor" else None
+    ours = [r for r in rows if r.get("group") == "ours" and r["mode"] == mode
+            and abs(float(r["command_vx"]) - command_vx) < 1e-9]
+    if src is None and not ours:
+        return None
+    robots = [*paper.ROBOTS, *sorted({r["robot"] for r in ours} - set(paper.ROBOTS))]
+    out_rows: list[Row] = []
+    if src is not None:
+        out_rows.append(Row(PAPER_GROUP))
+        missing = (Part(None), Part(None))
+        for method in src.columns:
+            out_rows.append(Row(f"{method_name(method)} (paper)", tuple(
+                tuple(Part(p.value, p.std, p.decimals, p.bold, p.mark) for p in src.cells[(robot, method)])
+                if (robot, method) in src.cells else missing for robot in robots)))
+    cols = sorted({(r["preset"], r["variant"]) for r in ours},
+                  key=lambda p: (p[0], EXTERNAL_TABLE_VARIANTS.index(p[1])))
+    has_external = any(v != "film" for _, v in cols)
+    out_rows.append(Row(OURS_GROUP if has_external else "Ours: not trained yet"))
+    by = {(r["robot"], r["preset"], r["variant"]): r for r in ours}
+    cells = {c: [by.get((robot, *c)) for robot in robots] for c in cols} if has_external else {}
+    v_bold = [bold_best([(cells[c][i] or {}).get("vx") for c in cells], True) for i in range(len(robots))]
+    s_bold = [bold_best([(cells[c][i] or {}).get("survival") for c in cells], True) for i in range(len(robots))]
+    for k, (preset, variant) in enumerate(cells):
+        n = max(int(r["n_seeds"]) for r in cells[(preset, variant)] if r)
+        out_rows.append(Row(f"{method_name(variant)} ({preset}, {n} seed{'s' if n != 1 else ''})", tuple(
+            (Part(c["vx"] if c else None, c["vx_std"] if c else None, 2, v_bold[i][k]),
+             Part(c["survival"] if c else None, None, 3, s_bold[i][k]))
+            for i, c in enumerate(cells[(preset, variant)]))))
+    use_max = src is not None and src.parts[0] == "vx_max"
+    quantity = r"$v_x^{\max} \pm \sigma / S$" if use_max else r"$\bar{v}_x \pm \sigma / S$"
+    ours_rows = [r for c in cells for r in cells[c] if r]
+    where = ("the target descriptor on the Go2 template" if mode == "descriptor" else "the target robot model itself")
+    caption = (f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s"
+               + (r" ($v_x^{\max}$ as the paper uses it: the mean forward speed under this command)" if use_max else "")
+               + ("; the paper's rows are its published numbers (URMA, GenLoco and Embodiment Scaling from their "
+                  "released weights, BodyTransformer trained by the paper to 400M transitions; each in its own "
+                  "simulator with its own robot models and commands; GenLoco takes no command; - = no forward "
+                  "motion), bold the paper's" if src is not None else "")
+               + "; ours re-implement each approach in morfic's pipeline (the Go2 template, rewards, curriculum and "
+               f"budget of MorFiC-F), on {where}"
+               + (f" ({protocol_text(ours_rows)})" if ours_rows else "") + ", bold the best of ours per robot.")
+    notes = [PAPER_ONLY[m] for m in (src.columns if src is not None else ()) if m in PAPER_ONLY]
+    notes += [_seed_note(ours_rows, pooled=True)] if ours_rows else [external_note(False)]
+    key = f"external_baselines_{command_vx:.1f}".replace(".", "_") + ("" if mode == "descriptor" else "_full")
+    title = f"External baselines vs. MorFiC-F at {command_vx:.1f} m/s" + (
+        "" if mode == "descriptor" else " on the targets' own models")
+    return Table(key, title, caption, "Method", tuple(robot_label(r) for r in robots), tuple(out_rows),
+                 notes=tuple(notes))
+
+
+def _duration(seconds: float | None) -> str:
+    """``"1.25 h"`` from an hour up, ``"38 s"`` / ``"12.5 min"`` below; "-" when unknown."""
+    if seconds is None:
+        return "-"
+    if seconds >= 3600:
+        return f"{seconds / 3600:.2f} h"
+    return f"{seconds / 60:.1f} min" if seconds >= 60 else f"{seconds:.0f} s"
+
+
+def external_compute_table(rows: Sequence[dict[str, Any]]) -> Table:
+    """The compute of the external baselines and MorFiC-F: ours (per preset), then the paper's.
+
+    Ours: the actor's and the critic's parameters (``sum(p.numel())`` of the models each run's stored config builds),
+    transitions, the training wall time here (``meta.wall_time_s``, mean over seeds) and where (the device, and the
+    machine where the run records one). The paper's: its Table "Training compute" rows of these methods, their
+    single-GPU hours as printed (the paper counts no parameters).
+    """
+    def count(n: Any) -> Part:
+        return Part(None, text="-" if n is None else f"{int(n):,}")
+
+    ours = sorted((r for r in rows if r["variant"] in EXTERNAL_TABLE_VARIANTS),
+                  key=lambda r: (r["preset"], EXTERNAL_TABLE_VARIANTS.index(r["variant"])))
+    out_rows: list[Row] = [Row(OURS_GROUP)] if ours else []
+    for r in ours:
+        n = int(r["n_seeds"])
+        where = r["device"] + (f" ({r['machine']})" if r.get("machine") else "")
+        out_rows.append(Row(f"{method_name(r['variant'])} ({r['preset']}, {n} seed{'s' if n != 1 else ''})", (
+            (count(r.get("actor_params")),), (count(r.get("critic_params")),),
+            (Part(None, text=_si(r["transitions"])),), (Part(None, text=_duration(r.get("wall_time_s"))),),
+            (Part(None, text=where),))))
+    out_rows.append(Row(f"The paper's (its Table \"{paper.TRAINING_COMPUTE_TITLE}\")"))
+    for p in paper.TRAINING_COMPUTE:
+        if our_variant(p.method) in EXTERNAL_TABLE_VARIANTS or p.method == "embodiment-scaling":
+            out_rows.append(Row(f"{p.label} (paper)", (
+                (Part(None, text="-"),), (Part(None, text="-"),), (Part(None, text=p.transitions_text),),
+                (Part(None, text=f"{p.gpu_hours_text.replace('--', '–')} GPU-h"),),
+                (Part(None, text=f"the paper's GPU; {p.notes}"),))))
+    caption = ("Parameters of the actor and of the critic (a module they share counts in both), transitions, the "
+               "training time and where it ran: ours as measured here (the run's wall time, mean over seeds), the "
+               "paper's as it prints them (single-GPU hours).")
+    notes = (_seed_note(ours),) if ours else ()
+    return Table("external_compute", "Compute of the external baselines", caption, "Method",
+                 ("Actor params", "Critic params", "Transitions", "Time", "Where"), tuple(out_rows), math=False,
+                 notes=notes)

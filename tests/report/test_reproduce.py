@@ -150,7 +150,10 @@ def test_compare_baselines_with_paper_csv_has_the_papers_aliengo_film_value(run_
     code, out, err = run_cli("compare-baselines", "--with-paper", "--format", "csv")
     assert code == 0, err
     rows = list(csv.DictReader(io.StringIO(out)))
-    assert {r["table"] for r in rows} == {"transfer", "calibration", "fixed_rollout", "compute"}
+    # with --with-paper and no external baseline trained: the external table holds the paper's group only
+    assert {r["table"] for r in rows} == {"transfer", "external", "calibration", "fixed_rollout", "compute",
+                                          "verdicts"}
+    assert {r["group"] for r in rows if r["table"] == "external"} == {"paper"}
     cell = next(r for r in rows if r["table"] == "transfer" and r["variant"] == "film" and r["robot"] == "aliengo"
                 and r["mode"] == "descriptor" and float(r["command_vx"]) == 2.0)
     assert float(cell["paper_vx"]) == 1.98 and cell["paper_table"] == "tab:zero_shot_transfer"
@@ -212,7 +215,10 @@ def test_report_markdown_default_with_paper_tables(run_cli, store, tmp_path):
     assert "**Zero-shot cross-morphology transfer (paper).**" in md
     assert "| AlienGo | 0.27 ± 0.07 / 0.000 | 0.64 ± 0.26 / **1.000** | 0.40 ± 0.18 / 0.156 | " \
            "**1.98 ± 0.51** / **1.000** |" in md
-    assert "| B1 | - / - |" in md  # URMA's "--" stays missing
+    # the external baselines' table: the paper's rows (URMA's "-/-" on AlienGo stays missing), ours not trained yet
+    assert "| URMA (paper) | 1.84 ± 0.26 / **1.000** | 1.93 ± 0.28 / **1.000** | 1.79 ± 0.25 / **1.000** | - / - |" \
+        in md
+    assert "| *Ours: not trained yet* |" in md
     ours = md[md.index("**Zero-shot cross-morphology transfer.**"):md.index("(paper).**")]
     assert "| Target | PPO | MorFiC-F |" in ours and "**" in ours.split("|---|")[1]
 
