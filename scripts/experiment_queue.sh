@@ -4,10 +4,11 @@
 # --preset cpu`'s steps for this run, skipped where the store holds them, its critic scored on the frozen film actor's
 # rollouts, evaluated and diagnosed at 1.0 m/s too), copy its result tables under docs/results/, regenerate
 # docs/results.md's tables, claims and figures (scripts/results_tables.py) and ship it as a results-only bundle
-# (artifacts/bundles/results/<run>.tar: its evals and diagnoses without weights, logs or other runs' curves; `morfic
-# store import` it, then `morfic report runs/<run>`) and a weights-only one (~7 MiB: import it on top to evaluate or
-# diagnose the run again): a seed-0 run's at artifacts/bundles/<run>.tar (what `reproduce --preset shipped` imports),
-# any other seed's at artifacts/bundles/weights/<run>.tar.
+# (artifacts/bundles/results/<run>.tar: its evals' and diagnoses' tables without weights, logs, rendered figures or
+# other runs' curves; `morfic store import` it, then `morfic report runs/<run>`, which draws the figures) and a
+# weights-only one (~7 MiB: import it on top to evaluate or diagnose the run again): a seed-0 run's at
+# artifacts/bundles/<run>.tar (what `reproduce --preset shipped` imports), any other seed's at
+# artifacts/bundles/weights/<run>.tar.
 #
 # Usage: scripts/experiment_queue.sh [--stop-at HH:MM] [--last-start HH:MM] [--train-at COMMIT] VARIANT:SEED ...
 #   e.g.  MORFIC_STORE=/work/stores/exp nohup scripts/experiment_queue.sh --stop-at 23:05 concat:0 actor-only:0 \

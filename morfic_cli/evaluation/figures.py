@@ -8,6 +8,10 @@ of each fall (a termination that is not a time-out). Middle: foot slip, the mean
 contact, over the same alive envs (mean and band), with the validity threshold (an env whose mean slip is above it
 drags its feet). Bottom: survival S(t), the fraction of envs alive at t, which ends at the table's S. Legends sit
 right of the axes, off the data. Each figure is ``(png, pdf)`` bytes (the PDF without a creation date).
+
+A rollout imported from a results-only bundle has neither its log nor its figure (docs/concepts.md, "Results-only
+bundles"); :func:`table_figure` then draws the same verdict line with the eval table's numbers instead of the time
+series (:func:`figure_or_table`).
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from __future__ import annotations
 import io
 from collections import Counter
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -169,26 +173,131 @@ def rollout_figure(vx: np.ndarray, terminated: np.ndarray, dt: float, command_vx
     return png.getvalue(), pdf.getvalue()
 
 
-def write_figures(store: Store, eval_id: str, out: Path) -> list[Path]:
-    """Copy the stored figure of every rollout of eval ``eval_id`` into the ``--out`` directory.
+def _number(row: dict[str, Any], key: str) -> float:
+    """``row[key]`` as a float (NaN when empty or missing): eval rows come from CSV text or pandas."""
+    try:
+        return float(row.get(key))
+    except (TypeError, ValueError):
+        return float("nan")
 
-    Names: ``<robot>-<mode>-vx<cmd>-speed.png`` (and ``.pdf``) in ``out``.
+
+def table_figure(row: dict[str, Any], title: str) -> tuple[bytes, bytes]:
+    """One rollout's figure drawn from its eval-table row, for a rollout whose time series is not in the store.
+
+    The verdict line as :func:`rollout_figure` draws it (valid envs out of ``num_envs``); left, v_x over the
+    rollout (``vx_mean``, error bar ``vx_std``) and its best 1 s (``vx_peak_1s_mean`` ± ``vx_peak_1s_std``) beside
+    the command (dashed); right, the survival S and the valid fraction in percent. A note under the axes says the
+    time series was left out (a results-only bundle) and how to draw it again.
+
+    Args:
+        row: One row of ``eval.csv`` (:data:`~morfic_cli.evaluation.protocol.EVAL_COLUMNS`; strings or numbers).
+        title: Figure title, e.g. ``film-cpu-s0 on go1, descriptor mode, command 2.0 m/s``.
+
+    Returns:
+        ``(png, pdf)`` bytes (the PDF without a creation date).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    command = _number(row, "command_vx")
+    n = _number(row, "num_envs")
+    valid = _number(row, "valid_fraction")
+    fig, (ax, ax_s) = plt.subplots(1, 2, figsize=(6.4, 3.4), width_ratios=(1.6, 1.0), constrained_layout=True)
+    labels = ("whole rollout", "best 1 s")
+    means = [_number(row, "vx_mean"), _number(row, "vx_peak_1s_mean")]
+    errors = [_number(row, "vx_std"), _number(row, "vx_peak_1s_std")]
+    for k, (mean, err) in enumerate(zip(means, errors, strict=True)):
+        ax.errorbar([k], [mean], yerr=[0.0 if np.isnan(err) else err], fmt="o", color=f"C{k}", capsize=4, ms=7)
+        if np.isfinite(mean):
+            ax.annotate(f"{mean:.2f}", (k, mean), xytext=(8, 0), textcoords="offset points", va="center", fontsize=8)
+    if np.isfinite(command):
+        ax.axhline(command, color="black", ls="--", lw=1.0, label=f"command {command:g} m/s")
+        ax.legend(fontsize=7, loc="lower right")
+    ax.set_xticks(range(len(labels)), labels, fontsize=8)
+    ax.set_xlim(-0.6, len(labels) - 0.4)
+    top = np.nanmax([command, *(m + (e if np.isfinite(e) else 0.0) for m, e in zip(means, errors, strict=True))])
+    ax.set_ylim(min(0.0, np.nanmin([*means, 0.0])) - 0.1, 1.15 * (top if np.isfinite(top) else 1.0) + 0.1)
+    ax.set_ylabel("v_x (m/s), mean ± σ", fontsize=9)
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3, axis="y")
+    ax.tick_params(labelsize=8)
+    shares = [100.0 * _number(row, "survival"), 100.0 * valid]
+    ax_s.bar([0, 1], [0.0 if np.isnan(v) else v for v in shares], color=["C2", "C4"], width=0.6)
+    for k, v in enumerate(shares):
+        ax_s.annotate("n/a" if np.isnan(v) else f"{v:.0f} %", (k, 0.0 if np.isnan(v) else v), xytext=(0, 3),
+                      textcoords="offset points", ha="center", fontsize=8)
+    ax_s.set_xticks([0, 1], ["alive at the end (S)", "valid gait"], fontsize=8)
+    ax_s.set_ylim(0, 112)
+    ax_s.set_ylabel("envs (%)", fontsize=9)
+    ax_s.grid(alpha=0.3, axis="y")
+    ax_s.tick_params(labelsize=8)
+    verdict = str(row.get("verdict") or "n/a")
+    counted = f"valid {round(valid * n)}/{int(n)}" if np.isfinite(valid) and np.isfinite(n) else "valid n/a"
+    fig.suptitle(f"verdict: {verdict} – {counted}", fontsize=9, fontweight="bold",
+                 color="C2" if verdict == "ok" else "C3")
+    fig.text(0.5, -0.02, "from the eval table: the time series was left out (a results-only bundle); import the "
+             "run's weights and `morfic eval` it to draw it", ha="center", va="top", fontsize=7, color="0.35")
+    png, pdf = io.BytesIO(), io.BytesIO()
+    fig.savefig(png, format="png", dpi=110, bbox_inches="tight")
+    fig.savefig(pdf, format="pdf", metadata={"CreationDate": None}, bbox_inches="tight")
+    plt.close(fig)
+    return png.getvalue(), pdf.getvalue()
+
+
+def figure_or_table(store: Store, rollout_id: str, row: dict[str, Any] | None, title: str
+                    ) -> tuple[bytes, bytes] | None:
+    """The ``(png, pdf)`` figure of rollout ``rollout_id``: the stored one, or :func:`table_figure` of ``row``.
+
+    The stored ``speed.png`` / ``speed.pdf`` when the store holds them; drawn from the eval row when a
+    results-only bundle left them out (``store.omitted_files``); None when the rollout has no figure (or it was
+    left out and there is no row to draw from).
+    """
+    from morfic_cli.evaluation.protocol import FIGURE_PDF, FIGURE_PNG
+
+    manifest = store.read_manifest(rollout_id)
+    if FIGURE_PNG not in manifest.files or FIGURE_PDF not in manifest.files:
+        return None
+    if not {FIGURE_PNG, FIGURE_PDF} & set(store.omitted_files(manifest)):
+        return store.read_file(rollout_id, FIGURE_PNG), store.read_file(rollout_id, FIGURE_PDF)
+    return None if row is None else table_figure(row, title)
+
+
+def write_figures(store: Store, eval_id: str, out: Path) -> list[Path]:
+    """Write the figure of every rollout of eval ``eval_id`` into the ``--out`` directory.
+
+    The stored figure, or (left out by a results-only bundle) one drawn from the eval's table
+    (:func:`figure_or_table`). Names: ``<robot>-<mode>-vx<cmd>-speed.png`` (and ``.pdf``) in ``out``.
 
     Returns:
         The paths written.
     """
-    from morfic_cli.evaluation.media import media_name
-    from morfic_cli.evaluation.protocol import FIGURE_PDF, FIGURE_PNG
+    import csv
 
+    from morfic_cli.evaluation.media import media_name
+    from morfic_cli.evaluation.protocol import rollout_role
+
+    manifest = store.read_manifest(eval_id)
+    rows = {}
+    if "eval.csv" in manifest.files:
+        text = store.read_file(eval_id, "eval.csv").decode()
+        rows = {rollout_role(r["robot"], r["mode"], float(r["command_vx"])): r
+                for r in csv.DictReader(io.StringIO(text))}
+    run = manifest.meta.get("run", "")
     written = []
-    for role, rid in store.read_manifest(eval_id).inputs.items():
+    for role, rid in manifest.inputs.items():
         if not role.startswith("rollout/"):
             continue
-        files = store.read_manifest(rid).files
+        row = rows.get(role)
+        title = (f"{run} on {row['robot']}, {row['mode']} mode, command {float(row['command_vx']):g} m/s"
+                 if row else role)
+        figure = figure_or_table(store, rid, row, title)
+        if figure is None:
+            continue
         stem = f"{media_name(role)}-speed"
-        for name in (FIGURE_PNG, FIGURE_PDF):
-            if name in files:
-                path = out / (stem + Path(name).suffix)
-                path.write_bytes(store.read_file(rid, name))
-                written.append(path)
+        for suffix, data in zip((".png", ".pdf"), figure, strict=True):
+            path = out / (stem + suffix)
+            path.write_bytes(data)
+            written.append(path)
     return written

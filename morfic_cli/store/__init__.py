@@ -50,7 +50,7 @@ from morfic_cli.store.objects import ObjectDB, store_os_error
 from morfic_cli.store.publish import Published, publish
 from morfic_cli.store.refs import ANY, RefDB, RefEntry, RefMovedError, check_ref_name, pick_version, split_spec
 from morfic_cli.store.results import RUN_FILE
-from morfic_cli.store.shallow import OMITTABLE_FILES, OMITTABLE_ROLES, OmittedIndex
+from morfic_cli.store.shallow import OMITTABLE_ROLES, OmittedIndex, omittable_file
 from morfic_cli.store.transfer import AppendRule, ExportReport, ImportReport, export_tar, import_tar
 
 __all__ = [
@@ -174,9 +174,9 @@ class Store:
                 if role in OMITTABLE_ROLES and self.is_omitted(oid)}
 
     def omitted_files(self, manifest: Manifest) -> dict[str, str]:
-        """File name -> id of the files of ``manifest`` that a results-only import left out (weights, logs, curves)."""
+        """File name -> id of the files of ``manifest`` an import left out (weights, logs, curves, figures)."""
         return {name: entry.id for name, entry in manifest.files.items()
-                if name in OMITTABLE_FILES and self.is_omitted(entry.id)}
+                if omittable_file(manifest.kind, name) and self.is_omitted(entry.id)}
 
     def weights_omitted(self, manifest: Manifest) -> bool:
         """Whether ``manifest``'s weights (``model.pt``) were left out (a run imported from a results-only bundle).
@@ -271,12 +271,14 @@ class Store:
 
     def _file_entry(self, manifest_spec: str, name: str) -> FileEntry:
         """File ``name`` of a manifest; one a results-only bundle left out is an error that says so."""
-        entry = self.read_manifest(manifest_spec).file(name)
-        if name in OMITTABLE_FILES and self.is_omitted(entry.id):
+        manifest = self.read_manifest(manifest_spec)
+        entry = manifest.file(name)
+        if omittable_file(manifest.kind, name) and self.is_omitted(entry.id):
             raise ArtifactNotFoundError(f"file '{name}' ({entry.id[:12]}) of {manifest_spec} is not in store "
                                         f"{self.root}: a results-only bundle left it out (results without weights, "
-                                        "rollout logs or other runs' curves); import a bundle that holds it (the "
-                                        "run's weights-only or full bundle) to get it.")
+                                        "rollout logs, rendered figures or other runs' curves); `morfic report` "
+                                        "draws the figures from the tables, and a bundle that holds the file (the "
+                                        "run's weights-only or full bundle) brings it.")
         return entry
 
     # -- refs ---------------------------------------------------------------------------------
@@ -359,7 +361,7 @@ class Store:
             if self.is_omitted(hexid):
                 raise ArtifactNotFoundError(f"artifact {hexid} is not in store {self.root}: a weights-only bundle "
                                             "left it out (a trainer state), or a results-only one (a trainer state, "
-                                            "weights or a rollout log); import the full bundle to get it.")
+                                            "weights, a rollout log or a figure); import the full bundle to get it.")
             raise self._not_found(text)
         if len(hexid) < MIN_PREFIX or len(hexid) > 64:
             raise ArtifactNotFoundError(f"id prefix '{text}' is too short: give at least {MIN_PREFIX} hex "

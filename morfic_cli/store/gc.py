@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from morfic_cli.errors import StoreError
 from morfic_cli.store.manifest import MANIFEST_MAGIC, Manifest, parse_manifest
 from morfic_cli.store.objects import CHUNK_SIZE, unlink_quiet
-from morfic_cli.store.shallow import NOTHING, OMITTABLE_FILES, OMITTABLE_ROLES, LeaveOut
+from morfic_cli.store.shallow import NOTHING, OMITTABLE_ROLES, LeaveOut, omittable_file
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -37,7 +37,8 @@ class VerifyReport:
         temp_files: Leftover temp files (harmless; ``gc`` removes them).
         omitted: Manifest inputs known to be absent (trainer states left out of a weights-only or results-only
             import).
-        omitted_files: Manifest files known to be absent (weights and rollout logs left out of a results-only import).
+        omitted_files: Manifest files known to be absent (weights, rollout logs and figures left out of a
+            results-only import).
         problems: One line per problem; empty for a healthy store.
     """
 
@@ -140,9 +141,9 @@ def walk(store: Store, roots: Iterable[str], *, strict: bool = True, leave_out: 
     """Every id reachable from ``roots`` (manifest -> files and inputs, recursively), and the known-absent ones.
 
     Roots and inputs must be manifests. Ids that are not stored are included (they are referenced) but not
-    followed. An input under a role of :data:`~morfic_cli.store.shallow.OMITTABLE_ROLES`, or a file under a name
-    of :data:`~morfic_cli.store.shallow.OMITTABLE_FILES`, that is missing but marked omitted (``shallow/<id>``) is
-    known-absent, not damage; inputs under ``leave_out.roles`` and the files it leaves out
+    followed. An input under a role of :data:`~morfic_cli.store.shallow.OMITTABLE_ROLES`, or a file its manifest
+    may lack (:func:`~morfic_cli.store.shallow.omittable_file`), that is missing but marked omitted
+    (``shallow/<id>``) is known-absent, not damage; inputs under ``leave_out.roles`` and the files it leaves out
     (:meth:`~morfic_cli.store.shallow.LeaveOut.leaves_out`) are not followed (a weights-only or results-only export)
     unless something else reaches them.
 
@@ -163,11 +164,11 @@ def walk(store: Store, roots: Iterable[str], *, strict: bool = True, leave_out: 
     absent_files: dict[str, str] = {}
     skipped: dict[str, str] = {}
     skipped_files: dict[str, str] = {}
-    # (id, role, file name): role "" a root, None a file (then its name)
-    stack: list[tuple[str, str | None, str]] = [(oid, "", "") for oid in roots]
+    # (id, role, file name, kind): role "" a root, None a file (then its name and its manifest's kind)
+    stack: list[tuple[str, str | None, str, str]] = [(oid, "", "", "") for oid in roots]
     while stack:
         while stack:
-            oid, role, name = stack.pop()
+            oid, role, name, kind = stack.pop()
             must_be_manifest = role is not None
             if oid in seen and not (must_be_manifest and oid not in manifests and oid not in damaged):
                 continue
@@ -175,7 +176,7 @@ def walk(store: Store, roots: Iterable[str], *, strict: bool = True, leave_out: 
                 if must_be_manifest and role in OMITTABLE_ROLES:
                     absent[oid] = role
                     continue
-                if not must_be_manifest and name in OMITTABLE_FILES:
+                if not must_be_manifest and omittable_file(kind, name):
                     absent_files.setdefault(oid, name)
                     continue
             seen.add(oid)
@@ -194,17 +195,17 @@ def walk(store: Store, roots: Iterable[str], *, strict: bool = True, leave_out: 
                 continue
             manifests.add(oid)
             for file_name, entry in manifest.files.items():
-                if leave_out.leaves_out(oid, file_name):
+                if leave_out.leaves_out(oid, file_name, manifest.kind):
                     skipped_files.setdefault(entry.id, file_name)
                 else:
-                    stack.append((entry.id, None, file_name))
+                    stack.append((entry.id, None, file_name, manifest.kind))
             for input_role, input_id in manifest.inputs.items():
                 if input_role in leave_out.roles:
                     skipped.setdefault(input_id, input_role)
                 else:
-                    stack.append((input_id, input_role, ""))
+                    stack.append((input_id, input_role, "", ""))
         # an omitted input that something else reaches (seen, say, as a plain file) is walked after all
-        stack = [(oid, skipped.pop(oid), "") for oid in sorted(skipped) if oid in seen and oid not in manifests]
+        stack = [(oid, skipped.pop(oid), "", "") for oid in sorted(skipped) if oid in seen and oid not in manifests]
     absent.update((oid, role) for oid, role in skipped.items() if oid not in seen)
     absent_files.update((oid, name) for oid, name in skipped_files.items() if oid not in seen and oid not in absent)
     for oid in seen & set(absent_files):  # reached as something kept after all
@@ -330,7 +331,7 @@ def _verify_index(store: Store, report: VerifyReport) -> None:
 
 def _verify_manifest_links(store: Store, manifest: Manifest, report: VerifyReport) -> None:
     for name, entry in manifest.files.items():
-        if name in OMITTABLE_FILES and store.is_omitted(entry.id):
+        if omittable_file(manifest.kind, name) and store.is_omitted(entry.id):
             report.omitted_files += 1
         elif not store.objects.has(entry.id):
             report.problems.append(f"manifest {manifest.id}: file '{name}' object {entry.id} is missing")

@@ -4,7 +4,8 @@ The tar mirrors the store layout and holds the closure of the named refs::
 
     morfic-export.json           {"format": 1, "morfic_version": ..., "refs": [...], "objects": N}
                                  (+ "omitted": {id: "trainer_state"} in a weights-only export,
-                                  + "omitted_files": {id: "model.pt"} in a results-only one)
+                                  + "omitted_files": {id: "model.pt"} in a results-only one,
+                                    "speed.png" for a rendered figure)
     objects/ab/cdef...           every object reachable from any version of those refs
     manifests/<id>               index markers of the manifests among them
     refs/<name>                  the full history of each named ref
@@ -16,10 +17,10 @@ ref history (see :func:`morfic_cli.store.refs.merge_status`); it is idempotent a
 
 A weights-only export (``without_trainer_state``) leaves out the ``trainer_state`` inputs of the checkpoints
 and lists them under ``omitted``; a results-only export (``results_only``, refs chosen by
-:mod:`morfic_cli.store.results`) also leaves out the weight and rollout-log files (and other runs'
-curves) and lists them under ``omitted_files``. Their manifests are the store's, byte for byte. Importing one
-records the omitted ids the store lacks under ``shallow/`` (:mod:`morfic_cli.store.shallow`); exporting from such
-a store leaves them out (and lists them) by itself.
+:mod:`morfic_cli.store.results`) also leaves out the weight and rollout-log files, the rendered figures (and
+other runs' curves) and lists them under ``omitted_files``. Their manifests are the store's, byte for byte.
+Importing one records the omitted ids the store lacks under ``shallow/`` (:mod:`morfic_cli.store.shallow`);
+exporting from such a store leaves them out (and lists them) by itself.
 """
 
 from __future__ import annotations
@@ -59,7 +60,17 @@ from morfic_cli.store.refs import (
     next_entry,
 )
 from morfic_cli.store.results import results_histories
-from morfic_cli.store.shallow import NOTHING, OMITTABLE_FILES, OMITTABLE_ROLES, RESULTS_ONLY, WEIGHTS_ONLY
+from morfic_cli.store.shallow import (
+    FIGURE_KINDS,
+    FIGURE_SUFFIXES,
+    NOTHING,
+    OMITTABLE_FILES,
+    OMITTABLE_ROLES,
+    RESULTS_ONLY,
+    WEIGHTS_ONLY,
+    is_figure,
+    omittable_file,
+)
 from morfic_cli.validation import stored_cfg_problem
 
 if TYPE_CHECKING:
@@ -82,8 +93,8 @@ class ExportReport:
         objects: Objects in the tar.
         bytes: Their total size.
         omitted: Inputs left out (id -> role ``trainer_state``), listed in the header; empty for a full export.
-        omitted_files: Files left out (id -> file name: ``model.pt``, ``rollout.mcap``, ``obs.npz``), listed in
-            the header; empty but for a results-only export.
+        omitted_files: Files left out (id -> file name: ``model.pt``, ``rollout.mcap``, ``obs.npz``, a figure such
+            as ``speed.png``), listed in the header; empty but for a results-only export.
     """
 
     path: Path
@@ -195,9 +206,9 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
 
     With ``results_only``, ``refs`` are runs and the tar holds their results
     (:func:`morfic_cli.store.results.results_histories` picks the refs and history prefixes; ``latest`` changes
-    nothing) without the trainer states, weights, rollout logs and the training curves of checkpoints other than
-    the runs' own (listed under ``omitted`` and ``omitted_files``): a bundle that ``morfic report`` reads, but
-    that cannot evaluate, diagnose or resume.
+    nothing) without the trainer states, weights, rollout logs, rendered figures and the training curves of
+    checkpoints other than the runs' own (listed under ``omitted`` and ``omitted_files``): a bundle that ``morfic
+    report`` reads (it draws the figures from the tables), but that cannot evaluate, diagnose or resume.
 
     Raises:
         ArtifactNotFoundError: A name that is not a ref.
@@ -680,24 +691,41 @@ def _read_header(tar: tarfile.TarFile, members: _Members, path: Path) -> dict:
     if not isinstance(header["morfic_version"], str) or len(header["morfic_version"]) > 100:
         raise bad
     header["refs"] = sorted(refs)
-    header["omitted"] = _read_omitted(header.get("omitted", {}), bad, path, OMITTABLE_ROLES, "input")
-    header["omitted_files"] = _read_omitted(header.get("omitted_files", {}), bad, path, OMITTABLE_FILES, "file")
+    header["omitted"] = _read_omitted(header.get("omitted", {}), bad, path, OMITTABLE_ROLES.__contains__, "input",
+                                      ", ".join(sorted(OMITTABLE_ROLES)))
+    header["omitted_files"] = _read_omitted(header.get("omitted_files", {}), bad, path, _omittable_label, "file",
+                                            _OMITTABLE_FILES_TEXT)
     return header
 
 
-def _read_omitted(omitted: object, bad: StoreError, path: Path, allowed: frozenset[str], what: str) -> dict[str, str]:
+_OMITTABLE_FILES_TEXT = (f"{', '.join(sorted(OMITTABLE_FILES))} and rendered figures "
+                         f"({'/'.join(s.lstrip('.') for s in FIGURE_SUFFIXES)} of {', '.join(sorted(FIGURE_KINDS))} "
+                         "artifacts)")
+"""What a bundle may leave out of a manifest's files, for messages."""
+
+
+def _omittable_label(label: str) -> bool:
+    """Whether a header's ``omitted_files`` label may name a left-out file: an omittable name, or a plain figure name.
+
+    Which manifest kind the figure belongs to is checked with the manifest (:func:`_check_manifest`).
+    """
+    return label in OMITTABLE_FILES or (is_figure(label) and plain_name_problem(label) is None)
+
+
+def _read_omitted(omitted: object, bad: StoreError, path: Path, allowed: Callable[[str], bool], what: str,
+                  allowed_text: str) -> dict[str, str]:
     """The header's ``omitted`` (id -> role) or ``omitted_files`` (id -> file name) map, checked.
 
-    Full ids, and only the roles or file names (``allowed``) a bundle may leave out.
+    Full ids, and only the roles or file names (``allowed``, described by ``allowed_text``) a bundle may leave out.
     """
     if not (isinstance(omitted, dict) and all(isinstance(k, str) and is_object_id(k) for k in omitted)):
         raise bad
     for oid, label in omitted.items():
-        if label not in allowed:
+        if not isinstance(label, str) or not allowed(label):
             shown = label[:40] if isinstance(label, str) else type(label).__name__
             raise StoreError(f"{path} leaves out {what} {oid} as {shown!r}, but a bundle may only leave out "
-                             f"{', '.join(sorted(allowed))} {what}s; nothing was imported. Export it again "
-                             "with everything it needs.")
+                             f"{allowed_text} {what}s; nothing was imported. Export it again with everything it "
+                             "needs.")
     return dict(omitted)
 
 
@@ -719,7 +747,8 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
     """Parse an exported manifest strictly and check that everything it names is there, with the right size.
 
     An input may instead be declared left out (``omitted``), under its own role, which must be ``trainer_state``;
-    a file (``omitted_files``) under a name of ``OMITTABLE_FILES``.
+    a file (``omitted_files``) under a name its manifest's kind may lack (:func:`~morfic_cli.store.shallow.
+    omittable_file`: ``OMITTABLE_FILES``, or a rendered figure of a result).
     Returns the declared-omitted ids this manifest names.
     """
     if oid in plan.staged:
@@ -765,10 +794,10 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
         if size is None and store.objects.intact(entry.id):
             size = store.objects.size(entry.id)
         if entry.id in omitted_files:
-            if name not in OMITTABLE_FILES:
-                raise StoreError(f"manifest {oid} in the export names the left-out file {entry.id} as '{name}', "
-                                 f"but only {', '.join(sorted(OMITTABLE_FILES))} files may be left out; nothing was "
-                                 "imported. Export it again with everything it needs.")
+            if not omittable_file(manifest.kind, name):
+                raise StoreError(f"manifest {oid} in the export names the left-out file {entry.id} as '{name}' (a "
+                                 f"{manifest.kind} artifact), but only {_OMITTABLE_FILES_TEXT} files may be left "
+                                 "out; nothing was imported. Export it again with everything it needs.")
             named.add(entry.id)
             if size is None:
                 continue

@@ -61,3 +61,36 @@ def test_the_verdict_line_is_the_tables_verdict_with_each_failure_counted():
     assert verdict_line(np.array(["ok", "ok", "drags feet"])) == ("verdict: ok \u2013 valid 2/3 (drags feet 1)", True)
     png, pdf = rollout_figure(vx, terminated, 0.02, 1.0, "t", foot_slip=slip, outcomes=outcomes, verdict=m.verdict)
     assert png.startswith(b"\x89PNG") and pdf.startswith(b"%PDF")
+
+
+def test_a_left_out_speed_figure_is_drawn_from_the_eval_row(tmp_path):
+    """A rollout imported results-only has no speed figure: `eval --out` (and the report) draw it from eval.csv."""
+    import csv
+    import io
+
+    from morfic_cli.evaluation.figures import figure_or_table, table_figure, write_figures
+    from morfic_cli.store import Store
+
+    src = Store(tmp_path / "src")
+    ckpt = src.put_manifest("checkpoint", config={"variant": "film"}, files={"model.pt": b"w", "curve.csv": b"it\n1"})
+    src.set_ref("runs/x", ckpt)
+    rollout = src.put_manifest("rollout", config={"robot": "go1"}, inputs={"checkpoint": ckpt},
+                               files={"rollout.mcap": b"log", "speed.png": b"png", "speed.pdf": b"pdf"})
+    table = (b"robot,mode,command_vx,vx_mean,vx_std,vx_peak_1s_mean,vx_peak_1s_std,survival,valid_fraction,verdict,"
+             b"num_envs\ngo1,descriptor,2.0,1.5,0.25,1.75,0.5,0.75,0.5,ok,8\n")
+    ev = src.put_manifest("eval", inputs={"checkpoint": ckpt, "rollout/go1/descriptor/vx2": rollout},
+                          files={"eval.csv": table}, meta={"run": "x"})
+    src.set_ref("evals/x", ev)
+    assert figure_or_table(src, rollout, None, "t") == (b"png", b"pdf")  # stored: read back as it is
+    dst = Store(tmp_path / "dst")
+    dst.import_tar(src.export_tar(["runs/x"], tmp_path / "x.tar", results_only=True).path)
+    assert set(dst.omitted_files(dst.read_manifest(rollout))) == {"rollout.mcap", "speed.png", "speed.pdf"}
+    assert figure_or_table(dst, rollout, None, "t") is None  # left out, and no row to draw it from
+    row = next(csv.DictReader(io.StringIO(table.decode())))
+    drawn = table_figure(row, "x on go1, descriptor mode, command 2 m/s")
+    assert drawn[0].startswith(b"\x89PNG") and drawn[1].startswith(b"%PDF")
+    paths = write_figures(dst, ev, tmp_path)
+    assert [p.name for p in paths] == ["go1-descriptor-vx2-speed.png", "go1-descriptor-vx2-speed.pdf"]
+    assert [p.read_bytes() for p in paths] == list(drawn)
+    (tmp_path / "out").mkdir()
+    assert [p.read_bytes() for p in write_figures(src, ev, tmp_path / "out")] == [b"png", b"pdf"]

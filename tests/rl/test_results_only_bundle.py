@@ -62,22 +62,32 @@ def _tar_objects(path) -> set[str]:
 def test_the_bundle_holds_the_results_and_none_of_the_weights_or_logs(bundles):
     src, results, weights, full = bundles
     assert results.refs == ["diagnoses/calibration", "diagnoses/fixed-rollout/aliengo", "evals/film-smoke-s1", RUN]
-    # every weight, trainer state and rollout log in the source store, and seed 0's curve, by kind and file name
-    heavy, states = set(), set()
+    # every weight, trainer state and rollout log in the source store, every rendered figure of a result (the eval
+    # rollouts' speed.png/pdf, the calibrations' ev.png/pdf) and every curve.png, and seed 0's curve table
+    heavy, states, figures = set(), set(), {}
     seed0 = src.read_manifest("runs/film-smoke-s0")
     for oid in src.index.ids():
         manifest = src.read_manifest(oid)
         heavy |= {e.id for n, e in manifest.files.items() if n in HEAVY}
+        figures |= {e.id: n for n, e in manifest.files.items()
+                    if n.endswith((".png", ".pdf")) and manifest.kind in ("rollout", "diagnosis", "checkpoint")}
         if manifest.config.get("role") == "trainer-state":
             states |= {oid, *(e.id for e in manifest.files.values())}
-    curves0 = {seed0.files[n].id for n in ("curve.csv", "curve.png")}
+    curves0 = {seed0.files["curve.csv"].id}
     in_tar = _tar_objects(results.path)
-    assert in_tar and not in_tar & (heavy | states | curves0)
+    assert in_tar and not in_tar & (heavy | states | curves0 | set(figures))
+    # the figures of the run's results are left out and listed as such, under their own names
+    results_of_run = [src.read_manifest(r) for r in ("evals/film-smoke-s1", "diagnoses/calibration")]
+    run_figures = {e.id: n for m in [*results_of_run, *(src.read_manifest(i) for r in results_of_run
+                                                        for i in r.inputs.values())]
+                   for n, e in m.files.items() if n.endswith((".png", ".pdf"))}
+    assert {"speed.png", "speed.pdf", "ev.png", "ev.pdf"} <= set(run_figures.values())
+    assert {oid: results.omitted_files[oid] for oid in run_figures} == run_figures
     # seed 0's checkpoint comes along (the frozen actor, the first calibration's critic), without its curve
     assert seed0.id in in_tar and curves0 <= set(results.omitted_files)
-    assert set(results.omitted_files) <= heavy | curves0 and set(results.omitted) <= states
+    assert set(results.omitted_files) <= heavy | curves0 | set(figures) and set(results.omitted) <= states
     assert {results.omitted_files[e.id] for e in src.read_manifest(RUN).files.values() if e.id in
-            results.omitted_files} == {"model.pt"}
+            results.omitted_files} == {"model.pt", "curve.png"}
     # the results are in: the eval table, both calibration tables, the fixed-rollout table, the run's curve
     for ref, file in (("evals/film-smoke-s1", "eval.csv"), ("diagnoses/calibration", "calibration.csv"),
                       ("diagnoses/calibration@1", "calibration.csv"), ("diagnoses/fixed-rollout/aliengo",
@@ -132,6 +142,16 @@ def test_report_over_the_imported_results_is_the_sources(run_cli, bundles, tmp_p
     figures = sorted(p.name for p in (tmp_path / "mine" / "figures").iterdir())
     assert "speed-film-smoke-s1-aliengo.png" in figures and "curves.png" in figures
     assert figures == sorted(p.name for p in (tmp_path / "source" / "figures").iterdir())
+    # the bundle left the speed figures out: the report drew them from the eval table, the source copied its own
+    from morfic_cli.evaluation.figures import table_figure
+
+    row = next(r for r in ours.evals if r["robot"] == "aliengo" and r["run"] == "film-smoke-s1")
+    drawn = table_figure(row, "film-smoke-s1 on aliengo, descriptor mode, command 2 m/s")
+    rollout = src.read_manifest(row["artifact"]).inputs["rollout/aliengo/descriptor/vx2"]
+    for suffix, data in zip((".png", ".pdf"), drawn, strict=True):
+        assert (tmp_path / "mine" / "figures" / f"speed-film-smoke-s1-aliengo{suffix}").read_bytes() == data
+        assert (tmp_path / "source" / "figures" / f"speed-film-smoke-s1-aliengo{suffix}").read_bytes() == \
+            src.read_file(rollout, f"speed{suffix}") != data
 
 
 COMMANDS = {

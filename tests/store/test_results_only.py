@@ -18,7 +18,7 @@ from morfic_cli.errors import ArtifactNotFoundError, StoreError
 from morfic_cli.store import Store
 from morfic_cli.store.gc import walk
 from morfic_cli.store.results import results_histories
-from morfic_cli.store.shallow import RESULTS_ONLY
+from morfic_cli.store.shallow import RESULTS_ONLY, WEIGHTS_ONLY, omittable_file
 
 STATE = "trainer_state"
 
@@ -116,12 +116,13 @@ def test_a_results_only_bundle_leaves_out_weights_states_and_logs(src, tmp_path)
     header, objects, markers, refs = _members(report.path)
     assert refs == report.refs == ["diagnoses/calibration", "diagnoses/fixed-rollout/x", "evals/b", "runs/b"]
     # what stays out: both trainer states (a's checkpoint comes with calibration@1 and the fixed rollout), both
-    # weights, a's curve (b's stays: b is the run exported), every rollout log and observation file (b's and a's
-    # eval rollouts are not reached: evals/a is not in)
+    # weights, a's curve (b's table stays: b is the run exported; its figure curve.png does not), every rollout log
+    # and observation file (b's and a's eval rollouts are not reached: evals/a is not in), every rendered figure
     assert report.omitted == dict(sorted({a["state"]: STATE, b["state"]: STATE}.items()))
     left_files = {**dict(zip(_files(src, a["ckpt"], "model.pt", "curve.csv", "curve.png"),
                              ("model.pt", "curve.csv", "curve.png"), strict=True)),
-                  **dict.fromkeys(_files(src, b["ckpt"], "model.pt"), "model.pt")}
+                  **dict(zip(_files(src, b["ckpt"], "model.pt", "curve.png"), ("model.pt", "curve.png"), strict=True)),
+                  **dict.fromkeys(_files(src, b["rollout"], "speed.png"), "speed.png")}
     for rollout in (b["rollout"], a["drollout"], b["drollout"]):
         mcap, obs = _files(src, rollout, "rollout.mcap", "obs.npz")
         left_files |= {mcap: "rollout.mcap", obs: "obs.npz"}
@@ -131,14 +132,14 @@ def test_a_results_only_bundle_leaves_out_weights_states_and_logs(src, tmp_path)
     # what goes in: 9 manifests and their kept files, nothing else
     manifests = sorted([a["ckpt"], b["ckpt"], b["rollout"], b["eval"], a["drollout"], b["drollout"], a["diag"],
                         b["diag"], src.ids["fixed"]])
-    kept = [*_files(src, b["ckpt"], "curve.csv", "curve.png"),
-            *_files(src, b["rollout"], "speed.png"), *_files(src, b["eval"], "eval.csv"),
+    kept = [*_files(src, b["ckpt"], "curve.csv"), *_files(src, b["eval"], "eval.csv"),
             *_files(src, a["diag"], "calibration.csv"), *_files(src, b["diag"], "calibration.csv"),
             *_files(src, src.ids["fixed"], "fixed_rollout.csv")]
     assert markers == manifests and objects == sorted([*manifests, *kept])
     assert not set(objects) & (set(left_files) | set(report.omitted))
     assert report.bytes == sum(src.objects.size(oid) for oid in objects)
-    assert sum(src.objects.size(oid) for oid in left_files) == 2 * 1000 + 4 + 4 + 2000 + 500 + 2 * (701 + 301)
+    assert sum(src.objects.size(oid) for oid in left_files) == (2 * 1000 + 4 + 4 + 2000 + 500 + 2 * (701 + 301)
+                                                                + len(b"pngb") + len(b"speedb"))
 
 
 def test_import_gives_the_same_refs_and_ids_and_every_walk_knows_the_gaps(src, tmp_path):
@@ -156,20 +157,25 @@ def test_import_gives_the_same_refs_and_ids_and_every_walk_knows_the_gaps(src, t
     assert sorted(p.name for p in (dst.root / "shallow").iterdir()) == sorted([*report.omitted,
                                                                                 *report.omitted_files])
     check = dst.verify()
-    assert check.ok and check.omitted == 2 and check.omitted_files == len(report.omitted_files) == 10
-    assert dst.gc(dry_run=False).removed == [] and dst.gc(dry_run=True).omitted == 12
+    assert check.ok and check.omitted == 2 and check.omitted_files == len(report.omitted_files) == 12
+    assert dst.gc(dry_run=False).removed == [] and dst.gc(dry_run=True).omitted == 14
     assert sorted(dst.omitted.ids()) == sorted([*report.omitted, *report.omitted_files])
     reached = walk(dst, [b["ckpt"]])
-    assert reached.absent == {b["state"]: STATE} and reached.absent_files == {_files(src, b["ckpt"], "model.pt")[0]:
-                                                                              "model.pt"}
+    model, curve_png = _files(src, b["ckpt"], "model.pt", "curve.png")
+    assert reached.absent == {b["state"]: STATE} and reached.absent_files == {model: "model.pt",
+                                                                              curve_png: "curve.png"}
     # what is there reads; what was left out says so
     assert dst.read_file("runs/b", "curve.csv") == b"it,b"
-    assert dst.describe("runs/b")["omitted_files"] == {"model.pt": _files(src, b["ckpt"], "model.pt")[0]}
+    assert dst.describe("runs/b")["omitted_files"] == {"curve.png": curve_png, "model.pt": model}
+    assert dst.omitted_files(dst.read_manifest(b["rollout"])) == dict(zip(
+        ("rollout.mcap", "obs.npz", "speed.png"), _files(src, b["rollout"], "rollout.mcap", "obs.npz", "speed.png"),
+        strict=True))
     for reader in (dst.read_file, dst.file_path):
         with pytest.raises(ArtifactNotFoundError, match="a results-only bundle left it out"):
             reader("runs/b", "model.pt")
-    with pytest.raises(ArtifactNotFoundError, match="a results-only bundle left it out"):
-        dst.read_file(b["rollout"], "rollout.mcap")
+    for name in ("rollout.mcap", "speed.png"):
+        with pytest.raises(ArtifactNotFoundError, match="a results-only bundle left it out"):
+            dst.read_file(b["rollout"], name)
     a = src.ids["a"]  # a's checkpoint is here (the fixed rollout's actor), its curve is in a's own bundle
     names = ("curve.csv", "curve.png", "model.pt")
     assert dst.describe(a["ckpt"])["omitted_files"] == dict(zip(names, _files(src, a["ckpt"], *names), strict=True))
@@ -214,10 +220,11 @@ def test_a_weights_only_bundle_on_top_fills_the_weights(src, tmp_path):
     dst = Store(tmp_path / "dst")
     dst.import_tar(results.path)
     filled = dst.import_tar(weights.path)
-    model = _files(src, b["ckpt"], "model.pt")[0]
-    assert filled.refs == {"runs/b": "unchanged"} and filled.filled == [model] and filled.objects_added == 1
+    model, curve_png = _files(src, b["ckpt"], "model.pt", "curve.png")
+    assert filled.refs == {"runs/b": "unchanged"} and filled.filled == sorted([model, curve_png])
+    assert filled.objects_added == 2
     assert dst.read_file("runs/b", "model.pt") == b"b" * 1000 and not dst.is_omitted(model)
-    assert dst.is_omitted(b["state"]) and dst.verify().ok and dst.verify().omitted_files == 9
+    assert dst.is_omitted(b["state"]) and dst.verify().ok and dst.verify().omitted_files == 10
 
 
 @pytest.mark.parametrize(("spec", "needle"), [
@@ -241,11 +248,26 @@ def test_a_run_without_results_is_an_error(src, tmp_path):
 
 
 def test_results_only_leaves_out_only_what_shallow_names():
-    assert RESULTS_ONLY.roles == {STATE} and RESULTS_ONLY.files == {"model.pt", "rollout.mcap", "obs.npz"}
-    assert RESULTS_ONLY.foreign_files == {"curve.csv", "curve.png"} and not RESULTS_ONLY.own
+    assert RESULTS_ONLY.roles == {STATE} and RESULTS_ONLY.files == {"model.pt", "rollout.mcap", "obs.npz", "curve.png"}
+    assert RESULTS_ONLY.foreign_files == {"curve.csv"} and not RESULTS_ONLY.own and RESULTS_ONLY.figures
     kept = RESULTS_ONLY.keeping(frozenset({"k"}))
-    assert [kept.leaves_out(m, f) for m, f in (("k", "curve.csv"), ("o", "curve.csv"), ("k", "model.pt"),
-                                               ("o", "eval.csv"))] == [False, True, True, False]
+    cases = {("k", "curve.csv", "checkpoint"): False, ("o", "curve.csv", "checkpoint"): True,
+             ("k", "model.pt", "checkpoint"): True, ("o", "eval.csv", "eval"): False,
+             ("k", "curve.png", "checkpoint"): True, ("r", "speed.png", "rollout"): True,
+             ("r", "speed.pdf", "rollout"): True, ("d", "ev.PNG", "diagnosis"): True,
+             ("d", "calibration.csv", "diagnosis"): False, ("m", "video.mp4", "media"): False,
+             ("p", "figures/ev.pdf", "report"): True, ("c", "x.png", "checkpoint"): False}
+    assert {case: kept.leaves_out(*case) for case in cases} == cases
+    assert not WEIGHTS_ONLY.leaves_out("r", "speed.png", "rollout")
+
+
+def test_only_results_figures_and_the_named_files_may_be_missing():
+    assert [omittable_file(k, n) for k, n in (("rollout", "speed.png"), ("diagnosis", "critic_study.png"),
+                                              ("eval", "x.gif"), ("report", "figures/ev.pdf"),
+                                              ("checkpoint", "curve.png"), ("table", "model.pt"))] == [True] * 6
+    assert [omittable_file(k, n) for k, n in (("checkpoint", "x.png"), ("media", "video.mp4"), ("table", "t.png"),
+                                              ("diagnosis", "calibration.csv"), ("rollout", "speed.png.csv"),
+                                              ("eval", "eval.csv"))] == [False] * 6
 
 
 # -- hand-made bundles: only the weight and log files may be left out, and only when the header says so ----------
@@ -269,7 +291,8 @@ def _file_bundle(path, name: str, omitted_files: object, *, hold: bool = False):
 REFUSED = {
     "a-file-name-that-may-not-be-left-out": (dict(name="eval.csv", omitted_files={oid_of(_GONE): "eval.csv"}),
                                              "may only leave out curve.csv, curve.png, model.pt, obs.npz, rollout.mcap "
-                                             "files"),
+                                             r"and rendered figures \(png/pdf/gif/mp4 of diagnosis, eval, report, "
+                                             r"rollout artifacts\) files"),
     "declared-as-another-file": (dict(name="eval.csv", omitted_files={oid_of(_GONE): "model.pt"}),
                                  "names the left-out file"),
     "undeclared-gap": (dict(name="model.pt", omitted_files=None), "the export is incomplete"),
@@ -279,6 +302,11 @@ REFUSED = {
     "declared-yet-held": (dict(name="model.pt", omitted_files={oid_of(_GONE): "model.pt"}, hold=True),
                           "yet it holds it"),
     "not-a-map": (dict(name="model.pt", omitted_files=[oid_of(_GONE)]), "invalid morfic-export.json"),
+    # a figure may be left out of a result (rollout, eval, diagnosis, report), not of a checkpoint
+    "a-checkpoints-figure": (dict(name="x.png", omitted_files={oid_of(_GONE): "x.png"}),
+                             r"names the left-out file \w+ as 'x.png' \(a checkpoint artifact\), but only"),
+    "a-figure-label-that-is-no-plain-name": (dict(name="model.pt", omitted_files={oid_of(_GONE): "../x.png"}),
+                                             "as '../x.png', but a bundle may only leave out"),
 }
 
 
@@ -303,21 +331,41 @@ def test_a_well_formed_results_only_bundle_imports(tmp_path):
     assert store.verify().ok and store.verify().omitted_files == 1 and store.gc(dry_run=False).removed == []
 
 
+def test_a_results_figures_may_be_left_out_and_verify_counts_them(tmp_path):
+    """A diagnosis whose ev.png the header lists as left out imports; verify counts the gap, gc keeps the rest."""
+    table = b"robot,ev\ngo2,0.5\n"
+    diag = manifest_bytes(kind="diagnosis", files={"ev.png": {"id": oid_of(_GONE), "size": len(_GONE)},
+                                                   "calibration.csv": {"id": oid_of(table), "size": len(table)}})
+    header = {"format": 1, "morfic_version": "0.1.0", "objects": 2, "refs": ["diagnoses/calibration"],
+              "omitted_files": {oid_of(_GONE): "ev.png"}}
+    path = write_bundle(tmp_path / "d.tar", blobs=[table], manifests=[diag], header=header,
+                        refs={"diagnoses/calibration": history_bytes([oid_of(diag)])})
+    store = Store(tmp_path / "s")
+    assert store.import_tar(path).omitted_files == [oid_of(_GONE)]
+    check = store.verify()
+    assert check.ok and check.omitted_files == 1 and store.gc(dry_run=False).removed == []
+    assert store.omitted_files(store.read_manifest(oid_of(diag))) == {"ev.png": oid_of(_GONE)}
+    with pytest.raises(ArtifactNotFoundError, match="rendered figures"):
+        store.read_file("diagnoses/calibration", "ev.png")
+    assert store.read_file("diagnoses/calibration", "calibration.csv") == table
+
+
 def test_cli_results_only_round_trip(run_cli, src, tmp_path):
     b = src.ids["b"]
     code, out, err = run_cli("store", "export", "runs/b", "--results-only", "--out", str(tmp_path / "bundles"),
                              "--store", str(src.root))
     assert code == 0, err
     assert out == f"{tmp_path / 'bundles' / 'b.tar'}\n"
-    left = "2 trainer state(s) and 10 weight, rollout-log and curve file(s) left out"
+    left = "2 trainer state(s) and 12 weight, rollout-log, curve and figure file(s) left out"
     assert "exported 4 ref(s)" in err and left in err
     dst = str(tmp_path / "dst")
     code, _, err = run_cli("store", "import", str(tmp_path / "bundles" / "b.tar"), "--store", dst)
     assert code == 0 and left in err
     code, _, err = run_cli("store", "verify", "--store", dst)
-    assert code == 0 and "10 weight, rollout-log and curve file(s) left out by a results-only import" in err
+    assert code == 0 and "12 weight, rollout-log, curve and figure file(s) left out by a results-only import" in err
     code, out, _ = run_cli("store", "show", "runs/b", "--store", dst, "-f", "json")
-    assert code == 0 and json.loads(out)["omitted_files"] == {"model.pt": _files(src, b["ckpt"], "model.pt")[0]}
+    assert code == 0 and json.loads(out)["omitted_files"] == dict(zip(
+        ("model.pt", "curve.png"), _files(src, b["ckpt"], "model.pt", "curve.png"), strict=True))
     code, _, err = run_cli("store", "get", "runs/b", "--file", "model.pt", "--out", str(tmp_path / "got"),
                            "--store", dst)
     assert code == 1 and err.startswith("Error: file 'model.pt'") and "results-only bundle left it out" in err
