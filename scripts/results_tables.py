@@ -45,6 +45,7 @@ from typing import Any
 import pandas as pd
 
 from morfic_cli.report.claims import PAPER_COMMAND, TRAINED_COMMAND, command_suffix, is_paper_command
+from morfic_cli.report.tables import robot_label
 
 BEGIN, END = "<!-- results-tables:begin -->", "<!-- results-tables:end -->"
 CLAIMS_BEGIN, CLAIMS_END = "<!-- results-claims:begin -->", "<!-- results-claims:end -->"
@@ -514,7 +515,7 @@ def _decided(c: Any) -> list[str]:
     for r in c.comparisons:
         if r["outcome"] in ("for", "against"):
             ci = f" [{r['lo']:+.2f}, {r['hi']:+.2f}]" if r["lo"] is not None else ""
-            out.append(f"{r['unit']} {r['comparison']} {r['effect']:+.2f}{ci} (Holm p {r['p_holm']:.2g}, "
+            out.append(f"{robot_label(r['unit'])} {r['comparison']} {r['effect']:+.2f}{ci} (Holm p {r['p_holm']:.2g}, "
                        f"{r['outcome']} the claim)")
     return out
 
@@ -530,7 +531,7 @@ def _closest(c: Any) -> str:
         return "no seed count would (no effect to detect, or no test)"
     r = min(cands, key=lambda x: x["seeds_needed"])
     n = r["seeds_needed"]
-    return f"{r['comparison']} on {r['unit']}: " + (f"more than {MAX_SEEDS}" if n > MAX_SEEDS else str(n))
+    return f"{r['comparison']} on {robot_label(r['unit'])}: " + (f"more than {MAX_SEEDS}" if n > MAX_SEEDS else str(n))
 
 
 def _runs_text(results: Path) -> str:

@@ -49,10 +49,11 @@ class EvalMode(str, enum.Enum):
 
 
 class EvalModes(str, enum.Enum):
-    """``morfic eval --mode``: one evaluation mode, or both."""
+    """``morfic eval --mode``: one evaluation mode, or both (descriptor and full; docs/eval.md)."""
 
     descriptor = "descriptor"
     full = "full"
+    actuation_matched = "actuation-matched"
     both = "both"
 
     def modes(self) -> tuple[str, ...]:

@@ -29,12 +29,13 @@ def evaluate(
                                        "checkpoint id.")],
     robots: RobotsOpt = "all",
     command_vx: Annotated[
-        str | None, typer.Option("--command-vx", help="Forward command(s) in m/s, e.g. 2.0,2.5 [default: 2.0; 1.0 "
-                                 "with --training-conditions].")
+        str | None, typer.Option("--command-vx", help="Forward command(s) in m/s, e.g. 2.0,2.5. Default 2.0; with "
+                                 "--training-conditions it is 1.0.")
     ] = None,
     mode: Annotated[
         EvalModes, typer.Option("--mode", help="descriptor (Go2 template with the target's descriptor, the paper's), "
-                                "full (the target's own model), or both.")
+                                "full (the target's own model), actuation-matched (descriptor mode with Kp, Kd and "
+                                "torque limits x the target's mass / Go2's), or both (descriptor and full).")
     ] = EvalModes.descriptor,
     envs: Annotated[int, typer.Option("--envs", min=1, help="Parallel envs per robot.")] = 64,
     steps: Annotated[

@@ -69,7 +69,7 @@ def eval_config(spec: str, cfg: EvalCfg) -> dict[str, Any]:
 
 def batched(cfg: EvalCfg, mode: str) -> bool:
     """Whether ``cfg``'s rollouts in ``mode`` share one env (:attr:`EvalCfg.batch_robots`)."""
-    return cfg.batch_robots and mode == "descriptor" and len(cfg.robots) > 1
+    return cfg.batch_robots and mode != "full" and len(cfg.robots) > 1
 
 
 @dataclass

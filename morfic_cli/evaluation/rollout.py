@@ -33,7 +33,7 @@ class Rollout:
 
     Attributes:
         robot: Target robot.
-        mode: "descriptor" or "full".
+        mode: "descriptor", "full" or "actuation-matched" (docs/eval.md).
         command_vx: Commanded forward velocity (m/s).
         seed: Env seed.
         dt: Policy step (s).
@@ -152,7 +152,8 @@ def run_rollout(
         critic: Trained critic (``critic(obs)`` is V). Shape: (N, 1).
         train_env: The run's env config (observation settings, gains, rewards).
         robot: Target robot name.
-        mode: "descriptor" (Go2 template with the target's descriptor) or "full" (the target's own model).
+        mode: "descriptor" (Go2 template with the target's descriptor), "full" (the target's own model) or
+            "actuation-matched" (descriptor mode with Kp, Kd and torque limits x the target's mass / Go2's).
         command_vx: Forward-velocity command (m/s); vy = yaw rate = 0.
         num_envs: Envs (N).
         steps: Policy steps (T).
@@ -199,8 +200,8 @@ def run_rollouts(
         actor: Trained actor, as in :func:`run_rollout`.
         critic: Trained critic.
         train_env: The run's env config.
-        robots: Target robots, distinct; more than one needs ``mode`` "descriptor".
-        mode: "descriptor" or "full".
+        robots: Target robots, distinct; more than one needs ``mode`` "descriptor" or "actuation-matched".
+        mode: "descriptor", "full" or "actuation-matched".
         command_vx: Forward-velocity command (m/s).
         num_envs: Envs per robot (N); the joint env has ``len(robots) * N``.
         steps: Policy steps (T).
@@ -219,7 +220,7 @@ def run_rollouts(
     from morfic_cli.envs.locomotion import LocomotionEnv
 
     robots = tuple(robots)
-    if len(set(robots)) != len(robots) or (len(robots) > 1 and mode != "descriptor"):
+    if len(set(robots)) != len(robots) or (len(robots) > 1 and mode == "full"):
         raise ValueError(f"one batch needs distinct robots in descriptor mode, got {robots} in mode '{mode}'.")
     total = len(robots) * num_envs
     cfg = rollout_env_cfg(train_env, total, steps, command_vx)

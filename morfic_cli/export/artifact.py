@@ -147,9 +147,16 @@ def plan_export(trained: TrainedModels, robot: str | None, targets: bool) -> tup
 
     Returns:
         ``(module, metadata)``; the module takes the metadata's inputs in order.
+
+    Raises:
+        MorficError: The actor reads the extended descriptor (not exportable yet).
     """
     actor = trained.actor
     env = trained.cfg.env
+    if env.obs.extended_morphology and actor.morphology_encoder is not None:
+        raise MorficError(f"run '{trained.meta.get('run')}' reads the extended descriptor "
+                          "(env.obs.extended_morphology, variant film-act); export bakes the 11-D one only, so it "
+                          "is not supported yet. Evaluate it with `morfic eval` instead.")
     morphology_input = actor.morphology_encoder is not None and robot is None
     robots = {robot: load_robot(robot)} if robot else {name: load_robot(name) for name in list_robots()}
     source = {

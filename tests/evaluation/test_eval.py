@@ -101,7 +101,8 @@ def test_rollout_metrics_follow_the_recorded_arrays(store):
         (["runs/nothing"], "no artifact 'runs/nothing'"),
         (["runs/film-s0", "--robots", "go3"], "unknown robot 'go3'"),
         (["runs/film-s0", "--command-vx", "fast"], "--command-vx takes"),
-        (["runs/film-s0", "--mode", "sideways"], "'sideways' is not one of 'descriptor', 'full', 'both'"),
+        (["runs/film-s0", "--mode", "sideways"],
+         "'sideways' is not one of 'descriptor', 'full', 'actuation-matched', 'both'"),
         (["runs/film-s0", "--envs", "0"], "Invalid value for '--envs'"),
     ],
 )
