@@ -51,6 +51,11 @@ import statistics
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from morfic_cli.evaluation.metric_terms import seed_columns
+from morfic_cli.evaluation.seeds import mean, seed_std
+from morfic_cli.evaluation.seeds import num as _num
+from morfic_cli.evaluation.seeds import pooled_std as pooled_std  # re-exported: the tests and older callers
+from morfic_cli.evaluation.seeds import step_sigma as step_sigma
 from morfic_cli.report import paper
 from morfic_cli.report.claims import check_claims, is_paper_command, row_command
 from morfic_cli.report.gather import StoreData
@@ -132,72 +137,11 @@ def robot_order(robot: str) -> int:
     return paper.ROBOTS.index(robot) if robot in paper.ROBOTS else len(paper.ROBOTS)
 
 
-def _finite(values: Iterable[Any]) -> list[float]:
-    out = []
-    for v in values:
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            continue
-        if math.isfinite(f):
-            out.append(f)
-    return out
-
-
-def mean(values: Iterable[Any]) -> float | None:
-    """Mean of the finite values, None when there are none."""
-    v = _finite(values)
-    return sum(v) / len(v) if v else None
-
-
-def seed_std(values: Iterable[Any]) -> float | None:
-    """Sample standard deviation over seeds (ddof 1); None with fewer than two finite values."""
-    v = _finite(values)
-    return statistics.stdev(v) if len(v) >= 2 else None
-
-
-def pooled_std(means: Sequence[Any], stds: Sequence[Any], counts: Sequence[Any] | None = None) -> float | None:
-    """Population σ of the union of several sample sets from their means μ_i, σ_i and sizes n_i.
-
-    σ² = Σ n_i (σ_i² + (μ_i - μ)²) / Σ n_i with μ = Σ n_i μ_i / Σ n_i; equal sizes when ``counts`` is None.
-    With one set it is that set's σ (one seed: the run's own σ, the paper's ± term).
-    """
-    counts = counts if counts is not None else [1.0] * len(means)
-    rows = []
-    for m, s, n in zip(means, stds, counts, strict=True):
-        try:
-            m, s, n = float(m), float(s), float(n)
-        except (TypeError, ValueError):
-            continue
-        if math.isfinite(m) and math.isfinite(s) and math.isfinite(n) and n > 0:
-            rows.append((m, s, n))
-    if not rows:
-        return None
-    total = sum(n for _, _, n in rows)
-    mu = sum(n * m for m, _, n in rows) / total
-    return math.sqrt(sum(n * (s * s + (m - mu) ** 2) for m, s, n in rows) / total)
-
-
-def step_sigma(rows: Sequence[dict[str, Any]]) -> float | None:
-    """The paper's σ of a cell: σ over all alive (env, step) samples of its runs (:func:`pooled_std`).
-
-    None when any run's evaluation predates the σ over steps (its ``vx_std`` was the std of per-env means, another
-    quantity; such an evaluation has no ``vx_env_std``): re-run ``morfic eval`` for those runs.
-    """
-    if any(r.get("vx_env_std") in (None, "") for r in rows):
-        return None
-    return pooled_std([r["vx_step_mean"] for r in rows], [r["vx_std"] for r in rows], [r["n_alive"] for r in rows])
-
-
 def _group(rows: Iterable[dict[str, Any]], key: Callable[[dict[str, Any]], tuple]) -> dict[tuple, list[dict]]:
     groups: dict[tuple, list[dict]] = {}
     for row in rows:
         groups.setdefault(key(row), []).append(row)
     return groups
-
-
-def _num(value: float | None, decimals: int) -> str:
-    return "-" if value is None else f"{value:.{decimals}f}"
 
 
 def transfer_rows(data: StoreData) -> list[dict[str, Any]]:
@@ -210,18 +154,11 @@ def _transfer_rows(evals: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     groups = _group(evals, lambda r: (r["preset"], r["variant"], r["robot"], r["mode"], float(r["command_vx"])))
     out = []
     for (preset, variant, robot, mode, vx_cmd), rows in groups.items():
-        vx, s = mean(r["vx_mean"] for r in rows), mean(r["survival"] for r in rows)
-        vx_std = step_sigma(rows)
         out.append({
             "table": "transfer", "preset": preset, "variant": variant, "robot": robot, "mode": mode,
             "command_vx": vx_cmd, "d": rows[0].get("d"), "n_seeds": len(rows),
             "runs": ";".join(sorted(r["run"] for r in rows)),
-            "vx": vx, "vx_std": vx_std, "vx_seed_std": seed_std(r["vx_mean"] for r in rows),
-            "vx_peak_1s": mean(r.get("vx_peak_1s_mean") for r in rows),
-            "survival": s, "survival_seed_std": seed_std(r["survival"] for r in rows),
-            "tracking_ratio": mean(r["tracking_ratio"] for r in rows),
-            "valid_fraction": mean(r["valid_fraction"] for r in rows),
-            "cell": f"{_num(vx, 2)} ± {_num(vx_std, 2)} / {_num(s, 3)}",
+            **{col.name: col.reduce(rows) for col in seed_columns()},  # each eval metric's columns over seeds
             # the evaluation budget behind the cell (the smallest, when seeds differ): the caption names it
             "num_envs": min((int(r["num_envs"]) for r in rows if r.get("num_envs") is not None), default=None),
             "steps": min((int(r["steps"]) for r in rows if r.get("steps") is not None), default=None),
