@@ -26,6 +26,16 @@ def _pm(key: str, d: int = 3):
     return Column(key, key, fmt=lambda v: _n(v, d), justify="right")
 
 
+def _seed_columns() -> list[Column]:
+    """The transfer table's registered metric columns over seeds that have a header (docs/eval.md)."""
+    from morfic_cli.evaluation.metric_terms import seed_columns
+
+    def fmt(spec: str):
+        return lambda v: "-" if v is None or v != v else format(v, spec)
+
+    return [Column(c.name, c.header, fmt=fmt(c.fmt), justify="right") for c in seed_columns() if c.header]
+
+
 def _columns(table: str, with_paper: bool) -> list[Column]:
     head = [Column("preset", "preset"), Column("variant", "variant")]
     command = Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:g}", justify="right")
@@ -38,8 +48,7 @@ def _columns(table: str, with_paper: bool) -> list[Column]:
     if table == "transfer":
         cols = [*head, Column("robot", "robot"), Column("mode", "mode"), command,
                 Column("n_seeds", "seeds", justify="right"), Column("cell", "v_x ± σ / S", justify="right"),
-                Column("vx_seed_std", "σ seeds", fmt=lambda v: _n(v, 2), justify="right"),
-                Column("vx_peak_1s", "peak 1 s", fmt=lambda v: _n(v, 2), justify="right")]
+                *_seed_columns()]
         if with_paper:
             cols += [Column("paper_quantity", "paper qty"),
                      Column("paper_vx", "paper v", fmt=lambda v: _n(v, 3), justify="right"),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -22,6 +22,9 @@ from morfic_cli.cli._progress import StepBar
 from morfic_cli.cli._render import Column, emit_rows, info
 from morfic_cli.errors import MorficError
 from morfic_cli.validation import check_args
+
+if TYPE_CHECKING:
+    from morfic_cli.evaluation.metric_terms import MetricTerm
 
 
 def evaluate(
@@ -125,11 +128,11 @@ def evaluate(
         for path in videos:
             info(f"video: {path}")
     if out is not None:
-        from morfic_cli.evaluation.protocol import EVAL_COLUMNS
+        from morfic_cli.evaluation.protocol import eval_columns
         from morfic_cli.recording.tables import rows_to_csv
 
         out.mkdir(parents=True, exist_ok=True)
-        (out / "eval.csv").write_bytes(rows_to_csv(result.rows, EVAL_COLUMNS))
+        (out / "eval.csv").write_bytes(rows_to_csv(result.rows, eval_columns()))
         from morfic_cli.evaluation.figures import write_figures
 
         for path in write_figures(st, result.id, out):
@@ -140,6 +143,9 @@ def evaluate(
             info(f"rollout log (MCAP, open in Foxglove): {path}")
     if not quiet:
         info(f"stored {result.ref}@{result.version} ({result.id[:12]}) with {len(result.rollouts)} MCAP rollout logs")
+    from morfic_cli.evaluation.metric_terms import shown_terms
+
+    shown = shown_terms()  # the registered metrics the table shows (docs/eval.md)
     emit_rows(
         result.rows,
         fmt,
@@ -148,16 +154,19 @@ def evaluate(
             Column("mode", "mode"),
             Column("command_vx", "cmd", fmt=lambda v: f"{v:.1f}", justify="right"),
             Column("d", "d", fmt=lambda v: "-" if v is None else f"{v:.3f}", justify="right", drop=1),
-            Column("cell", "v_x ± σ / S", justify="right", no_wrap=True),
-            Column("vx_peak_1s_mean", "peak", fmt=lambda v: f"{v:.2f}", justify="right", drop=3),
-            Column("tracking_ratio", "track", fmt=lambda v: f"{v:.2f}", justify="right", drop=2),
-            Column("verdict", "validity", no_wrap=True),
+            *(metric_column(t) for t in shown),
         ],
         title=f"zero-shot transfer of {run}",
-        caption="cmd: commanded v_x (m/s); v_x: mean forward velocity over alive steps (at 2.5 m/s also the "
-        "paper's v_x^max); σ: std over all alive (env, step) samples; S: survival; peak: best 1 s moving average "
-        "(morfic's extra); track: v_x / cmd; validity: moving, upright, no dragging",
+        caption="; ".join(["cmd: commanded v_x (m/s)", *(t.legend for t in shown if t.legend)]),
     )
+
+
+def metric_column(term: MetricTerm) -> Column:
+    """The ``morfic eval`` table's column of a registered metric (header, format, alignment, drop order)."""
+    spec = term.fmt
+    return Column(term.name, term.header or term.name,
+                  fmt=None if spec is None else (lambda v: "-" if v is None else format(v, spec)),
+                  justify=term.align, no_wrap=spec is None, drop=term.drop)
 
 
 def _training_check(run: str, robots: str, command_vx: str | None, mode: str, envs: int, steps: int | None, seed: int,

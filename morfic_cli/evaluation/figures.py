@@ -190,7 +190,7 @@ def table_figure(row: dict[str, Any], title: str) -> tuple[bytes, bytes]:
     time series was left out (a results-only bundle) and how to draw it again.
 
     Args:
-        row: One row of ``eval.csv`` (:data:`~morfic_cli.evaluation.protocol.EVAL_COLUMNS`; strings or numbers).
+        row: One row of ``eval.csv`` (:func:`~morfic_cli.evaluation.protocol.eval_columns`; strings or numbers).
         title: Figure title, e.g. ``film-cpu-s0 on go1, descriptor mode, command 2.0 m/s``.
 
     Returns:

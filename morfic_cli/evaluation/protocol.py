@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from morfic_cli import __version__
-from morfic_cli.evaluation.metrics import paper_cell
+from morfic_cli.evaluation.metric_terms import RolloutData, metric_terms, metric_values
 from morfic_cli.evaluation.rollout import Rollout, run_rollout, run_rollouts
 from morfic_cli.runs import run_of
 from morfic_cli.store import Store
@@ -24,12 +24,15 @@ from morfic_cli.store import Store
 if TYPE_CHECKING:
     from morfic_cli.rl.runner import TrainedModels
 
-#: Columns of the eval table, in order.
-EVAL_COLUMNS: tuple[str, ...] = (
-    "robot", "mode", "command_vx", "d", "vx_mean", "vx_std", "vx_env_std", "vx_step_mean", "n_alive",
-    "vx_peak_1s_mean", "vx_peak_1s_std", "survival", "tracking_ratio", "valid", "valid_fraction", "verdict", "cell",
-    "num_envs", "steps",
-)
+
+def eval_columns() -> tuple[str, ...]:
+    """Columns of the eval table (``eval.csv``), in order: the row's keys, the registered metrics between them.
+
+    ``robot, mode, command_vx, d``, each metric of :data:`~morfic_cli.evaluation.metric_terms.METRICS`, then
+    ``num_envs, steps``.
+    """
+    return ("robot", "mode", "command_vx", "d", *(t.name for t in metric_terms()), "num_envs", "steps")
+
 
 EVALS_PREFIX = "evals/"
 
@@ -89,12 +92,10 @@ def rollout_role(robot: str, mode: str, command_vx: float) -> str:
 
 
 def metrics_row(rollout: Rollout, distance: float | None) -> dict[str, Any]:
-    """One row of the eval table."""
-    m = rollout.metrics()
+    """One row of the eval table (:func:`eval_columns`): every registered metric of ``rollout``."""
     return {
         "robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx, "d": distance,
-        **{k: v for k, v in dataclasses.asdict(m).items()},
-        "cell": paper_cell(m),
+        **metric_values(RolloutData(rollout.arrays, rollout.command_vx, rollout.dt)),
         "num_envs": int(rollout.arrays["done"].shape[1]), "steps": int(rollout.arrays["done"].shape[0]),
     }
 
@@ -192,7 +193,7 @@ def evaluate(
                         files={"rollout.mcap": path, FIGURE_PNG: png, FIGURE_PDF: pdf},
                         meta={k: v for k, v in meta.items() if k != "term_names"}).id
         pub = store.publish("eval", EVALS_PREFIX + run_name, config=eval_config(spec, cfg), inputs=inputs,
-                            files={"eval.csv": rows_to_csv(rows, EVAL_COLUMNS)},
+                            files={"eval.csv": rows_to_csv(rows, eval_columns())},
                             meta={"run": run_name, "iteration": trained.meta.get("iteration")})
     return EvalResult(rows, pub.id, pub.ref, pub.version, rollouts)
 

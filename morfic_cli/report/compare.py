@@ -46,8 +46,6 @@ fixed-rollout rows at that command get its numbers. A number the paper does not 
 from __future__ import annotations
 
 import json
-import math
-import statistics
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
