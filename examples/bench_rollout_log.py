@@ -33,7 +33,7 @@ def main() -> None:
     from morfic_cli.evaluation.protocol import write_rollout_log
     from morfic_cli.evaluation.rollout import run_rollout
     from morfic_cli.recording.rollout_log import read_rollout
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
     from morfic_cli.store import Store
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

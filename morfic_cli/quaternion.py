@@ -2,7 +2,7 @@
 
 MuJoCo's ``mju_rotVecQuat`` / ``mju_mulQuat`` / ``mju_negQuat`` do the same for one quaternion at a time; these take
 any leading shape, for arrays of envs and bodies. The batched torch versions for the env are in
-:mod:`morfic_cli.envs.math`; both compute R(q)^T v as v - 2 w (u x v) + 2 u x (u x v), u = (x, y, z).
+:mod:`morfic_cli.quaternion_torch`; both compute R(q)^T v as v - 2 w (u x v) + 2 u x (u x v), u = (x, y, z).
 """
 
 from __future__ import annotations

@@ -179,8 +179,8 @@ def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: Out
     from morfic_cli.benchmarks import bench_train
     from morfic_cli.recording.tables import write_bench_table
     from morfic_cli.rl.config import apply_overrides, preset_cfg
+    from morfic_cli.rl.devices import check_device
     from morfic_cli.rl.precision import bf16_matmul, cpu_bf16_kernels, float32_note
-    from morfic_cli.rl.runner import check_device
 
     check_device(device)
     cfg = apply_overrides(preset_cfg(preset, variant, seed), overrides)  # unknown keys: Error before any work

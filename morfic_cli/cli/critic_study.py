@@ -110,7 +110,7 @@ def critic_study(
     )
     from morfic_cli.evaluation.protocol import parse_commands
     from morfic_cli.morphology.distance import parse_robot_list
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
     from morfic_cli.rl.variants import trust_variants
     from morfic_cli.store import Store
 

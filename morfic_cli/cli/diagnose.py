@@ -157,7 +157,7 @@ def diagnose(
 
 def _calibration(st, specs: list[str], cfg, out: Path | None, fmt: OutputFormat, quiet: bool) -> None:
     from morfic_cli.diagnostics.calibration import CALIBRATION_COLUMNS, check_horizon, diagnose_runs
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
 
     trained = [load_trained(st, s) for s in specs]  # bad refs fail here, before the progress bar starts
     for t in trained:

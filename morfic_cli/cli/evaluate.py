@@ -110,7 +110,7 @@ def evaluate(
     cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed,
                   scene_envs=n_scene)
     st = Store(store)
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
 
     trained = load_trained(st, run)  # bad refs fail here, before the progress bar starts
 
@@ -174,7 +174,7 @@ def _training_check(run: str, robots: str, command_vx: str | None, mode: str, en
     """``morfic eval RUN --training-conditions``."""
     from morfic_cli.evaluation.training_check import CHECK_COLUMNS, CheckCfg, check_rows, steps_per_row, training_check
     from morfic_cli.morphology.distance import parse_robot_list
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
     from morfic_cli.store import Store
 
     if steps is not None or video or mode != EvalModes.descriptor:

@@ -45,7 +45,7 @@ def play(
     from morfic_cli.evaluation.play import PlayCfg
     from morfic_cli.evaluation.play import play as run_play
     from morfic_cli.morphology.robots import load_robot
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
     from morfic_cli.store import Store
 
     load_robot(robot)  # an unknown name: the error every command gives (UnknownNameError, the library's order)

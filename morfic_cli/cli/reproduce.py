@@ -126,7 +126,7 @@ def reproduce(
     _check_executor(executor, address, retries)
     _check_shipped(preset, bundles, full_protocol, executor, overrides)
     from morfic_cli.pipeline import Pipeline, reproduce_cfg
-    from morfic_cli.rl.runner import check_device
+    from morfic_cli.rl.devices import check_device
     from morfic_cli.store import Store
 
     names = REPRODUCE_VARIANTS if variants.strip().lower() == "all" else tuple(

@@ -252,11 +252,13 @@ def export(
                  "omitted": sorted(report.omitted), "omitted_files": sorted(report.omitted_files)}, fmt)
 
 
-def _say_user_variants(bundle: str, needed: dict[str, list[str]]) -> None:
-    """A line per user variant an imported bundle's runs name: its refs, and whether this user trusts it."""
-    from morfic_cli.rl.variants import is_trusted
+def _say_user_variants(bundle: str, named: dict[str, list[str]]) -> None:
+    """A line per user variant (not stock) an imported bundle's runs name: its refs, and whether this user trusts it."""
+    from morfic_cli.rl.variants import STOCK, is_trusted
 
-    for variant, refs in needed.items():
+    for variant, refs in named.items():
+        if variant in STOCK:
+            continue
         shown = escape(", ".join(refs[:5])) + (f" and {len(refs) - 5} more" if len(refs) > 5 else "")
         how = ("trusted here" if is_trusted(variant) else
                f"NOT trusted here: commands on them import it only with --trust-variant {variant}, or after "
@@ -314,7 +316,7 @@ def import_(
         filled = f"; {len(report.filled)} left-out object(s) filled in" if report.filled else ""
         info(f"{escape(path.name)}: imported {report.objects_added} new object(s) ({report.objects_present} already "
              f"present{repaired}), {len(report.refs)} ref(s) into {escape(str(store))}{left_out}{filled}")
-        _say_user_variants(path.name, report.user_variants)
+        _say_user_variants(path.name, report.variants)
     if rows or not failed:
         title = f"refs imported from {paths[0].name}" if len(paths) == 1 else f"refs imported from {len(paths)} tars"
         _emit(rows, fmt, [Column("bundle"), Column("ref"), Column("status")], title=title)

@@ -36,7 +36,7 @@ from morfic_cli.runs import run_of
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
-    from morfic_cli.rl.runner import TrainedModels
+    from morfic_cli.rl.load import TrainedModels
 
 CALIBRATION_REF = "diagnoses/calibration"
 
@@ -227,7 +227,7 @@ def diagnose_runs(
     from morfic_cli.morphology.distance import distance_table
     from morfic_cli.morphology.robots import list_robots
     from morfic_cli.recording.tables import rows_to_csv
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
 
     models = list(trained) if trained is not None else [load_trained(store, s) for s in specs]
     for m in models:

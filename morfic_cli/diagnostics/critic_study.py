@@ -23,7 +23,7 @@ replicates over actors:
 
 The unit of replication is the actor: a cell's fits are averaged within each actor first, then over actors
 (:mod:`~morfic_cli.diagnostics.study_summary`). A variant's critic is the same module as in training
-(:func:`~morfic_cli.rl.runner.build_models`), so ``ppo``'s and ``actor-only``'s critics (both unconditioned) are one
+(:func:`~morfic_cli.rl.build.build_models`), so ``ppo``'s and ``actor-only``'s critics (both unconditioned) are one
 architecture: the study fits it once, as ``ppo``.
 
 Store: one ``diagnosis`` manifest per call (ref ``diagnoses/critic-study``, config ``layout``
@@ -55,7 +55,7 @@ from morfic_cli.runs import RUNS_PREFIX, run_name
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
-    from morfic_cli.rl.runner import TrainedModels
+    from morfic_cli.rl.load import TrainedModels
 
 STUDY_REF = "diagnoses/critic-study"
 TRAIN_ROBOT = "train"
@@ -291,7 +291,7 @@ def build_critic(actor_cfg: Any, variant: str, seed: int) -> torch.nn.Module:
         variant: Stock name or ``module:Class``.
         seed: Seeds torch's generator before the weights are drawn.
     """
-    from morfic_cli.rl.runner import build_models
+    from morfic_cli.rl.build import build_models
 
     cfg = dataclasses.replace(actor_cfg, variant=variant,
                               model=dataclasses.replace(actor_cfg.model, shared_morphology_encoder=False,
@@ -605,7 +605,7 @@ def run_study(store: Store, cfg: StudyCfg, *, actors: dict[str, TrainedModels] |
         verdict_rows,
     )
     from morfic_cli.recording.tables import rows_to_csv
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
     from morfic_cli.rl.variants import STOCK, resolve_variant
 
     check_cfg(cfg)

@@ -29,7 +29,7 @@ from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
-    from morfic_cli.rl.runner import TrainedModels
+    from morfic_cli.rl.load import TrainedModels
 
 FIXED_ROLLOUT_PREFIX = "diagnoses/fixed-rollout/"
 
@@ -203,7 +203,7 @@ def load_models(
         MorficError: No default actor, a critic named twice, a spec that is not a checkpoint, an incompatible
             critic, or ``cfg.steps`` too short.
     """
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
 
     skipped: dict[str, str] = {}
     actor_spec = actor_spec or default_actor(store, skipped.__setitem__)

@@ -33,7 +33,7 @@ from morfic_cli.store import Store
 
 if TYPE_CHECKING:
     from morfic_cli.evaluation.rollout import Rollout
-    from morfic_cli.rl.runner import TrainedModels
+    from morfic_cli.rl.load import TrainedModels
 
 OBS_GROUPS: tuple[str, ...] = ("history", "critic", "privileged", "morphology")
 """Observation groups a diagnostic rollout keeps: the actor's (history, morphology) and every critic's (critic =
@@ -231,7 +231,7 @@ def collect_samples(
 
     Args:
         store: Artifact store (a new rollout manifest is written there).
-        trained: The checkpoint whose actor acts (:func:`~morfic_cli.rl.runner.load_trained`).
+        trained: The checkpoint whose actor acts (:func:`~morfic_cli.rl.load.load_trained`).
         robot: Target robot.
         cfg: Rollout settings (mode, command, envs, steps, seed, batch).
         on_step: Progress callback per policy step (called ``steps`` times at once for a reused rollout).

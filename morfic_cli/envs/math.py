@@ -4,20 +4,7 @@ from __future__ import annotations
 
 import torch
 
-
-def quat_rotate_inverse(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """Rotate world vectors into the frame of ``q``: R(q)^T v.
-
-    Args:
-        q: Unit quaternions (w, x, y, z). Shape: (N, 4).
-        v: Vectors in the world frame. Shape: (N, 3).
-
-    Returns:
-        The vectors in the body frame. Shape: (N, 3).
-    """
-    w, xyz = q[:, :1], q[:, 1:]
-    t = 2.0 * torch.cross(xyz, v, dim=1)
-    return v - w * t + torch.cross(xyz, t, dim=1)
+from morfic_cli.quaternion_torch import quat_rotate_inverse
 
 
 def quat_rotate(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from morfic_cli.evaluation.metrics import FAILURES, ValidityCfg, alive_mask
+from morfic_cli.evaluation.names import FIGURE_PDF, FIGURE_PNG, media_name, rollout_role
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -254,8 +255,6 @@ def figure_or_table(store: Store, rollout_id: str, row: dict[str, Any] | None, t
     results-only bundle left them out (``store.omitted_files``); None when the rollout has no figure (or it was
     left out and there is no row to draw from).
     """
-    from morfic_cli.evaluation.protocol import FIGURE_PDF, FIGURE_PNG
-
     manifest = store.read_manifest(rollout_id)
     if FIGURE_PNG not in manifest.files or FIGURE_PDF not in manifest.files:
         return None
@@ -274,9 +273,6 @@ def write_figures(store: Store, eval_id: str, out: Path) -> list[Path]:
         The paths written.
     """
     import csv
-
-    from morfic_cli.evaluation.media import media_name
-    from morfic_cli.evaluation.protocol import rollout_role
 
     manifest = store.read_manifest(eval_id)
     rows = {}

@@ -14,6 +14,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
+from morfic_cli.evaluation.names import media_name
 from morfic_cli.evaluation.protocol import EvalResult
 from morfic_cli.store import Store
 
@@ -25,11 +26,6 @@ VIDEO_EVERY = 2
 
 VIDEO_ENVS = 4
 """Envs shown in a video (the first ones; a rollout may keep more models for its 3D scene)."""
-
-
-def media_name(role: str) -> str:
-    """File stem of a rollout's media: ``rollout/go1/descriptor/vx2`` -> ``go1-descriptor-vx2``."""
-    return role.removeprefix("rollout/").replace("/", "-")
 
 
 def write_logs(store: Store, eval_id: str, out: Path) -> list[Path]:

@@ -24,7 +24,7 @@ import numpy as np
 from morfic_cli.errors import MorficError
 
 if TYPE_CHECKING:
-    from morfic_cli.rl.runner import TrainedModels
+    from morfic_cli.rl.load import TrainedModels
 
 
 @dataclass(frozen=True)
@@ -91,7 +91,7 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
     recording close cleanly whatever the step was doing; a second Ctrl-C interrupts at once.
 
     Args:
-        trained: The checkpoint (:func:`~morfic_cli.rl.runner.load_trained`).
+        trained: The checkpoint (:func:`~morfic_cli.rl.load.load_trained`).
         cfg: What to run and where to show it.
         on_ready: Called once the sinks are open, with the :class:`~morfic_cli.recording.live.LiveView`
             (None with ``--viewer``), e.g. to print the URL.

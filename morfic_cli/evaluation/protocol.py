@@ -17,12 +17,13 @@ from typing import TYPE_CHECKING, Any
 
 from morfic_cli import __version__
 from morfic_cli.evaluation.metric_terms import RolloutData, metric_terms, metric_values
+from morfic_cli.evaluation.names import FIGURE_PDF, FIGURE_PNG, rollout_role
 from morfic_cli.evaluation.rollout import Rollout, run_rollout, run_rollouts
 from morfic_cli.runs import run_of
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
-    from morfic_cli.rl.runner import TrainedModels
+    from morfic_cli.rl.load import TrainedModels
 
 
 def eval_columns() -> tuple[str, ...]:
@@ -35,10 +36,6 @@ def eval_columns() -> tuple[str, ...]:
 
 
 EVALS_PREFIX = "evals/"
-
-FIGURE_PNG, FIGURE_PDF = "speed.png", "speed.pdf"
-"""Files of a rollout manifest with its figure (forward speed and survival over time)."""
-
 
 @dataclass(frozen=True)
 class EvalCfg:
@@ -86,11 +83,6 @@ class EvalResult:
     rollouts: dict[str, Rollout]
 
 
-def rollout_role(robot: str, mode: str, command_vx: float) -> str:
-    """Input role of a rollout manifest, e.g. ``rollout/go1/descriptor/vx2.0``."""
-    return f"rollout/{robot}/{mode}/vx{command_vx:g}"
-
-
 def metrics_row(rollout: Rollout, distance: float | None) -> dict[str, Any]:
     """One row of the eval table (:func:`eval_columns`): every registered metric of ``rollout``."""
     return {
@@ -131,7 +123,7 @@ def evaluate(
 
     ``keep_models`` > 0 keeps that many envs' MjModels in each returned rollout (for ``--video``; at least
     ``cfg.scene_envs`` are kept, for the logs' 3D scene). ``trained``:
-    the checkpoint already loaded with :func:`~morfic_cli.rl.runner.load_trained` (else it is loaded here).
+    the checkpoint already loaded with :func:`~morfic_cli.rl.load.load_trained` (else it is loaded here).
 
     Raises:
         ArtifactNotFoundError / MorficError: ``spec`` is not a training checkpoint.
@@ -140,7 +132,7 @@ def evaluate(
     from morfic_cli.morphology.distance import distance_table
     from morfic_cli.morphology.robots import list_robots
     from morfic_cli.recording.tables import rows_to_csv
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
 
     if trained is None:
         trained = load_trained(store, spec)

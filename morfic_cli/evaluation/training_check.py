@@ -37,7 +37,7 @@ from morfic_cli.evaluation.episodes import (
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
-    from morfic_cli.rl.runner import TrainedModels
+    from morfic_cli.rl.load import TrainedModels
 
 CHECK_REF_PREFIX = "checks/training-conditions/"
 
@@ -189,7 +189,7 @@ def training_check(store: Store, spec: str, cfg: CheckCfg, *, trained: TrainedMo
     from morfic_cli.errors import MorficError
     from morfic_cli.recording.curves import read_curve_csv
     from morfic_cli.recording.tables import rows_to_csv
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
 
     if trained is None:
         trained = load_trained(store, spec)

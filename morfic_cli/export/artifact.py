@@ -37,7 +37,7 @@ from morfic_cli.export.runtime import (
 )
 from morfic_cli.export.verify import TOLERANCE, Verification, model_mismatches, verify_outputs
 from morfic_cli.morphology.robots import list_robots, load_robot
-from morfic_cli.rl.runner import TrainedModels, load_trained
+from morfic_cli.rl.load import TrainedModels, load_trained
 from morfic_cli.runs import run_of
 from morfic_cli.store import Store
 from morfic_cli.store.manifest import safe_join
@@ -312,7 +312,7 @@ def export_rsl_rl(store: Store, spec: str, out: Path | None = None) -> RslRlExpo
 
 def _check_rsl_rl_weights(trained: TrainedModels, data: bytes) -> None:
     """Load the exported weights into fresh models and compare actions on random inputs (an internal invariant)."""
-    from morfic_cli.rl.runner import build_models, dummy_observations
+    from morfic_cli.rl.build import build_models, dummy_observations
 
     state = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     actor, critic = build_models(trained.cfg)

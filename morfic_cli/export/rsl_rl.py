@@ -11,7 +11,7 @@ layout. The files of the export:
   bundle, old or made by ``store export --without-trainer-state``) gets the state of a fresh, never-stepped
   optimiser of the config's type and learning rate, no ``adaptation_optimizer_state_dict``, and
   ``infos["optimizer"] == "fresh"``; otherwise ``"trained"``.
-- ``agent.json``: the runner config ``OnPolicyRunner(env, train_cfg)`` takes (:func:`~morfic_cli.rl.runner.rsl_rl_cfg`);
+- ``agent.json``: the runner config ``OnPolicyRunner(env, train_cfg)`` takes (:func:`~morfic_cli.rl.build.rsl_rl_cfg`);
   its ``class_name`` entries name morfic's classes, so morfic must be installed to load it.
 - ``train.json``: morfic's full :class:`~morfic_cli.rl.config.TrainCfg` (env config included), to rebuild the env.
 """
@@ -26,9 +26,11 @@ from typing import Any
 import torch
 
 from morfic_cli.rl import trainer_state
+from morfic_cli.rl.build import rsl_rl_cfg
 from morfic_cli.rl.config import train_cfg_to_dict
-from morfic_cli.rl.runner import TRAINER_STATE_ROLE, TrainedModels, rsl_rl_cfg
+from morfic_cli.rl.load import TrainedModels
 from morfic_cli.store import Store
+from morfic_cli.store.shallow import TRAINER_STATE_ROLE
 
 AGENT_FILE = "agent.json"
 TRAIN_FILE = "train.json"

@@ -95,7 +95,7 @@ def eval_figures(store: Store, evals: list[dict[str, Any]]) -> dict[str, tuple[b
     (:func:`~morfic_cli.evaluation.figures.figure_or_table`).
     """
     from morfic_cli.evaluation.figures import figure_or_table
-    from morfic_cli.evaluation.protocol import rollout_role
+    from morfic_cli.evaluation.names import rollout_role
 
     out: dict[str, tuple[bytes, bytes]] = {}
     for row in sorted(evals, key=lambda r: (r["run"], paper.ROBOTS.index(r["robot"])

@@ -227,7 +227,7 @@ def parameter_counts(store: Store, runs: Sequence[RunInfo]) -> dict[str, tuple[i
     """Checkpoint id -> (actor, critic) parameter counts of each run of a stock variant.
 
     Each count is ``sum(p.numel() for p in model.parameters())`` of the model its stored config builds
-    (:func:`~morfic_cli.rl.runner.build_models`; a parameter the two share, e.g. the morphology encoder, counts in
+    (:func:`~morfic_cli.rl.build.build_models`; a parameter the two share, e.g. the morphology encoder, counts in
     both). A user variant's run is left out (counting would import its code), as is a run whose stored config this
     morfic cannot read. One build per distinct config: the seeds of a variant share it.
     """
@@ -238,7 +238,7 @@ def parameter_counts(store: Store, runs: Sequence[RunInfo]) -> dict[str, tuple[i
     stock = [r for r in runs if r.variant in STOCK]
     if not stock:
         return {}
-    from morfic_cli.rl.runner import build_models
+    from morfic_cli.rl.build import build_models
     from morfic_cli.validation import check_stored_cfg
 
     out: dict[str, tuple[int, int]] = {}

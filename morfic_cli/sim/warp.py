@@ -62,7 +62,6 @@ import numpy as np
 import torch
 
 from morfic_cli.config import SimCfg
-from morfic_cli.envs.math import quat_rotate_inverse
 from morfic_cli.errors import DescriptorError, MorficError
 from morfic_cli.morphology.apply import (
     DESCRIPTOR_MASS_INDEX,
@@ -74,6 +73,7 @@ from morfic_cli.morphology.apply import (
 from morfic_cli.morphology.builder import build_model
 from morfic_cli.morphology.descriptor import LIMIT_PAIRS, SANE_MAX, SANE_MIN, as_descriptor
 from morfic_cli.morphology.robots import LEGS, LINKS, RobotSpec
+from morfic_cli.quaternion_torch import quat_rotate_inverse
 from morfic_cli.sim import sync
 from morfic_cli.sim.backend import CONTACT_BODIES, SimFrame, SimParams
 from morfic_cli.sim.cpu import NUM_JOINTS, SensorLayout

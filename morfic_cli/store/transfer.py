@@ -45,7 +45,6 @@ from typing import IO, TYPE_CHECKING
 
 from morfic_cli import __version__
 from morfic_cli.errors import ArtifactNotFoundError, MorficError, StoreError, printable
-from morfic_cli.rl.variants import STOCK, stored_variants
 from morfic_cli.runs import RUNS_PREFIX
 from morfic_cli.store.gc import walk
 from morfic_cli.store.manifest import MAX_MANIFEST_BYTES, clashing_names, parse_manifest, plain_name_problem
@@ -72,6 +71,7 @@ from morfic_cli.store.shallow import (
     omittable_file,
 )
 from morfic_cli.validation import stored_cfg_problem
+from morfic_cli.variant_names import stored_variants
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -118,8 +118,9 @@ class ImportReport:
         omitted: Inputs the (weights-only) export left out and this store lacks, now recorded under ``shallow/``.
         omitted_files: Files the (results-only) export left out and this store lacks, recorded the same way.
         filled: Inputs and files this store had recorded as left out and that this import brought.
-        user_variants: User variant (not stock) -> the refs (or manifest ids) of the bundle whose manifests name
-            it: code that commands on those runs import, with the user's consent (docs/extending.md).
+        variants: Variant -> the refs (or manifest ids) of the bundle whose manifests name it, stock ones
+            included (the store knows no registry); a user variant among them is code that commands on those runs
+            import, with the user's consent (docs/extending.md), which ``morfic store import`` says.
     """
 
     objects_added: int = 0
@@ -130,7 +131,7 @@ class ImportReport:
     omitted: list[str] = field(default_factory=list)
     omitted_files: list[str] = field(default_factory=list)
     filled: list[str] = field(default_factory=list)
-    user_variants: dict[str, list[str]] = field(default_factory=dict)
+    variants: dict[str, list[str]] = field(default_factory=dict)
 
 
 def _info(name: str, size: int, mode: int) -> tarfile.TarInfo:
@@ -503,7 +504,7 @@ class _Plan:
     objects: list[str] = field(default_factory=list)
     """Every object id the tar holds."""
     variants: dict[str, list[str]] = field(default_factory=dict)
-    """Manifest id -> the user variants it names (checked well-formed, never imported)."""
+    """Manifest id -> the variants it names (stock ones too) (checked well-formed, never imported)."""
 
 
 #: Which refs an import appends to instead of merging: all (``True``), none (``False``), or those a predicate names.
@@ -765,13 +766,13 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
                          "Re-export it.")
     manifest = parse_manifest(oid, data)
     try:  # a variant names code that commands would import: refuse any string that is not a well-formed name
-        users = [v for v in stored_variants(manifest.config, manifest.meta) if v not in STOCK]
+        named = stored_variants(manifest.config, manifest.meta)  # stock ones too: the store knows no registry
     except MorficError as exc:
         raise StoreError(f"manifest {oid} in the export names a variant that is not well-formed ({exc}); nothing was "
                          "imported. morfic records a stock name, an entry-point name or module.path:Class: the bundle "
                          "was not made by morfic, or was edited.") from None
-    if users:
-        plan.variants[oid] = users
+    if named:
+        plan.variants[oid] = named
     if manifest.kind == "checkpoint" and "model.pt" in manifest.files:  # a run: commands rebuild models from it
         problem = stored_cfg_problem(manifest.config)
         if problem is not None:
@@ -863,11 +864,11 @@ def _commit(store: Store, plan: _Plan, report: ImportReport, append: AppendRule 
                     store.refs.remove(name)
             raise
         report.refs = statuses
-        report.user_variants = _user_variants(plan)
+        report.variants = _named_variants(plan)
 
 
-def _user_variants(plan: _Plan) -> dict[str, list[str]]:
-    """User variant -> the bundle's refs whose versions name it (a manifest no ref points at: its short id)."""
+def _named_variants(plan: _Plan) -> dict[str, list[str]]:
+    """Variant -> the bundle's refs whose versions name it (a manifest no ref points at: its short id)."""
     out: dict[str, list[str]] = {}
     pointed: set[str] = set()
     for name, history in sorted(plan.histories.items()):
