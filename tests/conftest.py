@@ -30,6 +30,15 @@ def _isolated_store(tmp_path, monkeypatch):
         yield
 
 
+@pytest.fixture(scope="session")
+def smoke_runs(tmp_path_factory):
+    """The session's smoke-trained stores: ``smoke_runs.store(root, *calls)`` copies one to ``root``, trained once
+    per session for each distinct list of ``train_smoke_runs`` calls (tests/smoke_runs.py)."""
+    from smoke_runs import SmokeRuns
+
+    return SmokeRuns(tmp_path_factory.mktemp("smoke-templates"))
+
+
 @pytest.fixture
 def run_cli(capsys):
     """Run ``morfic`` in-process through ``main`` (the real error handling) -> (exit code, stdout, stderr)."""

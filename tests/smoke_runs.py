@@ -25,6 +25,55 @@ def train_smoke_runs(root: Path, variants: tuple[str, ...] = ("film",), seed: in
     return store
 
 
+#: One ``train_smoke_runs`` call: (variants, seed, name).
+SmokeCall = tuple[tuple[str, ...], int, str]
+DEFAULT_NAME = "{variant}-s{seed}"
+
+
+class SmokeRuns:
+    """Smoke-trained stores made once per test session and handed out as copies (the ``smoke_runs`` fixture).
+
+    A store is keyed by its ``train_smoke_runs`` calls, in order: the first request trains it into a template under
+    ``root`` that no test sees; every request (the first included) gets its own ``shutil.copytree`` of it, so a
+    test or module that writes into its store never reaches another's. Training is the slow part (about 8-20 s a
+    run on 2 cores); a copy of a 20 MB store takes a fraction of a second.
+    """
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.templates: dict[tuple[SmokeCall, ...], Path] = {}
+        self.fingerprints: dict[Path, list[tuple[str, int, int]]] = {}
+
+    def template(self, *calls: SmokeCall) -> Path:
+        """The read-only template store of ``calls`` (trained on first use); copy it, never write into it."""
+        if not calls:
+            calls = ((("film",), 0, DEFAULT_NAME),)
+        key = tuple((tuple(v), s, n) for v, s, n in calls)
+        if key not in self.templates:
+            path = self.root / f"t{len(self.templates)}" / "store"
+            for variants, seed, name in key:
+                train_smoke_runs(path, variants, seed, name)
+            self.templates[key] = path
+            self.fingerprints[path] = _fingerprint(path)
+        path = self.templates[key]
+        assert _fingerprint(path) == self.fingerprints[path], f"a test wrote into the smoke template {path}"
+        return path
+
+    def store(self, root: Path, *calls: SmokeCall) -> Store:
+        """A fresh copy at ``root`` of the store ``train_smoke_runs`` makes with ``calls`` (default: film seed 0,
+        ``runs/film-s0``)."""
+        import shutil
+
+        shutil.copytree(self.template(*calls), root)
+        return Store(root)
+
+
+def _fingerprint(root: Path) -> list[tuple[str, int, int]]:
+    """Every file under ``root``: (relative path, size, mtime in ns), sorted."""
+    return sorted((str(p.relative_to(root)), p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*")
+                  if p.is_file())
+
+
 #: The first shipped policy (`film`, cpu preset, trained by morfic 0.1.0 before the method fixes of issue 16; ref
 #: runs/film-cpu): the fixture of every test about checkpoints an older morfic wrote (artifacts/README.md).
 LEGACY_BUNDLE = Path(__file__).resolve().parents[1] / "artifacts" / "bundles" / "film-cpu-legacy.tar"

@@ -192,12 +192,10 @@ ROWS: list[tuple[str, ...]] = [
 
 
 @pytest.fixture(scope="module")
-def workspace(tmp_path_factory):
+def workspace(smoke_runs, tmp_path_factory):
     """A store with one smoke run (runs/film-s0), a file, an empty folder and three tars, shared by every row."""
-    from smoke_runs import train_smoke_runs
-
     root = tmp_path_factory.mktemp("fuzz")
-    store = train_smoke_runs(root / "store")
+    store = smoke_runs.store(root / "store")
     (root / "a-file.txt").write_text("not a store\n")
     (root / "a-dir").mkdir()
     tar = store.export_tar(["runs/film-s0"], root / "good.tar").path

@@ -13,7 +13,6 @@ import subprocess
 import sys
 
 import pytest
-from smoke_runs import train_smoke_runs
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -23,9 +22,9 @@ SUBPROTOCOLS = ["foxglove.websocket.v1"]
 
 
 @pytest.fixture(scope="module")
-def smoke_store(tmp_path_factory):
+def smoke_store(smoke_runs, tmp_path_factory):
     root = tmp_path_factory.mktemp("play") / "store"
-    train_smoke_runs(root)
+    smoke_runs.store(root)
     return root
 
 

@@ -234,7 +234,7 @@ def test_the_example_variant_installs_as_its_own_package(tmp_path):
     script = (f"import site; site.addsitedir({str(site)!r})\n"
               "from morfic_cli.rl import variants as V\n"
               "from morfic_cli.rl.config import smoke_preset\n"
-              "from morfic_cli.rl.runner import build_models\n"
+              "from morfic_cli.rl.build import build_models\n"
               "name = 'custom_variant:GatedCritic'\n"
               "try:\n    V.resolve_variant(name)\nexcept V.UntrustedVariantError:\n    print('refused')\n"
               "with V.consent_scope([name]):\n"

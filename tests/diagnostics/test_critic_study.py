@@ -11,7 +11,7 @@ import statistics
 import numpy as np
 import pytest
 import torch
-from smoke_runs import copy_store, train_smoke_runs
+from smoke_runs import copy_store
 
 from morfic_cli.diagnostics import critic_study as cs
 from morfic_cli.diagnostics import study_summary as ss
@@ -31,11 +31,11 @@ TINY = ("--train-envs", "5", "--held-out", "1", "--val-envs", "1", "--target-env
 
 
 @pytest.fixture(scope="module")
-def smoke_store(tmp_path_factory):
-    root = tmp_path_factory.mktemp("study") / "store"
-    train_smoke_runs(root, ("film", "concat"), name="{variant}-smoke-s{seed}")  # reproduce's fixed-rollout actor
-    train_smoke_runs(root, ("film",), seed=1, name="{variant}-smoke-s{seed}")
-    return root
+def smoke_store(smoke_runs):
+    """film and concat seed 0 (reproduce's fixed-rollout actor), then film seed 1: the session's template, copied
+    per test."""
+    return smoke_runs.template((("film", "concat"), 0, "{variant}-smoke-s{seed}"),
+                               (("film",), 1, "{variant}-smoke-s{seed}"))
 
 
 @pytest.fixture

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from smoke_runs import copy_store, train_smoke_runs
+from smoke_runs import DEFAULT_NAME, copy_store
 
 from morfic_cli.diagnostics.samples import DiagnoseCfg, collect_samples, load_samples
 
@@ -23,11 +23,10 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
-def smoke_store(tmp_path_factory):
-    """Smoke-trained film and ppo checkpoints (ppo trained last: the newest run), shared by this module's tests."""
-    root = tmp_path_factory.mktemp("smoke") / "store"
-    train_smoke_runs(root, ("film", "ppo"))
-    return root
+def smoke_store(smoke_runs):
+    """Smoke-trained film and ppo checkpoints (ppo trained last: the newest run), shared by this module's tests
+    (the session's template, copied per test)."""
+    return smoke_runs.template((("film", "ppo"), 0, DEFAULT_NAME))
 
 
 @pytest.fixture
@@ -142,7 +141,7 @@ def test_fixed_rollout_with_explicit_actor_and_critics(run_cli, store):
 
 
 def test_stored_samples_read_back_exactly(store):
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
 
     trained = load_trained(store, "runs/film-s0")
     cfg = DiagnoseCfg(robots=("a1",), num_envs=2, steps=12, seed=4)

@@ -16,8 +16,8 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 @pytest.fixture(scope="module")
 def models():
     """Fresh (untrained) film actor and critic at paper sizes, eval mode, and their config."""
+    from morfic_cli.rl.build import build_models
     from morfic_cli.rl.config import smoke_preset
-    from morfic_cli.rl.runner import build_models
 
     torch.manual_seed(0)
     cfg = smoke_preset("film")

@@ -246,7 +246,8 @@ def test_both_stays_descriptor_and_full_and_export_refuses_the_extended_descript
     assert EvalModes("actuation-matched").modes() == ("actuation-matched",)
     from morfic_cli.errors import MorficError
     from morfic_cli.export.artifact import plan_export
-    from morfic_cli.rl.runner import TrainedModels, build_models
+    from morfic_cli.rl.build import build_models
+    from morfic_cli.rl.load import TrainedModels
 
     cfg = preset_cfg("smoke", "film-act", 0)
     actor, critic = build_models(cfg)

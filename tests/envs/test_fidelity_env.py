@@ -12,8 +12,8 @@ from morfic_cli.envs import observations as O
 from morfic_cli.envs.locomotion import LocomotionEnv
 from morfic_cli.envs.rewards import TERMS
 from morfic_cli.envs.state import CLOCK, FIELD_SOURCES, OBSERVED, EnvState
+from morfic_cli.rl.build import rsl_rl_cfg
 from morfic_cli.rl.config import preset_cfg
-from morfic_cli.rl.runner import rsl_rl_cfg
 
 
 def _env(n: int = 2, **parts) -> LocomotionEnv:

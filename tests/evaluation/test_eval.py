@@ -9,7 +9,7 @@ import os
 
 import numpy as np
 import pytest
-from smoke_runs import copy_store, train_smoke_runs
+from smoke_runs import copy_store
 
 from morfic_cli.evaluation.protocol import EvalCfg, evaluate, rollout_role
 from morfic_cli.morphology.robots import list_robots
@@ -18,11 +18,10 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
-def smoke_store(tmp_path_factory):
-    """One smoke-trained film checkpoint, shared by the tests of this module (copied per test)."""
-    root = tmp_path_factory.mktemp("smoke") / "store"
-    train_smoke_runs(root)
-    return root
+def smoke_store(smoke_runs):
+    """One smoke-trained film checkpoint (the session's template), shared by the tests of this module (copied per
+    test)."""
+    return smoke_runs.template()
 
 
 @pytest.fixture

@@ -12,12 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from smoke_runs import train_smoke_runs
 from tensordict import TensorDict
 
 from morfic_cli.evaluation.rollout import rollout_env_cfg, run_rollout
 from morfic_cli.export.artifact import ExportCfg, export_policy, plan_export
-from morfic_cli.rl.runner import load_trained
+from morfic_cli.rl.load import load_trained
 from morfic_cli.store import Store
 
 pytest.importorskip("onnxruntime")
@@ -42,10 +41,10 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
+def smoke(smoke_runs, tmp_path_factory):
     """A smoke-trained film run, its go1 ONNX export (out/go1) and its descriptor-input export (out/any)."""
     base = tmp_path_factory.mktemp("deploy")
-    store = train_smoke_runs(base / "store")
+    store = smoke_runs.store(base / "store")
     export_policy(store, "runs/film-s0", ExportCfg(robot="go1"), out=base / "go1")
     export_policy(store, "runs/film-s0", ExportCfg(), out=base / "any")
     return base

@@ -9,14 +9,13 @@ import sys
 import numpy as np
 import pytest
 import torch
-from smoke_runs import train_smoke_runs
 from tensordict import TensorDict
 
 from morfic_cli.export.artifact import ExportCfg, check_export, export_policy, plan_export, serialise
 from morfic_cli.export.verify import model_mismatches
 from morfic_cli.morphology.builder import build_model
 from morfic_cli.morphology.robots import list_robots, load_robot
-from morfic_cli.rl.runner import load_trained
+from morfic_cli.rl.load import load_trained
 from morfic_cli.store import Store
 
 pytest.importorskip("onnxruntime")
@@ -27,10 +26,10 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
-def smoke_store(tmp_path_factory):
+def smoke_store(smoke_runs, tmp_path_factory):
     """A smoke-trained film run and its go1 ONNX export (with joint targets, also written to out/)."""
     base = tmp_path_factory.mktemp("export")
-    store = train_smoke_runs(base / "store")
+    store = smoke_runs.store(base / "store")
     export_policy(store, "runs/film-s0", ExportCfg(robot="go1", targets=True), out=base / "out")
     return base
 

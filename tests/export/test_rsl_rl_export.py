@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 import torch
 from rsl_rl.runners import OnPolicyRunner
-from smoke_runs import LEGACY_BUNDLE, train_smoke_runs
+from smoke_runs import LEGACY_BUNDLE
 
 from morfic_cli.envs.locomotion import LocomotionEnv
 from morfic_cli.rl.config import train_cfg_from_dict
-from morfic_cli.rl.runner import load_trained
+from morfic_cli.rl.load import load_trained
 from morfic_cli.store import Store
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -23,8 +23,8 @@ BUNDLE = LEGACY_BUNDLE
 
 
 @pytest.fixture(scope="module")
-def smoke_store(tmp_path_factory):
-    return train_smoke_runs(tmp_path_factory.mktemp("rslrl") / "store")
+def smoke_store(smoke_runs, tmp_path_factory):
+    return smoke_runs.store(tmp_path_factory.mktemp("rslrl") / "store")
 
 
 def _rsl_rl_runner(out: Path) -> tuple[OnPolicyRunner, LocomotionEnv, dict]:

@@ -159,7 +159,7 @@ def test_our_group_is_the_mean_over_seeds_of_each_evaluation(data):
 
 
 def test_the_compute_table_counts_each_models_parameters(store, data):
-    from morfic_cli.rl.runner import load_trained
+    from morfic_cli.rl.load import load_trained
 
     rows = {r["variant"]: r for r in C.compute_rows(data)}
     for variant in VARIANTS:

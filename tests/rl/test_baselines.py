@@ -23,9 +23,9 @@ from morfic_cli.morphology.builder import build_model
 from morfic_cli.morphology.description import body_description
 from morfic_cli.morphology.robots import load_robot
 from morfic_cli.rl import bot, urma
+from morfic_cli.rl.build import build_models, dummy_observations
 from morfic_cli.rl.config import preset_cfg
 from morfic_cli.rl.ppo import MorficPPO, algorithm_cfg
-from morfic_cli.rl.runner import build_models, dummy_observations
 from morfic_cli.rl.variants import STOCK, table_variants
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

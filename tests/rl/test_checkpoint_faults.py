@@ -427,7 +427,7 @@ def test_a_checkpoint_that_waits_for_gc_too_long_stops_the_training_cleanly(tmp_
 
 def test_gc_in_a_loop_during_a_training_loses_nothing(tmp_path):
     """gc --yes over and over while a training checkpoints: every version stays whole and resumable."""
-    from morfic_cli.rl.runner import load_resume_point
+    from morfic_cli.rl.resume import load_resume_point
 
     train = _spawn(tmp_path, "train", *_train_args(3))
     gcs = []

@@ -16,7 +16,7 @@ import pytest
 
 from morfic_cli.errors import MorficError
 from morfic_cli.rl.config import smoke_preset
-from morfic_cli.rl.runner import check_device, distributed_info, for_device, torch_device
+from morfic_cli.rl.devices import check_device, distributed_info, for_device, torch_device
 from morfic_cli.store import Store
 
 

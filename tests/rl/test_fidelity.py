@@ -12,9 +12,9 @@ import torch
 import torch.nn as nn
 from tensordict import TensorDict
 
+from morfic_cli.rl.build import build_models, dummy_observations, rsl_rl_cfg
 from morfic_cli.rl.config import LEGACY_VALUES, fill_legacy, preset_cfg, train_cfg_from_dict, train_cfg_to_dict
 from morfic_cli.rl.models import FiLM, HyperHead, MorficCritic
-from morfic_cli.rl.runner import build_models, dummy_observations, rsl_rl_cfg
 
 
 @pytest.fixture(autouse=True)

@@ -2,7 +2,7 @@
 
 import torch
 
-from morfic_cli.rl.runner import host_values
+from morfic_cli.rl.curve_logger import host_values
 
 
 def test_values_by_hand_and_one_read(monkeypatch):

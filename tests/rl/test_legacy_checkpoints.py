@@ -16,7 +16,7 @@ from morfic_cli import __version__
 from morfic_cli.envs import observations as O
 from morfic_cli.errors import MorficError
 from morfic_cli.rl.config import preset_cfg, train_cfg_to_dict
-from morfic_cli.rl.runner import load_trained
+from morfic_cli.rl.load import load_trained
 from morfic_cli.store import Store
 from morfic_cli.store.transfer import import_tar
 

@@ -16,8 +16,10 @@ import torch
 from smoke_runs import LEGACY_BUNDLE
 
 from morfic_cli.recording.curves import read_curve_csv
+from morfic_cli.rl.build import dummy_observations
 from morfic_cli.rl.config import smoke_preset
-from morfic_cli.rl.runner import dummy_observations, load_trained, new_run, resume_run
+from morfic_cli.rl.load import load_trained
+from morfic_cli.rl.runner import new_run, resume_run
 from morfic_cli.rl.variants import STOCK, VARIANTS
 from morfic_cli.store import Store
 

@@ -7,9 +7,8 @@ import tarfile
 
 import pytest
 from crafted_bundles import listing
-from smoke_runs import train_smoke_runs
 
-from morfic_cli.rl.runner import load_resume_point
+from morfic_cli.rl.resume import load_resume_point
 from morfic_cli.store import Store
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -18,10 +17,10 @@ RUN = "runs/film-s0"
 
 
 @pytest.fixture(scope="module")
-def bundles(tmp_path_factory):
+def bundles(smoke_runs, tmp_path_factory):
     """The smoke-trained source store, and its run exported --latest in full and weights-only."""
     base = tmp_path_factory.mktemp("weights-only")
-    src = train_smoke_runs(base / "src")
+    src = smoke_runs.store(base / "src")
     full = src.export_tar([RUN], base / "full.tar", latest=True)
     shallow = src.export_tar([RUN], base / "shallow.tar", latest=True, without_trainer_state=True)
     return src, full, shallow

@@ -994,7 +994,7 @@ def test_the_crafted_trainer_state_is_one_morfic_train_writes():
     from crafted_bundles import trainer_state
 
     from morfic_cli.rl import trainer_state as T
-    from morfic_cli.rl.runner import TRAINER_KEYS
+    from morfic_cli.rl.resume import TRAINER_KEYS
 
     assert T.trainer_state_problems(trainer_state(), TRAINER_KEYS) == []
     assert T.trainer_state_problems(trainer_state(iteration=True), TRAINER_KEYS) == [
