@@ -182,7 +182,11 @@ def transfer_cell(rows: pd.DataFrame) -> str:
 
 
 def _paper_cell(vx: float | None, vx_std: float | None, survival: float | None) -> str:
-    return "-" if vx is None else f"{vx:.2f} ± {vx_std:.2f} / {survival:.3f}"
+    """The paper's ``v_x ± σ / S``; a part the paper does not print (GenLoco's σ, say) is left out."""
+    if vx is None:
+        return "-"
+    std = f" ± {vx_std:.2f}" if vx_std is not None else ""
+    return f"{vx:.2f}{std}" + (f" / {survival:.3f}" if survival is not None else "")
 
 
 def _seeds_label(frame: pd.DataFrame, variant: str) -> str:
@@ -453,7 +457,15 @@ def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
             r["artifact"] = (ids.get(owner, {}).get(f"fixed_rollout{suffix}", {}).get(r["robot"])
                              or f"fixed-rollout{suffix}-{r['robot']}.csv")
             fixed_rows.append(r)
-    return records(("eval", *EXTRA_EVALS)), records(("calibration", *EXTRA_CALIBRATIONS)), fixed_rows
+    return paper_only(records(("eval", *EXTRA_EVALS))), paper_only(records(("calibration", *EXTRA_CALIBRATIONS))), \
+        paper_only(fixed_rows)
+
+
+def paper_only(rows: list[dict]) -> list[dict]:
+    """The rows of the paper's own seven variants (and the Monte-Carlo reference): the claims are about them only."""
+    from morfic_cli.report.compare import PAPER_VARIANTS
+
+    return [r for r in rows if r.get("variant") in PAPER_VARIANTS or r.get("variant") == "mc"]
 
 
 def _short(artifact: str) -> str:
@@ -536,7 +548,10 @@ def _closest(c: Any) -> str:
 
 def _runs_text(results: Path) -> str:
     """``7 variants x 3 seeds`` (or ``1-3 seeds``) from the runs under ``results``."""
+    from morfic_cli.report.compare import PAPER_VARIANTS
+
     runs = load(results, "eval")
+    runs = runs[runs["variant"].isin(PAPER_VARIANTS)] if not runs.empty else runs
     if runs.empty:
         return "no runs"
     seeds = runs.groupby("variant")["seed"].nunique()

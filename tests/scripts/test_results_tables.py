@@ -369,7 +369,7 @@ def test_the_answer_and_the_readme_headline_are_written_from_the_verdicts(tmp_pa
     assert "(2 variants x 2 seeds)" in answer
     assert "**At 2.0 m/s (the paper's command): (b) partly reversed; (a), (c), (d) and (e) cannot tell.**" in answer
     assert "| (b) MorFiC-F transfers better than ppo, actor-only, concat | **partly reversed** | " \
-           "aliengo film - ppo -0.51 [-0.51, -0.51] (Holm p 0, against the claim) at 2.0 m/s |" in answer
+           "AlienGo film - ppo -0.51 [-0.51, -0.51] (Holm p 0, against the claim) at 2.0 m/s |" in answer
     assert "none: its test is over the robots, and seeds add no robots" in answer
     head = rt.render_headline(tmp_path)
     assert head.startswith("- The paper's five claims on the trained policies (2 variants x 2 seeds, the `cpu` "

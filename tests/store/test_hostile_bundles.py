@@ -23,7 +23,6 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-import resource
 import subprocess
 import sys
 import tarfile
@@ -746,15 +745,17 @@ def test_a_bomb_through_the_real_cli_stays_small(world, monkeypatch):
     _, bundle = _build(world, "bomb: bzip2, 4096 objects of 4 MiB (16 GiB)", monkeypatch)
     assert bundle.stat().st_size < 1 * MIB
 
-    def limits() -> None:
-        resource.setrlimit(resource.RLIMIT_AS, (2 * GIB, 2 * GIB))
-        resource.setrlimit(resource.RLIMIT_FSIZE, (32 * MIB, 32 * MIB))
-
+    # The limits are set by the child before it execs morfic, not by a preexec_fn: a preexec_fn makes subprocess
+    # fork the whole pytest process (no vfork), which the kernel may refuse late in a long session (ENOMEM).
+    limited = ("import os, resource, sys; "
+               f"resource.setrlimit(resource.RLIMIT_AS, ({2 * GIB}, {2 * GIB})); "
+               f"resource.setrlimit(resource.RLIMIT_FSIZE, ({32 * MIB}, {32 * MIB})); "
+               "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])")
     before_store, before_outside = listing(world.root), tree(world.tmp, skip=world.root)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MORFIC_DEBUG": "0"}
-    proc = subprocess.run([sys.executable, "-m", "morfic_cli", "store", "import", str(bundle), "--store",
-                           str(world.root)], capture_output=True, text=True, timeout=120, env=env,
-                          preexec_fn=limits, check=False)
+    proc = subprocess.run([sys.executable, "-c", limited, "-m", "morfic_cli", "store", "import", str(bundle),
+                           "--store", str(world.root)], capture_output=True, text=True, timeout=120, env=env,
+                          check=False)
     assert proc.returncode == 1, proc.stderr
     assert proc.stderr.startswith("Error: ") and BOMB in proc.stderr and "Traceback" not in proc.stderr
     _check_invariants(world, CASES["bomb: bzip2, 4096 objects of 4 MiB (16 GiB)"], "refused",
