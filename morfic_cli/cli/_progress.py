@@ -22,7 +22,7 @@ class StepBar:
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
             self.bar = Progress(TextColumn(f"[bold]{self.label}[/] {{task.description}}"), BarColumn(),
-                                MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True))
+                                MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True, emoji=False))
             self.bar.__enter__()
             self.task = self.bar.add_task("", total=self.total)
         return self

@@ -17,9 +17,10 @@ from rich.text import Text
 from morfic_cli.cli._options import OutputFormat
 from morfic_cli.errors import UNPRINTABLE, printable
 
-#: Human messages (progress, "wrote artifact ...") go here, never to stdout.
-err_console = Console(stderr=True, soft_wrap=True)  # messages are not hard-wrapped; the terminal wraps them
-out_console = Console()
+#: Human messages (progress, "wrote artifact ...") go here, never to stdout. Not hard-wrapped (the terminal wraps
+#: them); no emoji codes: a name such as ``evil.mod:X`` beside a colon would print as an emoji.
+err_console = Console(stderr=True, soft_wrap=True, emoji=False)
+out_console = Console(emoji=False)
 
 
 @dataclass(frozen=True)

@@ -287,7 +287,7 @@ class _View:
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-        self.console = Console(stderr=True)
+        self.console = Console(stderr=True, emoji=False)
         self.live = self.console.is_terminal
         if self.live:
             self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -349,7 +349,7 @@ class _RayView(_View):
         from rich.console import Console
         from rich.live import Live
 
-        self.console = Console(stderr=True)
+        self.console = Console(stderr=True, emoji=False)
         if self.console.is_terminal:
             self.live_view = Live(console=self.console, refresh_per_second=2, transient=False)
             self.live_view.__enter__()

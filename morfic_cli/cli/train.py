@@ -201,7 +201,7 @@ class _progress:
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-        console = Console(stderr=True)
+        console = Console(stderr=True, emoji=False)
         if not console.is_terminal:  # a log file: one plain line every ~1% of the run instead of a live bar
             every = max(1, self.run.cfg.max_iterations // 100)
 

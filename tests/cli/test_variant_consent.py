@@ -247,3 +247,16 @@ def test_the_example_variant_installs_as_its_own_package(tmp_path):
                           cwd=tmp_path, env={**env, "OMP_NUM_THREADS": "1"})
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["refused", "GatedCritic", "custom_variant", "Gated"]
+
+
+def test_names_that_look_like_emoji_codes_print_as_written(run_cli, tmp_path, monkeypatch):
+    """rich turns ``:x:`` into an emoji unless told not to: a variant named ``evil.mod:X`` next to a colon must print
+    as those characters, in the table and in the message that the hand-added line voids the list."""
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
+    assert run_cli("trust", "smile.mod:Smile")[0] == 0
+    code, out, _ = run_cli("trust", "--list")
+    assert code == 0 and "smile.mod:Smile" in out
+    path = tmp_path / "xdg" / "morfic" / "trusted-variants"
+    path.write_text(path.read_text() + "evil.mod:X\n")
+    code, out, err = run_cli("trust", "--list")
+    assert code == 0 and "evil.mod:X" in out + err and "\N{CROSS MARK}" not in out + err
