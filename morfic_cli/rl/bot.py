@@ -32,6 +32,7 @@ from tensordict import TensorDict
 from morfic_cli.envs.observations import POLICY_DIM
 from morfic_cli.morphology.robots import JOINTS, LEGS
 from morfic_cli.rl.external import TokenModel, float32_linear, init_transformer_weights
+from morfic_cli.rl.models import ExportedPolicy
 
 NUM_NODES = 1 + len(LEGS) * len(JOINTS)
 """The root and the 12 joints."""
@@ -258,11 +259,8 @@ def parameter_count(d_model: int = 64, dim_feedforward: int = 128, num_layers: i
     return num_layers * layer + tokenizer + heads
 
 
-class _ExportedBot(nn.Module):
+class _ExportedBot(ExportedPolicy):
     """Deterministic BoT policy on the flattened history for TorchScript and ONNX: (N, H * 48) -> (N, 12)."""
-
-    is_recurrent: bool = False
-    __jit_unused_properties__ = ["input_names", "output_names"]
 
     def __init__(self, actor: BotActor) -> None:
         super().__init__()
@@ -274,21 +272,3 @@ class _ExportedBot(nn.Module):
         """Action means from the newest frame (the last 48 entries). Shape: (N, H * 48) -> (N, 12)."""
         root, joints = split_frame(x[:, -POLICY_DIM:])
         return self.heads(self.body(root, joints)[:, 1:]).squeeze(-1)
-
-    @torch.jit.export
-    def reset(self) -> None:
-        """Reset recurrent state (no-op)."""
-
-    def get_dummy_inputs(self) -> tuple[torch.Tensor]:
-        """A zero input for ONNX tracing. Shape: (1, H * 48)."""
-        return (torch.zeros(1, self.input_size),)
-
-    @property
-    def input_names(self) -> list[str]:
-        """ONNX input names."""
-        return ["obs"]
-
-    @property
-    def output_names(self) -> list[str]:
-        """ONNX output names."""
-        return ["actions"]

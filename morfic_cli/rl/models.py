@@ -589,14 +589,39 @@ def link_morphology_encoder(actor: nn.Module, critic: nn.Module) -> None:
     critic._shared_source = (actor,)
 
 
-class _ExportedActor(nn.Module):
-    """Deterministic policy on one flat input ``[state groups..., m]`` for TorchScript and ONNX export.
+class ExportedPolicy(nn.Module):
+    """What every exported policy module shares: one flat input ``obs``, one output ``actions``, no recurrent state.
 
-    Shape: (N, D_s + 11) -> (N, 12) (D_s + 0 for ``ppo``). No dropout (export is inference).
+    TorchScript, ONNX and rsl-rl's exporter read these. A subclass sets ``input_size`` and defines ``forward``.
     """
 
     is_recurrent: bool = False
     __jit_unused_properties__ = ["input_names", "output_names"]
+
+    @torch.jit.export
+    def reset(self) -> None:
+        """Reset recurrent state (no-op)."""
+
+    def get_dummy_inputs(self) -> tuple[torch.Tensor]:
+        """A zero input for ONNX tracing. Shape: (1, input_size)."""
+        return (torch.zeros(1, self.input_size),)
+
+    @property
+    def input_names(self) -> list[str]:
+        """ONNX input names."""
+        return ["obs"]
+
+    @property
+    def output_names(self) -> list[str]:
+        """ONNX output names."""
+        return ["actions"]
+
+
+class _ExportedActor(ExportedPolicy):
+    """Deterministic policy on one flat input ``[state groups..., m]`` for TorchScript and ONNX export.
+
+    Shape: (N, D_s + 11) -> (N, 12) (D_s + 0 for ``ppo``). No dropout (export is inference).
+    """
 
     def __init__(self, model: MorficActor, verbose: bool = False) -> None:
         super().__init__()
@@ -621,21 +646,3 @@ class _ExportedActor(nn.Module):
         if self.morphology_dim > 0:
             parts.append(self.morphology_encoder(x[:, self.state_dim :]))
         return self.deterministic_output(self.mlp(torch.cat(parts, dim=-1)))
-
-    @torch.jit.export
-    def reset(self) -> None:
-        """Reset recurrent state (no-op)."""
-
-    def get_dummy_inputs(self) -> tuple[torch.Tensor]:
-        """A zero input for ONNX tracing. Shape: (1, D_s + 11)."""
-        return (torch.zeros(1, self.input_size),)
-
-    @property
-    def input_names(self) -> list[str]:
-        """ONNX input names."""
-        return ["obs"]
-
-    @property
-    def output_names(self) -> list[str]:
-        """ONNX output names."""
-        return ["actions"]
