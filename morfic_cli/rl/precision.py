@@ -24,6 +24,7 @@ import contextlib
 from collections.abc import Iterator
 
 import torch
+from torch.utils import _pytree as pytree
 from torch.utils._python_dispatch import TorchDispatchMode
 
 #: ``bf16_matmul`` of a run: the native bf16 kernels, or float32 products of the bf16 operands (this module).
@@ -31,10 +32,12 @@ NATIVE, FLOAT32 = "native", "float32"
 
 _aten = torch.ops.aten
 _MATMULS = frozenset({_aten.mm.default, _aten.addmm.default, _aten.bmm.default, _aten.baddbmm.default,
-                      _aten.linear.default, _aten.matmul.default})
-"""The products autocast runs in bf16 on the CPU, as they reach a dispatch mode: ``linear`` and ``matmul`` whole
-under ``torch.inference_mode`` (the rollout), decomposed into ``mm`` / ``addmm`` / ``bmm`` / ``baddbmm`` where
-autograd records them (the update, forward and backward)."""
+                      _aten.linear.default, _aten.matmul.default, _aten.einsum.default})
+"""The products autocast runs in bf16 on the CPU, as they reach a dispatch mode: ``linear``, ``matmul`` and
+``einsum`` whole under ``torch.inference_mode`` (the rollout), decomposed into ``mm`` / ``addmm`` / ``bmm`` /
+``baddbmm`` where autograd records them (the update, forward and backward). A whole ``einsum`` arrives before
+autocast has cast its operands (it casts the ``bmm`` inside), so it may mix bf16 and float32 operands (urma's
+attention pool: float32 weights, bf16 values)."""
 
 
 def cpu_bf16_kernels() -> bool | None:
@@ -72,10 +75,21 @@ class Bf16MatmulInFloat32(TorchDispatchMode):
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):  # noqa: ANN001, D105
         kwargs = kwargs or {}
-        if func in _MATMULS and any(isinstance(a, torch.Tensor) and a.dtype == torch.bfloat16 for a in args):
-            wide = [a.float() if isinstance(a, torch.Tensor) and a.dtype == torch.bfloat16 else a for a in args]
-            return func(*wide, **kwargs).to(torch.bfloat16)
+        if func in _MATMULS and any(t.dtype == torch.bfloat16 for t in _tensors(args)):
+            return func(*pytree.tree_map(_as_bf16_in_float32, args), **kwargs).to(torch.bfloat16)
         return func(*args, **kwargs)
+
+
+def _tensors(args: tuple) -> list[torch.Tensor]:
+    """The tensors among a dispatched op's arguments, in lists too (``einsum``'s operands)."""
+    return [a for a in pytree.tree_leaves(args) if isinstance(a, torch.Tensor)]
+
+
+def _as_bf16_in_float32(a: object) -> object:
+    """A floating operand as autocast passes it to a bf16 product (rounded to bf16), held in float32."""
+    if isinstance(a, torch.Tensor) and a.dtype in (torch.bfloat16, torch.float32):
+        return a.to(torch.bfloat16).float()
+    return a
 
 
 @contextlib.contextmanager

@@ -104,6 +104,36 @@ def test_an_autocast_mlp_pass_is_the_native_one_up_to_the_order_of_sums():
     assert _rel([rollout_emulated.float()], [rollout_native.float()])[0] < 0.25 * _rel([native[0]], [full[0]])[0]
 
 
+def test_a_whole_einsum_with_mixed_operands_is_autocasts_bf16_product():
+    # under inference_mode einsum reaches the mode whole, before autocast casts its operands (urma's attention pool:
+    # float32 softmax weights, bf16 values); autocast would round both to bf16 and multiply
+    w = torch.tensor([[[0.5, 1.0 / 3.0], [0.5, 2.0 / 3.0]]])  # (n=1, t=2, s=2), float32; 1/3 is not a bf16 number
+    v = torch.tensor([[[2.0], [4.0]]], dtype=BF16)              # (n=1, t=2, v=1)
+    third, two_thirds = float(torch.tensor(1.0 / 3.0).to(BF16)), float(torch.tensor(2.0 / 3.0).to(BF16))
+    hand = [[[0.5 * 2 + 0.5 * 4], [third * 2 + two_thirds * 4]]]
+    with torch.inference_mode(), torch.autocast("cpu", dtype=BF16):
+        native = torch.einsum("nts,ntv->nsv", w, v)
+        with Bf16MatmulInFloat32():
+            emulated = torch.einsum("nts,ntv->nsv", w, v)
+    assert emulated.dtype == native.dtype == BF16
+    assert torch.equal(emulated, native)
+    assert emulated.tolist() == torch.tensor(hand).to(BF16).tolist()
+
+
+def test_urmas_attention_pool_runs_in_the_rollout_on_a_cpu_without_kernels():
+    from morfic_cli.rl.urma import AttentionPool
+
+    torch.manual_seed(0)
+    pool = AttentionPool(description_dim=6, state_dim=3, slots=4)
+    description, state = torch.randn(5, 12, 6), torch.randn(5, 12, 3)
+    with torch.inference_mode(), torch.autocast("cpu", dtype=BF16):
+        native, _ = pool(description, state)
+        with Bf16MatmulInFloat32():
+            emulated, _ = pool(description, state)
+    assert emulated.shape == native.shape == (5, 4 * 4) and emulated.dtype == native.dtype
+    assert float((emulated.float() - native.float()).abs().max()) <= 2 ** -7 * float(native.float().abs().max())
+
+
 @pytest.mark.parametrize(("kernels", "mixed", "mode"), [(False, "true", FLOAT32), (True, "true", NATIVE),
                                                         (False, "false", None)])
 def test_train_records_how_its_bf16_products_ran(run_cli, monkeypatch, kernels, mixed, mode):
