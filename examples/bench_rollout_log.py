@@ -24,8 +24,21 @@ from pathlib import Path
 import numpy as np
 import torch
 
-FIELDS = ("base_pos", "base_quat", "base_lin_vel", "base_ang_vel", "command", "joint_pos", "joint_vel", "action",
-          "reward", "reward_terms", "value", "done", "time_out")
+FIELDS = (
+    "base_pos",
+    "base_quat",
+    "base_lin_vel",
+    "base_ang_vel",
+    "command",
+    "joint_pos",
+    "joint_vel",
+    "action",
+    "reward",
+    "reward_terms",
+    "value",
+    "done",
+    "time_out",
+)
 
 
 def main() -> None:
@@ -47,8 +60,17 @@ def main() -> None:
     torch.set_num_threads(1)
     trained = load_trained(Store(args.store), args.run)
     t0 = time.perf_counter()
-    ro = run_rollout(trained.actor, trained.critic, trained.cfg.env, robot=args.robot, mode="descriptor",
-                     command_vx=2.0, num_envs=args.envs, steps=args.steps, keep_models=args.envs)
+    ro = run_rollout(
+        trained.actor,
+        trained.critic,
+        trained.cfg.env,
+        robot=args.robot,
+        mode="descriptor",
+        command_vx=2.0,
+        num_envs=args.envs,
+        steps=args.steps,
+        keep_models=args.envs,
+    )
     t_roll = time.perf_counter() - t0
     n = args.envs * args.steps
     print(f"rollout {args.envs} x {args.steps} on {args.robot}: {t_roll:.1f} s; load average {os.getloadavg()}")
@@ -71,8 +93,10 @@ def main() -> None:
             ref = v1.read_rollout(path).arrays
             r = time.perf_counter() - t0
             size = path.stat().st_size
-            print(f"before (format 1, JSON): {size / 1e6:.2f} MB, {size / n:.0f} B/env-step, write {w:.2f} s "
-                  f"({100 * w / t_roll:.1f} % of the rollout), read {r:.2f} s")
+            print(
+                f"before (format 1, JSON): {size / 1e6:.2f} MB, {size / n:.0f} B/env-step, write {w:.2f} s "
+                f"({100 * w / t_roll:.1f} % of the rollout), read {r:.2f} s"
+            )
         for scene in (0, 4, args.envs):
             path = Path(tmp) / f"v2-{scene}.mcap"
             t0 = time.perf_counter()
@@ -85,8 +109,10 @@ def main() -> None:
             for k in FIELDS:
                 np.testing.assert_array_equal(arrays[k], (ref or arrays)[k], err_msg=k)
                 np.testing.assert_array_equal(arrays[k], a[k].astype(arrays[k].dtype), err_msg=k)
-            print(f"after (format 2, protobuf), scene of {scene} envs: {size / 1e6:.2f} MB, {size / n:.0f} B/env-step, "
-                  f"write {w:.2f} s ({100 * w / t_roll:.1f} % of the rollout), read {r:.2f} s")
+            print(
+                f"after (format 2, protobuf), scene of {scene} envs: {size / 1e6:.2f} MB, {size / n:.0f} B/env-step, "
+                f"write {w:.2f} s ({100 * w / t_roll:.1f} % of the rollout), read {r:.2f} s"
+            )
 
 
 if __name__ == "__main__":

@@ -163,8 +163,15 @@ class PhysicsRecorder:
         return best
 
 
-def bench_env(num_envs: int, steps: int, backend: str = "cpu", seed: int = 0, warmup: int = 5,
-              device: str = "cpu", repeats: int = 3) -> EnvBenchResult:
+def bench_env(
+    num_envs: int,
+    steps: int,
+    backend: str = "cpu",
+    seed: int = 0,
+    warmup: int = 5,
+    device: str = "cpu",
+    repeats: int = 3,
+) -> EnvBenchResult:
     """Measure env steps/s with random actions and the physics floor on the same models, in alternation.
 
     Each repetition times ``steps`` env steps (recording their stepping calls), then replays exactly those calls as
@@ -312,8 +319,14 @@ class TrainBenchResult:
         return asdict(self)
 
 
-def bench_train(preset: str = "cpu", variant: str = "film", iterations: int = 5, seed: int = 0,
-                overrides: list[str] | None = None, device: str = "cpu") -> TrainBenchResult:
+def bench_train(
+    preset: str = "cpu",
+    variant: str = "film",
+    iterations: int = 5,
+    seed: int = 0,
+    overrides: list[str] | None = None,
+    device: str = "cpu",
+) -> TrainBenchResult:
     """Time ``iterations`` PPO iterations of a preset (after one warm-up) and replay their physics as the floor.
 
     The run goes to a temporary store that is deleted afterwards. ``device="cuda"`` trains as
@@ -328,8 +341,10 @@ def bench_train(preset: str = "cpu", variant: str = "film", iterations: int = 5,
     from morfic_cli.rl.runner import new_run
     from morfic_cli.store import Store
 
-    cfg = apply_overrides(preset_cfg(preset, variant, seed),
-                          [f"max_iterations={iterations + 1}", f"save_interval={iterations + 10}", *(overrides or [])])
+    cfg = apply_overrides(
+        preset_cfg(preset, variant, seed),
+        [f"max_iterations={iterations + 1}", f"save_interval={iterations + 10}", *(overrides or [])],
+    )
     load_before = load_average()
     with tempfile.TemporaryDirectory(prefix="morfic-bench-") as tmp:
         run = new_run(Store(tmp), cfg, "bench", device)
@@ -359,17 +374,31 @@ def bench_train(preset: str = "cpu", variant: str = "film", iterations: int = 5,
     fraction = statistics.median(fractions)
     med = statistics.median
     return TrainBenchResult(
-        preset=preset, variant=variant, backend=cfg.env.sim.backend, device=device_name(cfg.env.sim.device),
-        num_envs=cfg.env.num_envs, iterations=len(timed), transitions=transitions * len(timed),
-        s_per_iteration=round(med(per_iter), 3), collect_s_per_iteration=round(med(r["collect_s"] for r in timed), 3),
+        preset=preset,
+        variant=variant,
+        backend=cfg.env.sim.backend,
+        device=device_name(cfg.env.sim.device),
+        num_envs=cfg.env.num_envs,
+        iterations=len(timed),
+        transitions=transitions * len(timed),
+        s_per_iteration=round(med(per_iter), 3),
+        collect_s_per_iteration=round(med(r["collect_s"] for r in timed), 3),
         learn_s_per_iteration=round(med(r["learn_s"] for r in timed), 3),
         train_steps_per_s=round(transitions / med(per_iter), 1),
-        floor_env_steps_per_s=round(med(floors) / cfg.env.decimation, 1), fraction_of_floor=credible(fraction),
-        torch_threads=torch.get_num_threads(), cpu_model=cpu_model(), cores=os.cpu_count() or 1,
-        s_per_iteration_spread=_spread(per_iter, 3), fraction_spread=_spread(fractions),
-        noisy=fraction > MAX_CREDIBLE_RATIO, load_before=load_before, load_after=load_average(),
-        omp_wait_policy=os.environ.get("OMP_WAIT_POLICY", ""), mixed_precision=cfg.ppo.use_mixed_precision,
-        bf16_kernels=cpu_bf16_kernels(), bf16_matmul=matmul,
+        floor_env_steps_per_s=round(med(floors) / cfg.env.decimation, 1),
+        fraction_of_floor=credible(fraction),
+        torch_threads=torch.get_num_threads(),
+        cpu_model=cpu_model(),
+        cores=os.cpu_count() or 1,
+        s_per_iteration_spread=_spread(per_iter, 3),
+        fraction_spread=_spread(fractions),
+        noisy=fraction > MAX_CREDIBLE_RATIO,
+        load_before=load_before,
+        load_after=load_average(),
+        omp_wait_policy=os.environ.get("OMP_WAIT_POLICY", ""),
+        mixed_precision=cfg.ppo.use_mixed_precision,
+        bf16_kernels=cpu_bf16_kernels(),
+        bf16_matmul=matmul,
     )
 
 
@@ -403,8 +432,14 @@ class TrainComparison:
 
     def summary_rows(self) -> list[dict]:
         """One row per side: medians over rounds of the keys both sides report."""
-        keys = ("s_per_iteration", "collect_s_per_iteration", "learn_s_per_iteration", "train_steps_per_s",
-                "floor_env_steps_per_s", "fraction_of_floor")
+        keys = (
+            "s_per_iteration",
+            "collect_s_per_iteration",
+            "learn_s_per_iteration",
+            "train_steps_per_s",
+            "floor_env_steps_per_s",
+            "fraction_of_floor",
+        )
         out = []
         for side, runs in ((self.this, self.this_runs), (f"{self.ref} ({self.ref_commit[:10]})", self.ref_runs)):
             row: dict = {"code": side}
@@ -429,8 +464,10 @@ def _git(root: Path, *args: str) -> str:
 
     proc = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True)
     if proc.returncode != 0:
-        raise MorficError(f"git {' '.join(args)} failed in {root}: {proc.stderr.strip() or proc.stdout.strip()}; "
-                          "--compare needs a git checkout of morfic and a commit, branch or tag it knows.")
+        raise MorficError(
+            f"git {' '.join(args)} failed in {root}: {proc.stderr.strip() or proc.stdout.strip()}; "
+            "--compare needs a git checkout of morfic and a commit, branch or tag it knows."
+        )
     return proc.stdout.strip()
 
 
@@ -442,16 +479,24 @@ def _bench_subprocess(root: Path, argv: list[str], env: dict[str, str]) -> dict:
 
     from morfic_cli.errors import MorficError
 
-    proc = subprocess.run([sys.executable, "-m", "morfic_cli", "bench", "train", *argv], cwd=root, env=env,
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "morfic_cli", "bench", "train", *argv], cwd=root, env=env, capture_output=True, text=True
+    )
     if proc.returncode != 0:
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
         raise MorficError(f"bench train with the code in {root} failed (exit {proc.returncode}): {' '.join(tail)}")
     return json.loads(proc.stdout)
 
 
-def compare_train(ref: str, preset: str = "cpu", variant: str = "film", iterations: int = 3, rounds: int = 2,
-                  seed: int = 0, progress=None) -> TrainComparison:
+def compare_train(
+    ref: str,
+    preset: str = "cpu",
+    variant: str = "film",
+    iterations: int = 3,
+    rounds: int = 2,
+    seed: int = 0,
+    progress=None,
+) -> TrainComparison:
     """Time ``bench train`` of this checkout and of commit ``ref`` side by side, in alternating subprocesses.
 
     REF's tree is exported with ``git archive`` into a temporary directory (no worktree is registered) and run with
@@ -482,8 +527,19 @@ def compare_train(ref: str, preset: str = "cpu", variant: str = "film", iteratio
     head = _git(root, "rev-parse", "HEAD")
     dirty = bool(_git(root, "status", "--porcelain", "--untracked-files=no"))
     this = f"this checkout ({head[:10]}{' + changes' if dirty else ''})"
-    argv = ["--preset", preset, "--variant", variant, "--iterations", str(iterations), "--seed", str(seed),
-            "--format", "json", "-q"]
+    argv = [
+        "--preset",
+        preset,
+        "--variant",
+        variant,
+        "--iterations",
+        str(iterations),
+        "--seed",
+        str(seed),
+        "--format",
+        "json",
+        "-q",
+    ]
     env = user_environment()
     this_runs: list[dict] = []
     ref_runs: list[dict] = []
@@ -495,7 +551,7 @@ def compare_train(ref: str, preset: str = "cpu", variant: str = "film", iteratio
             tar.extractall(ref_root, filter="data")
         sides = {"this": (root, this_runs), "ref": (ref_root, ref_runs)}
         for r in range(max(1, int(rounds))):
-            for name in (("this", "ref") if r % 2 == 0 else ("ref", "this")):
+            for name in ("this", "ref") if r % 2 == 0 else ("ref", "this"):
                 side_root, runs = sides[name]
                 if progress is not None:
                     progress(f"round {r + 1}/{rounds}: {this if name == 'this' else ref} ...")
@@ -507,6 +563,13 @@ def compare_train(ref: str, preset: str = "cpu", variant: str = "film", iteratio
                 out.setdefault("load_after", load_average())
                 runs.append(out)
     ratios = [a["s_per_iteration"] / b["s_per_iteration"] for a, b in zip(this_runs, ref_runs, strict=True)]
-    return TrainComparison(ref=ref, ref_commit=ref_commit, this=this, rounds=len(ratios), this_runs=this_runs,
-                           ref_runs=ref_runs, s_per_iteration_ratio=round(statistics.median(ratios), 4),
-                           ratio_spread=_spread(ratios))
+    return TrainComparison(
+        ref=ref,
+        ref_commit=ref_commit,
+        this=this,
+        rounds=len(ratios),
+        this_runs=this_runs,
+        ref_runs=ref_runs,
+        s_per_iteration_ratio=round(statistics.median(ratios), 4),
+        ratio_spread=_spread(ratios),
+    )

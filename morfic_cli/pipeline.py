@@ -107,14 +107,31 @@ SHIPPED_TRAIN_PRESET = "cpu"
 #: little more than its fixed Python overhead, so fewer steps, not fewer envs, would be the real saving), the seven
 #: robots' 16 envs stepped as one batch of 112 (``batch_robots``: one policy call and one env step per step for all
 #: robots, about half the CPU time of seven rollouts of 16; docs/benchmarks.md).
-SHIPPED_PROTOCOL: dict[str, Any] = {"modes": ("descriptor",), "command_vx": (2.0,), "eval_envs": 16,
-                                    "eval_steps": 500, "diagnose_envs": 16, "diagnose_steps": 800,
-                                    "batch_robots": True}
+SHIPPED_PROTOCOL: dict[str, Any] = {
+    "modes": ("descriptor",),
+    "command_vx": (2.0,),
+    "eval_envs": 16,
+    "eval_steps": 500,
+    "diagnose_envs": 16,
+    "diagnose_steps": 800,
+    "batch_robots": True,
+}
 
 
-SMOKE_STUDY: dict[str, Any] = {"seeds": 2, "commands": (2.0,), "train_envs": 4, "held_out": 1, "val_envs": 1,
-                               "target_envs": 2, "steps": 80, "trunc_eps": 0.5, "max_epochs": 2, "patience": 1,
-                               "minibatch": 64, "stride": 2}
+SMOKE_STUDY: dict[str, Any] = {
+    "seeds": 2,
+    "commands": (2.0,),
+    "train_envs": 4,
+    "held_out": 1,
+    "val_envs": 1,
+    "target_envs": 2,
+    "steps": 80,
+    "trunc_eps": 0.5,
+    "max_epochs": 2,
+    "patience": 1,
+    "minibatch": 64,
+    "stride": 2,
+}
 """The smoke preset's critic study: every stage in seconds (its numbers are not results)."""
 SHIPPED_STUDY_BUNDLE = "results/critic-study.tar"
 """Where, under the bundle folder, the shipped preset finds the critic study of the shipped runs."""
@@ -140,8 +157,15 @@ def shipped_variants(bundles: str | Path, seed: int = 0) -> tuple[str, ...]:
     return tuple(v for v in VARIANTS if shipped_bundle(bundles, v, seed).is_file())
 
 
-def reproduce_cfg(preset: str, *, seeds: int = 1, variants: tuple[str, ...] | None = None,
-                  device: str = "cpu", bundles: str | Path | None = None, full_protocol: bool = False) -> ReproduceCfg:
+def reproduce_cfg(
+    preset: str,
+    *,
+    seeds: int = 1,
+    variants: tuple[str, ...] | None = None,
+    device: str = "cpu",
+    bundles: str | Path | None = None,
+    full_protocol: bool = False,
+) -> ReproduceCfg:
     """The pipeline of a preset.
 
     ``smoke`` exercises every stage in minutes on 2 cores: 2 envs x 25 steps per evaluation rollout, 2 envs x 80
@@ -169,30 +193,49 @@ def reproduce_cfg(preset: str, *, seeds: int = 1, variants: tuple[str, ...] | No
         return _shipped_cfg(seeds, variants, device, Path(bundles) if bundles else default_bundles(), full_protocol)
     base = ReproduceCfg(preset=preset, seeds=seeds, variants=tuple(variants or REPRODUCE_VARIANTS), device=device)
     if preset == "smoke":
-        return dataclasses.replace(base, eval_envs=2, eval_steps=25, diagnose_envs=2, diagnose_steps=80,
-                                   trunc_eps=0.5, torch_threads=1, critic_study=SMOKE_STUDY)
+        return dataclasses.replace(
+            base,
+            eval_envs=2,
+            eval_steps=25,
+            diagnose_envs=2,
+            diagnose_steps=80,
+            trunc_eps=0.5,
+            torch_threads=1,
+            critic_study=SMOKE_STUDY,
+        )
     return dataclasses.replace(base, critic_study={})
 
 
-def _shipped_cfg(seeds: int, variants: tuple[str, ...] | None, device: str, bundles: Path,
-                 full_protocol: bool) -> ReproduceCfg:
+def _shipped_cfg(
+    seeds: int, variants: tuple[str, ...] | None, device: str, bundles: Path, full_protocol: bool
+) -> ReproduceCfg:
     if seeds != 1:
         raise MorficError("--preset shipped has one seed per variant (seed 0); leave out --seeds.")
     if not bundles.is_dir():
-        raise MorficError(f"no bundle folder {bundles}: run from a source checkout of morfic (it ships the trained "
-                          f"runs under artifacts/bundles/), or pass --bundles DIR.")
+        raise MorficError(
+            f"no bundle folder {bundles}: run from a source checkout of morfic (it ships the trained "
+            f"runs under artifacts/bundles/), or pass --bundles DIR."
+        )
     if variants:
         missing = [str(shipped_bundle(bundles, v)) for v in variants if not shipped_bundle(bundles, v).is_file()]
         if missing:
-            raise MorficError(f"no shipped bundle {', '.join(missing)}; the shipped variants are "
-                              f"{', '.join(shipped_variants(bundles)) or 'none'} (or train one: morfic reproduce "
-                              f"--preset cpu --variants ...).")
+            raise MorficError(
+                f"no shipped bundle {', '.join(missing)}; the shipped variants are "
+                f"{', '.join(shipped_variants(bundles)) or 'none'} (or train one: morfic reproduce "
+                f"--preset cpu --variants ...)."
+            )
     else:
         variants = shipped_variants(bundles)
         if not variants:
             raise MorficError(f"no shipped bundles (<variant>-cpu-s0.tar) in {bundles}; pass --bundles DIR.")
-    base = ReproduceCfg(preset=SHIPPED_TRAIN_PRESET, seeds=1, variants=tuple(variants), device=device,
-                        bundles=str(bundles), name=SHIPPED)
+    base = ReproduceCfg(
+        preset=SHIPPED_TRAIN_PRESET,
+        seeds=1,
+        variants=tuple(variants),
+        device=device,
+        bundles=str(bundles),
+        name=SHIPPED,
+    )
     return base if full_protocol else dataclasses.replace(base, **SHIPPED_PROTOCOL)
 
 
@@ -289,8 +332,9 @@ class Pipeline:
         progress: Progress sink (default: silent).
     """
 
-    def __init__(self, store: Store, cfg: ReproduceCfg, out: Path | None = None,
-                 progress: Progress | None = None) -> None:
+    def __init__(
+        self, store: Store, cfg: ReproduceCfg, out: Path | None = None, progress: Progress | None = None
+    ) -> None:
         self.store, self.cfg, self.out = store, cfg, out
         self.progress = progress or _Silent()
         self._training = None
@@ -300,16 +344,21 @@ class Pipeline:
     # ------------------------------------------------------------------ plan
     def run_specs(self) -> list[tuple[str, int, str]]:
         """(variant, seed, ``runs/NAME``) of every training run, variant-major."""
-        return [(v, s, RUNS_PREFIX + run_name(v, s, self.cfg.preset)) for v in self.cfg.variants
-                for s in range(self.cfg.seeds)]
+        return [
+            (v, s, RUNS_PREFIX + run_name(v, s, self.cfg.preset))
+            for v in self.cfg.variants
+            for s in range(self.cfg.seeds)
+        ]
 
     def trains_in_bf16(self) -> bool:
         """True when a run this pipeline has yet to train (not finished in the store) autocasts to bf16."""
         if self.cfg.bundles:
             return False
-        return any(self.train_cfg(v, s).ppo.use_mixed_precision
-                   and not (self.store.has_ref(spec) and self.store.read_manifest(spec).meta.get("finished"))
-                   for v, s, spec in self.run_specs())
+        return any(
+            self.train_cfg(v, s).ppo.use_mixed_precision
+            and not (self.store.has_ref(spec) and self.store.read_manifest(spec).meta.get("finished"))
+            for v, s, spec in self.run_specs()
+        )
 
     def plan(self) -> list[tuple[str, str, Callable[[], StepResult]]]:
         """Every step as (kind, label, function), in order."""
@@ -403,10 +452,17 @@ class Pipeline:
         if experiment_config(recorded) != experiment_config(train_cfg_to_dict(self.train_cfg(variant, seed))):
             raise MorficError(
                 f"{spec} exists in {self.store.root} but was trained with another config than this "
-                f"reproduce asks for; use another --store, or move it aside (it stays in the store's history).")
+                f"reproduce asks for; use another --store, or move it aside (it stays in the store's history)."
+            )
         if manifest.meta.get("finished"):
-            return StepResult("train", spec, "skipped", manifest.id, spec,
-                              detail=f"finished at iteration {manifest.meta.get('iteration')}")
+            return StepResult(
+                "train",
+                spec,
+                "skipped",
+                manifest.id,
+                spec,
+                detail=f"finished at iteration {manifest.meta.get('iteration')}",
+            )
         return None
 
     def train(self, variant: str, seed: int, spec: str) -> StepResult:
@@ -462,12 +518,17 @@ class Pipeline:
             report = import_tar(self.store, path)
             status, detail = "done", f"{path.name}: {report.objects_added} new objects"
         manifest = self.store.read_manifest(spec)
-        if manifest.kind != "checkpoint" or not manifest.meta.get("finished") or manifest.config.get(
-                "variant") != variant:
+        if (
+            manifest.kind != "checkpoint"
+            or not manifest.meta.get("finished")
+            or manifest.config.get("variant") != variant
+        ):
             where = f"{path}" if status == "done" else f"{self.store.root}"
-            raise MorficError(f"{spec} in {where} is not a finished {variant} run (kind {manifest.kind}, variant "
-                              f"{manifest.config.get('variant')}, finished {bool(manifest.meta.get('finished'))}); "
-                              f"use another --store, or re-export the bundle from a finished run.")
+            raise MorficError(
+                f"{spec} in {where} is not a finished {variant} run (kind {manifest.kind}, variant "
+                f"{manifest.config.get('variant')}, finished {bool(manifest.meta.get('finished'))}); "
+                f"use another --store, or re-export the bundle from a finished run."
+            )
         self.progress.step_advance(completed=1)
         it = manifest.meta.get("iteration")
         return StepResult("import", spec, status, manifest.id, spec, detail=f"{detail}, iteration {it}")
@@ -477,8 +538,15 @@ class Pipeline:
         from morfic_cli.evaluation.protocol import EvalCfg
 
         c = self.cfg
-        return EvalCfg(robots=c.robots, modes=c.modes, command_vx=c.command_vx, num_envs=c.eval_envs,
-                       steps=c.eval_steps, seed=0, batch_robots=c.batch_robots)
+        return EvalCfg(
+            robots=c.robots,
+            modes=c.modes,
+            command_vx=c.command_vx,
+            num_envs=c.eval_envs,
+            steps=c.eval_steps,
+            seed=0,
+            batch_robots=c.batch_robots,
+        )
 
     def stored_eval(self, spec: str, cfg=None) -> StepResult | None:
         """The skipped result when the store holds this evaluation of ``spec``'s checkpoint, else None.
@@ -490,8 +558,9 @@ class Pipeline:
         from morfic_cli.evaluation.protocol import eval_config
 
         config = _json(eval_config(spec, cfg or self.eval_cfg()))
-        found = find_manifest(self.store, "eval", config, inputs_subset={"checkpoint": self.store.resolve(spec)},
-                              files=("eval.csv",))
+        found = find_manifest(
+            self.store, "eval", config, inputs_subset={"checkpoint": self.store.resolve(spec)}, files=("eval.csv",)
+        )
         return StepResult("eval", spec, "skipped", found) if found else None
 
     def evaluate(self, spec: str, cfg=None) -> StepResult:
@@ -507,9 +576,13 @@ class Pipeline:
             return found
         units = len(cfg.robots) * len(cfg.modes) * len(cfg.command_vx) * cfg.steps
         self._start("eval", spec, units, "steps")
-        res = evaluate(self.store, spec, cfg,
-                       on_rollout_start=lambda r, m, v: self.progress.step_advance(detail=f"{r} {m} {v:g}"),
-                       on_step=lambda _t: self.progress.step_advance(advance=1))
+        res = evaluate(
+            self.store,
+            spec,
+            cfg,
+            on_rollout_start=lambda r, m, v: self.progress.step_advance(detail=f"{r} {m} {v:g}"),
+            on_step=lambda _t: self.progress.step_advance(advance=1),
+        )
         return StepResult("eval", spec, "done", res.id, f"{res.ref}@{res.version}")
 
     def diagnose_cfg(self, robots: tuple[str, ...], command_vx: float = PAPER_COMMAND):
@@ -521,9 +594,16 @@ class Pipeline:
         from morfic_cli.diagnostics.samples import DiagnoseCfg
 
         c = self.cfg
-        return DiagnoseCfg(robots=robots, mode="descriptor", command_vx=command_vx, num_envs=c.diagnose_envs,
-                           steps=c.diagnose_steps, seed=0, trunc_eps=c.trunc_eps,
-                           batch=c.robots if c.batch_robots else ())
+        return DiagnoseCfg(
+            robots=robots,
+            mode="descriptor",
+            command_vx=command_vx,
+            num_envs=c.diagnose_envs,
+            steps=c.diagnose_steps,
+            seed=0,
+            trunc_eps=c.trunc_eps,
+            batch=c.robots if c.batch_robots else (),
+        )
 
     def stored_diagnosis(self, spec: str, cfg=None) -> StepResult | None:
         """The skipped result when the store holds this diagnosis of ``spec``'s checkpoint, else None.
@@ -535,9 +615,13 @@ class Pipeline:
         from morfic_cli.diagnostics.samples import diagnose_config
 
         config = _json({"specs": [spec], **diagnose_config(cfg or self.diagnose_cfg(self.cfg.robots))})
-        found = find_manifest(self.store, "diagnosis", config,
-                              inputs_subset={f"checkpoint/{spec}": self.store.resolve(spec)},
-                              files=("calibration.csv",))
+        found = find_manifest(
+            self.store,
+            "diagnosis",
+            config,
+            inputs_subset={f"checkpoint/{spec}": self.store.resolve(spec)},
+            files=("calibration.csv",),
+        )
         return StepResult("diagnose", spec, "skipped", found) if found else None
 
     def diagnose(self, spec: str, cfg=None) -> StepResult:
@@ -549,9 +633,13 @@ class Pipeline:
         if found is not None:
             return found
         self._start("diagnose", spec, len(cfg.robots) * cfg.steps, "steps")
-        res = diagnose_runs(self.store, [spec], cfg,
-                            on_rollout_start=lambda _r, robot: self.progress.step_advance(detail=robot),
-                            on_step=lambda _t: self.progress.step_advance(advance=1))
+        res = diagnose_runs(
+            self.store,
+            [spec],
+            cfg,
+            on_rollout_start=lambda _r, robot: self.progress.step_advance(detail=robot),
+            on_step=lambda _t: self.progress.step_advance(advance=1),
+        )
         return StepResult("diagnose", spec, "done", res.id, f"{res.ref}@{res.version}")
 
     def fixed_rollout_models(self) -> tuple[str, list[str]]:
@@ -570,8 +658,10 @@ class Pipeline:
         actor, _ = self.fixed_rollout_models()
         if any(spec == actor for _, _, spec in self.run_specs()) or self.store.has_ref(actor):
             return None
-        return (f"its frozen actor {actor} is neither reproduced here nor in the store; add "
-                f"{self.cfg.actor_variant} to --variants or import its run's bundle")
+        return (
+            f"its frozen actor {actor} is neither reproduced here nor in the store; add "
+            f"{self.cfg.actor_variant} to --variants or import its run's bundle"
+        )
 
     def stored_fixed_rollout(self, robot: str, command_vx: float = PAPER_COMMAND) -> StepResult | None:
         """The skipped result when the store holds this fixed-rollout analysis (robot, command), else None."""
@@ -584,8 +674,9 @@ class Pipeline:
         config = {"robot": robot, "actor": actor, "critics": critics, **diagnose_config(cfg)}
         config.pop("robots")
         subset = {"actor": self.store.resolve(actor), **{f"critic/{c}": self.store.resolve(c) for c in critics}}
-        found = find_manifest(self.store, "diagnosis", _json(config), inputs_subset=subset,
-                              files=("fixed_rollout.csv",))
+        found = find_manifest(
+            self.store, "diagnosis", _json(config), inputs_subset=subset, files=("fixed_rollout.csv",)
+        )
         return StepResult("fixed-rollout", robot, "skipped", found) if found else None
 
     def fixed_rollout(self, robot: str, *, reuse: bool = True, command_vx: float = PAPER_COMMAND) -> StepResult:
@@ -650,12 +741,20 @@ class Pipeline:
             return StepResult("critic-study", STUDY_LABEL, status, found, STUDY_REF, detail=f"imported {shipped.name}")
         cfg = self.study_cfg()
         if not cfg.actors:
-            return StepResult("critic-study", STUDY_LABEL, NOT_RUN,
-                              detail="none of its actors (film seeds 0-2, actor-only and concat seed 0) is reproduced "
-                              "here or in the store")
-        found = find_manifest(self.store, "diagnosis", _json(study_config(cfg)),
-                              inputs_subset={f"actor/{run_of(a)}": self.store.resolve(a) for a in cfg.actors},
-                              files=("critic_study.csv",))
+            return StepResult(
+                "critic-study",
+                STUDY_LABEL,
+                NOT_RUN,
+                detail="none of its actors (film seeds 0-2, actor-only and concat seed 0) is reproduced "
+                "here or in the store",
+            )
+        found = find_manifest(
+            self.store,
+            "diagnosis",
+            _json(study_config(cfg)),
+            inputs_subset={f"actor/{run_of(a)}": self.store.resolve(a) for a in cfg.actors},
+            files=("critic_study.csv",),
+        )
         if found:
             return StepResult("critic-study", STUDY_LABEL, "skipped", found)
         self._start("critic-study", STUDY_LABEL, 1, "study")
@@ -672,17 +771,28 @@ class Pipeline:
         self._start("compare", "compare-baselines", 1, "table")
         data = gather(self.store, resolve_runs(self.store, specs), curves=False)
         written, reused = store_comparison(self.store, data, compare_tables(data, with_paper=True), True)
-        return StepResult("compare", "compare-baselines", "skipped" if reused else "done", written.id,
-                          f"{written.ref}@{written.version}")
+        return StepResult(
+            "compare",
+            "compare-baselines",
+            "skipped" if reused else "done",
+            written.id,
+            f"{written.ref}@{written.version}",
+        )
 
     def report(self) -> StepResult:
         """The report (LaTeX, Markdown, figures, the paper's tables beside ours), copied to ``out``."""
         specs = tuple(spec for _, _, spec in self.run_specs())
         name = self.cfg.report_name
-        cfg = ReportCfg(runs=specs, latex=True, markdown=True, figures=True, with_paper=True, name=name,
-                        title=f"MorFiC reproduction report ({name} preset)")
+        cfg = ReportCfg(
+            runs=specs,
+            latex=True,
+            markdown=True,
+            figures=True,
+            with_paper=True,
+            name=name,
+            title=f"MorFiC reproduction report ({name} preset)",
+        )
         self._start("report", f"reports/{name}", 1, "report")
-        res = build_report(self.store, cfg, out=self.out,
-                           on_stage=lambda s: self.progress.step_advance(detail=s))
+        res = build_report(self.store, cfg, out=self.out, on_stage=lambda s: self.progress.step_advance(detail=s))
         self.report_result = res
         return StepResult("report", res.ref, "skipped" if res.reused else "done", res.id, f"{res.ref}@{res.version}")

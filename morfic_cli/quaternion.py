@@ -37,5 +37,12 @@ def quat_conj_mul(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
     """
     aw, ax, ay, az = qa[..., 0], -qa[..., 1], -qa[..., 2], -qa[..., 3]
     bw, bx, by, bz = qb[..., 0], qb[..., 1], qb[..., 2], qb[..., 3]
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )

@@ -56,9 +56,9 @@ def _finite(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
 
-def number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
-           hi_open: bool = False) -> Rule:
+def number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False, hi_open: bool = False) -> Rule:
     """A finite number in [lo, hi] (open ends with ``lo_open`` / ``hi_open``)."""
+
     def test(x: Any) -> bool:
         if not _finite(x):
             return False
@@ -68,15 +68,19 @@ def number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = 
 
     left = "" if lo is None else ("(" if lo_open else "[") + f"{lo:g}"
     right = "" if hi is None else f"{hi:g}" + (")" if hi_open else "]")
-    span = f"in {left}, {right}" if lo is not None and hi is not None else (
-        f"{'>' if lo_open else '>='} {lo:g}" if lo is not None else f"{'<' if hi_open else '<='} {hi:g}")
+    span = (
+        f"in {left}, {right}"
+        if lo is not None and hi is not None
+        else (f"{'>' if lo_open else '>='} {lo:g}" if lo is not None else f"{'<' if hi_open else '<='} {hi:g}")
+    )
     return Rule(test, f"a finite number {span}")
 
 
 def integer(lo: int, hi: int) -> Rule:
     """An integer in [lo, hi]."""
-    return Rule(lambda x: isinstance(x, int) and not isinstance(x, bool) and lo <= x <= hi,
-                f"an integer in [{lo}, {hi}]")
+    return Rule(
+        lambda x: isinstance(x, int) and not isinstance(x, bool) and lo <= x <= hi, f"an integer in [{lo}, {hi}]"
+    )
 
 
 def one_of(*choices: str) -> Rule:
@@ -97,8 +101,10 @@ def widths(x: Any) -> bool:
 def ordered_pair(lo: float | None = None, hi: float | None = None) -> Rule:
     """Two finite numbers a <= b, both within [lo, hi]."""
     inner = number(lo, hi)
-    return Rule(lambda x: isinstance(x, list | tuple) and len(x) == 2 and all(inner.test(v) for v in x)
-                and x[0] <= x[1], f"[a, b] with a <= b, each {inner.want[len('a finite number '):]}")
+    return Rule(
+        lambda x: isinstance(x, list | tuple) and len(x) == 2 and all(inner.test(v) for v in x) and x[0] <= x[1],
+        f"[a, b] with a <= b, each {inner.want[len('a finite number ') :]}",
+    )
 
 
 LAYERS = Rule(widths, "a list of 1 to 8 layer widths, each an integer in [1, 16384], e.g. [512,256,128]")
@@ -150,9 +156,20 @@ RULES: dict[str, Rule] = {
     "env.rand.push_vel": number(0),
     "env.rand.max_latency_steps": integer(0, 100),
     "env.rand.geometry.pool_size": integer(1, 100_000),
-    **{f"env.rand.geometry.{key}": ordered_pair(0.01, 100) for key in (
-        "scale", "base_size", "base_density", "hip_pos", "link_length", "thigh_length_ratio", "link_radius",
-        "thigh_radius_ratio", "link_mass")},
+    **{
+        f"env.rand.geometry.{key}": ordered_pair(0.01, 100)
+        for key in (
+            "scale",
+            "base_size",
+            "base_density",
+            "hip_pos",
+            "link_length",
+            "thigh_length_ratio",
+            "link_radius",
+            "thigh_radius_ratio",
+            "link_mass",
+        )
+    },
     "env.rand.geometry.min_base_clearance": number(0),
     "env.obs.history_len": integer(1, 1000),
     "env.obs.clip": number(0, lo_open=True),
@@ -216,8 +233,10 @@ def validate_train_cfg(cfg: Any) -> None:
             if memory:
                 problems.append(memory)
     if problems:
-        raise MorficError("invalid training config: " + "; ".join(problems) + ". Fix the --set values "
-                          "(docs/training.md lists every key).")
+        raise MorficError(
+            "invalid training config: " + "; ".join(problems) + ". Fix the --set values "
+            "(docs/training.md lists every key)."
+        )
 
 
 #: Most weights one network's layers may have: its input layer (``env.obs.history_len`` frames of the policy
@@ -245,18 +264,24 @@ def _joint_problems(cfg: Any) -> list[str]:
     problems = []
     batch = cfg.env.num_envs * cfg.num_steps_per_env
     if cfg.ppo.num_mini_batches > batch:
-        problems.append(f"ppo.num_mini_batches = {cfg.ppo.num_mini_batches}: must be at most the "
-                        f"{batch} transitions of an iteration (env.num_envs x num_steps_per_env)")
+        problems.append(
+            f"ppo.num_mini_batches = {cfg.ppo.num_mini_batches}: must be at most the "
+            f"{batch} transitions of an iteration (env.num_envs x num_steps_per_env)"
+        )
     if cfg.env.rand.geometry.enabled and cfg.env.sim.backend != "cpu":
-        problems.append(f"env.rand.geometry.enabled = true with env.sim.backend = '{cfg.env.sim.backend}': procedural "
-                        "geometry runs on the cpu backend only (set env.sim.backend=cpu, no --device cuda, or "
-                        "env.rand.geometry.enabled=false)")
+        problems.append(
+            f"env.rand.geometry.enabled = true with env.sim.backend = '{cfg.env.sim.backend}': procedural "
+            "geometry runs on the cpu backend only (set env.sim.backend=cpu, no --device cuda, or "
+            "env.rand.geometry.enabled=false)"
+        )
     for key in ("actor_hidden_dims", "critic_hidden_dims"):
         widths = getattr(cfg.model, key) or ()
         weights = network_weights(cfg.env.obs.history_len, widths)
         if weights > MAX_NETWORK_WEIGHTS:
-            problems.append(f"model.{key} = {_show(widths)} with env.obs.history_len = {cfg.env.obs.history_len}: "
-                            f"{weights} weights, more than the {MAX_NETWORK_WEIGHTS} a network may have")
+            problems.append(
+                f"model.{key} = {_show(widths)} with env.obs.history_len = {cfg.env.obs.history_len}: "
+                f"{weights} weights, more than the {MAX_NETWORK_WEIGHTS} a network may have"
+            )
     return problems
 
 
@@ -299,9 +324,11 @@ def check_stored_cfg(doc: Any, source: str) -> Any:
 
     problem = stored_cfg_problem(doc)
     if problem is not None:
-        raise MorficError(f"run {printable(source)} has an invalid stored config: {printable(problem)}. morfic train "
-                          "never writes one: the run comes from a hand-made or edited bundle; drop it, or import "
-                          "it again from a bundle of the store that trained it.")
+        raise MorficError(
+            f"run {printable(source)} has an invalid stored config: {printable(problem)}. morfic train "
+            "never writes one: the run comes from a hand-made or edited bundle; drop it, or import "
+            "it again from a bundle of the store that trained it."
+        )
     return train_cfg_from_dict(doc)
 
 
@@ -327,8 +354,10 @@ def memory_problem(num_envs: int, bytes_per_env: int, what: str) -> str | None:
     if have is None or need <= have:
         return None
     fit = max(1, have // bytes_per_env)
-    return (f"{what} = {num_envs} needs about {need / 2**30:.1f} GiB of memory ({bytes_per_env / 2**20:.1f} MiB per "
-            f"env), but {have / 2**30:.1f} GiB is available; use at most about {fit} envs here")
+    return (
+        f"{what} = {num_envs} needs about {need / 2**30:.1f} GiB of memory ({bytes_per_env / 2**20:.1f} MiB per "
+        f"env), but {have / 2**30:.1f} GiB is available; use at most about {fit} envs here"
+    )
 
 
 # ---------------------------------------------------------------------------- command arguments
@@ -403,8 +432,9 @@ def check_args(
     if reference is not None:
         names = _robot_list(reference, "--reference")
         if len(names) != 1:
-            raise MorficError(f"--reference takes one robot, got {len(names)} ({', '.join(names)}); e.g. "
-                              "--reference go2.")
+            raise MorficError(
+                f"--reference takes one robot, got {len(names)} ({', '.join(names)}); e.g. --reference go2."
+            )
     if variants is not None:
         _variant_list(variants)
     for spec in specs or ():
@@ -415,8 +445,10 @@ def check_store_root(root: Path) -> None:
     """``--store`` must be a folder or not exist yet (then the first write creates it)."""
     root = Path(root)
     if root.exists() and not root.is_dir():
-        raise MorficError(f"--store {root} is a file, not a store folder; pass a folder (or a path that does "
-                          "not exist yet) to --store or MORFIC_STORE.")
+        raise MorficError(
+            f"--store {root} is a file, not a store folder; pass a folder (or a path that does "
+            "not exist yet) to --store or MORFIC_STORE."
+        )
     _no_file_on_the_way(root, "--store")
 
 
@@ -440,8 +472,9 @@ def _no_file_on_the_way(path: Path, flag: str) -> None:
     for parent in [path, *path.parents]:
         if parent.exists():
             if not parent.is_dir():
-                raise MorficError(f"{flag} {path}: {parent} is a file, so nothing can be created under it; "
-                                  "choose another path.")
+                raise MorficError(
+                    f"{flag} {path}: {parent} is a file, so nothing can be created under it; choose another path."
+                )
             return
 
 
@@ -449,16 +482,19 @@ def _check_ref_part(flag: str, value: str, prefix: str, example: str) -> None:
     from morfic_cli.store.refs import is_ref_name
 
     if not is_ref_name(prefix + value) or not value:
-        raise MorficError(f"{flag} {value!r} is not a valid name: use letters, digits, '.', '_' and '-' (and '/' "
-                          f"between parts), no spaces, '..' or '@', e.g. {flag} {example}.")
+        raise MorficError(
+            f"{flag} {value!r} is not a valid name: use letters, digits, '.', '_' and '-' (and '/' "
+            f"between parts), no spaces, '..' or '@', e.g. {flag} {example}."
+        )
 
 
 def check_spec(spec: str) -> None:
     """An artifact name (ref, ``ref@N``, id or prefix): non-empty, printable, at most 300 characters."""
     if not spec.strip() or len(spec) > 300 or any(ord(c) < 32 for c in spec):
         shown = spec[:40] + ("..." if len(spec) > 40 else "")
-        raise MorficError(f"{shown!r} is not an artifact name; give a ref (runs/film-cpu-s0), ref@N or an id (see "
-                          "`morfic store ls`).")
+        raise MorficError(
+            f"{shown!r} is not an artifact name; give a ref (runs/film-cpu-s0), ref@N or an id (see `morfic store ls`)."
+        )
 
 
 def check_env_count(count: int, flag: str, bytes_per_env: int) -> None:
@@ -486,8 +522,10 @@ def parse_commands_vx(text: str) -> list[float]:
     except ValueError:
         values = []
     if not values or not all(math.isfinite(v) and abs(v) <= MAX_COMMAND_VX for v in values):
-        raise MorficError(f"--command-vx takes comma-separated finite numbers in m/s within +-{MAX_COMMAND_VX:g} "
-                          f"(e.g. 2.0,2.5), got {text!r}.")
+        raise MorficError(
+            f"--command-vx takes comma-separated finite numbers in m/s within +-{MAX_COMMAND_VX:g} "
+            f"(e.g. 2.0,2.5), got {text!r}."
+        )
     return values
 
 
@@ -528,6 +566,8 @@ def _trusted_list(names: Iterable[str]) -> None:
         except MorficError as exc:
             raise MorficError(f"--trust-variant: {exc}") from None
         if name in STOCK:
-            raise MorficError(f"--trust-variant {name}: {name} is a stock variant, which needs no trust; give a user "
-                              "variant, module.path:Class or an entry-point name.")
+            raise MorficError(
+                f"--trust-variant {name}: {name} is a stock variant, which needs no trust; give a user "
+                "variant, module.path:Class or an entry-point name."
+            )
     trust_variants(names)

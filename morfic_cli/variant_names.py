@@ -49,24 +49,31 @@ def check_variant_name(name: object, stock: Collection[str] = ()) -> str:
         MorficError: Not a string, too long, or not of either form.
     """
     if not isinstance(name, str):
-        raise MorficError(f"variant {_shown(name)} is not a variant name; a variant is a stock name "
-                          f"({_stock_names(stock)}), an entry-point name, or an import path module:Class.")
+        raise MorficError(
+            f"variant {_shown(name)} is not a variant name; a variant is a stock name "
+            f"({_stock_names(stock)}), an entry-point name, or an import path module:Class."
+        )
     if name in stock:
         return name
     if len(name) > MAX_NAME_LENGTH:
-        raise MorficError(f"variant {_shown(name)} is {len(name)} characters long; a variant name has at most "
-                          f"{MAX_NAME_LENGTH}.")
+        raise MorficError(
+            f"variant {_shown(name)} is {len(name)} characters long; a variant name has at most {MAX_NAME_LENGTH}."
+        )
     if is_import_path(name):
         parts = re.split(r"[.:]", name)
         if not _IMPORT_PATH.fullmatch(name) or any(keyword.iskeyword(p) for p in parts):
-            raise MorficError(f"variant {_shown(name)} is not an import path; write it as module.path:Class, Python "
-                              "identifiers joined by dots, without a leading dot or spaces (e.g. "
-                              "my_lab.critics:GatedCritic).")
+            raise MorficError(
+                f"variant {_shown(name)} is not an import path; write it as module.path:Class, Python "
+                "identifiers joined by dots, without a leading dot or spaces (e.g. "
+                "my_lab.critics:GatedCritic)."
+            )
         return name
     if not _BARE_NAME.fullmatch(name):
-        raise MorficError(f"variant {_shown(name)} is not a variant name; give a stock name ({_stock_names(stock)}), "
-                          "an entry-point name (letters, digits, _ and -), or your own critic class by import path, "
-                          "module:Class (docs/extending.md).")
+        raise MorficError(
+            f"variant {_shown(name)} is not a variant name; give a stock name ({_stock_names(stock)}), "
+            "an entry-point name (letters, digits, _ and -), or your own critic class by import path, "
+            "module:Class (docs/extending.md)."
+        )
     return name
 
 
@@ -89,8 +96,6 @@ def stored_variants(config: Mapping[str, Any], meta: Mapping[str, Any], stock: C
             if check_variant_name(name, stock) not in out:
                 out.append(name)
     return out
-
-
 
 
 def _stock_names(stock: Collection[str]) -> str:

@@ -38,8 +38,10 @@ def flat_weights(modules) -> torch.Tensor:
 def train(mixed: bool, kernels: bool, iterations: int) -> tuple[torch.Tensor, list[dict], float, str | None]:
     """-> (the weights' change from the start, curve rows, wall seconds, the checkpoint's ``meta.bf16_matmul``)."""
     ppo_module.cpu_bf16_kernels = lambda: kernels  # what MorficPPO asks when it is built
-    cfg = apply_overrides(preset_cfg("cpu", "concat", 1), [f"ppo.use_mixed_precision={str(mixed).lower()}",
-                                                           f"max_iterations={iterations}", "save_interval=100"])
+    cfg = apply_overrides(
+        preset_cfg("cpu", "concat", 1),
+        [f"ppo.use_mixed_precision={str(mixed).lower()}", f"max_iterations={iterations}", "save_interval=100"],
+    )
     with tempfile.TemporaryDirectory() as tmp:
         store = Store(tmp)
         run = new_run(store, cfg, "check", "cpu")

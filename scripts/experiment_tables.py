@@ -62,8 +62,13 @@ def fixed_rollout_key(command_vx: float = PAPER_COMMAND) -> str:
     return f"fixed_rollout{command_suffix(command_vx)}"
 
 
-def merge_fixed_rows(path: Path, new_rows: list[dict[str, str]], columns: list[str],
-                     samples: str, same_weights: frozenset[str] = frozenset()) -> list[dict[str, str]]:
+def merge_fixed_rows(
+    path: Path,
+    new_rows: list[dict[str, str]],
+    columns: list[str],
+    samples: str,
+    same_weights: frozenset[str] = frozenset(),
+) -> list[dict[str, str]]:
     """``path``'s rows with ``new_rows`` merged in, one row per (critic, samples); MC rows first.
 
     ``samples`` is the content id of the new rows' rollout samples (its ``obs.npz``). A rollout's manifest id (the
@@ -101,12 +106,22 @@ def merge_fixed_rows(path: Path, new_rows: list[dict[str, str]], columns: list[s
 
 
 #: The training-curve columns kept in ``<run>-curve.csv`` (the store's curve.csv has ~80 columns, 1.2 MB a run).
-CURVE_COLUMNS = ["iteration", "env_steps", "wall_time_s", "mean_reward", "episode_length_s", "explained_variance",
-                 "tracking.vx_error", "curriculum.vx_max", "action_std"]
+CURVE_COLUMNS = [
+    "iteration",
+    "env_steps",
+    "wall_time_s",
+    "mean_reward",
+    "episode_length_s",
+    "explained_variance",
+    "tracking.vx_error",
+    "curriculum.vx_max",
+    "action_std",
+]
 
 
 def curve_rows(curve_csv: str) -> list[dict[str, str]]:
     """The :data:`CURVE_COLUMNS` of a run's curve.csv, numbers to 5 significant digits."""
+
     def short(v: str) -> str:
         try:
             return f"{float(v):.5g}"
@@ -194,9 +209,12 @@ def write_trained_regime_diagnosis(store, pipe, spec: str, run: str, out: Path, 
     """Write ``out/RUN-calibration-1.0.csv`` and its id (``diagnosis-1.0``), or say on stderr why it is left out."""
     found = trained_regime_diagnosis(store, pipe, spec, run_missing)
     if found is None:
-        print(f"note: no 1.0 m/s diagnosis of {spec} in {store.root} (it needs the run's weights: import its bundle "
-              "and its weights bundle, then rerun with --run-missing or --diagnosis-1.0-only); claim (a) at 1.0 m/s "
-              "reads the runs that have one", file=sys.stderr)
+        print(
+            f"note: no 1.0 m/s diagnosis of {spec} in {store.root} (it needs the run's weights: import its bundle "
+            "and its weights bundle, then rerun with --run-missing or --diagnosis-1.0-only); claim (a) at 1.0 m/s "
+            "reads the runs that have one",
+            file=sys.stderr,
+        )
         return
     path = out / f"{run}-calibration-1.0.csv"
     path.write_bytes(store.read_file(found, "calibration.csv"))
@@ -204,8 +222,18 @@ def write_trained_regime_diagnosis(store, pipe, spec: str, run: str, out: Path, 
     print(f"{path} (artifact {found[:12]})")
 
 
-def write_fixed_rollout(store, pipe, spec: str, out: Path, ids: dict, same_weights: frozenset[str],
-                        command_vx: float, *, run_it: bool, rescore: bool) -> dict[str, str] | str:
+def write_fixed_rollout(
+    store,
+    pipe,
+    spec: str,
+    out: Path,
+    ids: dict,
+    same_weights: frozenset[str],
+    command_vx: float,
+    *,
+    run_it: bool,
+    rescore: bool,
+) -> dict[str, str] | str:
     """Write RUN's rows of the fixed-rollout analysis at ``command_vx`` into :func:`fixed_rollout_path` per robot.
 
     Each robot's analysis is the store's, or run first when ``run_it`` (``rescore``: run again on the rollout this
@@ -224,7 +252,8 @@ def write_fixed_rollout(store, pipe, spec: str, out: Path, ids: dict, same_weigh
         if step is None or step.id is None:
             why = pipe.fixed_rollout_unavailable()
             return f"no fixed-rollout analysis at {command_vx:.1f} m/s of {spec}'s critic on {robot}" + (
-                f": {why}" if why else "")
+                f": {why}" if why else ""
+            )
         rows = list(csv.DictReader(io.StringIO(store.read_file(step.id, "fixed_rollout.csv").decode())))
         mine = [r for r in rows if r["critic"] in ("MC", run)]
         samples = store.read_manifest(mine[0]["rollout"]).files["obs.npz"].id
@@ -250,21 +279,38 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("run", help="run name, e.g. concat-cpu-s0")
     p.add_argument("--out", type=Path, default=Path("docs/results"))
     p.add_argument("--store", default=os.environ.get("MORFIC_STORE", "artifacts"))
-    p.add_argument("--run-missing", action="store_true",
-                   help="first evaluate, diagnose and score the run's critic on the film actor's rollouts (each "
-                        "with the paper's protocol, skipped when the store holds it)")
+    p.add_argument(
+        "--run-missing",
+        action="store_true",
+        help="first evaluate, diagnose and score the run's critic on the film actor's rollouts (each "
+        "with the paper's protocol, skipped when the store holds it)",
+    )
     only = p.add_mutually_exclusive_group()
-    only.add_argument("--fixed-rollout-only", action="store_true",
-                      help="only the fixed-rollout rows; run the analysis (film actor frozen) if the store lacks it")
-    only.add_argument("--fixed-rollout-1.0-only", dest="fixed_1_0_only", action="store_true",
-                      help="only the fixed-rollout rows at 1.0 m/s; run the analysis if the store lacks it (it "
-                           "needs the run's and the frozen actor's weights)")
-    only.add_argument("--diagnosis-1.0-only", dest="diagnosis_only", action="store_true",
-                      help="only the 1.0 m/s diagnosis (run if the store lacks it and holds the run's weights)")
-    p.add_argument("--rescore", action="store_true",
-                   help="with --fixed-rollout-only or --fixed-rollout-1.0-only: score the critic again on the film "
-                        "actor's rollout this store holds or collects, even where it holds the analysis (on other "
-                        "samples)")
+    only.add_argument(
+        "--fixed-rollout-only",
+        action="store_true",
+        help="only the fixed-rollout rows; run the analysis (film actor frozen) if the store lacks it",
+    )
+    only.add_argument(
+        "--fixed-rollout-1.0-only",
+        dest="fixed_1_0_only",
+        action="store_true",
+        help="only the fixed-rollout rows at 1.0 m/s; run the analysis if the store lacks it (it "
+        "needs the run's and the frozen actor's weights)",
+    )
+    only.add_argument(
+        "--diagnosis-1.0-only",
+        dest="diagnosis_only",
+        action="store_true",
+        help="only the 1.0 m/s diagnosis (run if the store lacks it and holds the run's weights)",
+    )
+    p.add_argument(
+        "--rescore",
+        action="store_true",
+        help="with --fixed-rollout-only or --fixed-rollout-1.0-only: score the critic again on the film "
+        "actor's rollout this store holds or collects, even where it holds the analysis (on other "
+        "samples)",
+    )
     args = p.parse_args(argv)
     if args.rescore and not (args.fixed_rollout_only or args.fixed_1_0_only):
         p.error("--rescore goes with --fixed-rollout-only or --fixed-rollout-1.0-only")
@@ -279,8 +325,9 @@ def main(argv: list[str] | None = None) -> int:
     ids = json.loads(ids_path.read_text()) if ids_path.is_file() else {"run": args.run}
     weights = manifest.files["model.pt"].id if "model.pt" in manifest.files else None
     # the checkpoint these tables had (a run retrained under its name keeps its rows only if its weights are the same)
-    same_weights = frozenset({ids["checkpoint"]} if ids.get("checkpoint") and weights and ids.get("weights") == weights
-                             else ())
+    same_weights = frozenset(
+        {ids["checkpoint"]} if ids.get("checkpoint") and weights and ids.get("weights") == weights else ()
+    )
     ids["checkpoint"] = manifest.id
     if weights:
         ids["weights"] = weights
@@ -298,12 +345,17 @@ def main(argv: list[str] | None = None) -> int:
             result = step(spec)
             print(f"{result.kind} {spec}: {result.status} in {time.monotonic() - start:.0f} s", file=sys.stderr)
     if not only_fixed:
-        found = {"eval": (pipe.stored_eval(spec), "eval.csv"),
-                 "diagnosis": (pipe.stored_diagnosis(spec), "calibration.csv")}
+        found = {
+            "eval": (pipe.stored_eval(spec), "eval.csv"),
+            "diagnosis": (pipe.stored_diagnosis(spec), "calibration.csv"),
+        }
         for what, (step, file) in found.items():
             if step is None:
-                print(f"Error: no {what} of {spec} with the paper's protocol in {store.root}; rerun with "
-                      "--run-missing (or `morfic reproduce --preset cpu` for the run) first.", file=sys.stderr)
+                print(
+                    f"Error: no {what} of {spec} with the paper's protocol in {store.root}; rerun with "
+                    "--run-missing (or `morfic reproduce --preset cpu` for the run) first.",
+                    file=sys.stderr,
+                )
                 return 1
             path = args.out / f"{args.run}-{file}"
             path.write_bytes(store.read_file(step.id, file))
@@ -311,8 +363,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{path} (artifact {step.id[:12]})")
         slow = trained_regime_eval(pipe, spec, args.run_missing)
         if slow is None:
-            print(f"Error: no 1.0 m/s eval of {spec} in {store.root}; rerun with --run-missing (or `morfic eval "
-                  f"{spec} --command-vx 1.0`) first.", file=sys.stderr)
+            print(
+                f"Error: no 1.0 m/s eval of {spec} in {store.root}; rerun with --run-missing (or `morfic eval "
+                f"{spec} --command-vx 1.0`) first.",
+                file=sys.stderr,
+            )
             return 1
         path = args.out / f"{args.run}-eval-1.0.csv"
         path.write_bytes(store.read_file(slow, "eval.csv"))
@@ -321,8 +376,17 @@ def main(argv: list[str] | None = None) -> int:
         write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, args.run_missing)
     rescore: dict[float, dict[str, str]] = {}  # command -> robot -> the samples RUN's critic was scored on
     if not args.fixed_1_0_only:
-        used = write_fixed_rollout(store, pipe, spec, args.out, ids, same_weights, PAPER_COMMAND,
-                                   run_it=args.fixed_rollout_only or args.run_missing, rescore=args.rescore)
+        used = write_fixed_rollout(
+            store,
+            pipe,
+            spec,
+            args.out,
+            ids,
+            same_weights,
+            PAPER_COMMAND,
+            run_it=args.fixed_rollout_only or args.run_missing,
+            rescore=args.rescore,
+        )
         if isinstance(used, str):
             print(f"Error: {used} in {store.root}; rerun with --run-missing or --fixed-rollout-only.", file=sys.stderr)
             return 1
@@ -332,20 +396,36 @@ def main(argv: list[str] | None = None) -> int:
         # RUN's weights, which a results-only bundle leaves out, so there it is a note, not an error.
         actor, _ = pipe.fixed_rollout_models()
         at_hand = all(store.has_ref(s) and has_weights(store, s) for s in (actor, spec))
-        hint = (f"it needs {spec}'s and {actor}'s weights (import their bundles and weights bundles), then "
-                "--run-missing or --fixed-rollout-1.0-only")
+        hint = (
+            f"it needs {spec}'s and {actor}'s weights (import their bundles and weights bundles), then "
+            "--run-missing or --fixed-rollout-1.0-only"
+        )
         if args.fixed_1_0_only and not at_hand:
-            print(f"Error: {store.root} lacks {spec}'s or {actor}'s weights for the fixed-rollout analysis at 1.0 "
-                  f"m/s; {hint}.", file=sys.stderr)
+            print(
+                f"Error: {store.root} lacks {spec}'s or {actor}'s weights for the fixed-rollout analysis at 1.0 "
+                f"m/s; {hint}.",
+                file=sys.stderr,
+            )
             return 1
-        slow = write_fixed_rollout(store, pipe, spec, args.out, ids, same_weights, TRAINED_COMMAND,
-                                   run_it=at_hand and (args.fixed_1_0_only or args.run_missing), rescore=args.rescore)
+        slow = write_fixed_rollout(
+            store,
+            pipe,
+            spec,
+            args.out,
+            ids,
+            same_weights,
+            TRAINED_COMMAND,
+            run_it=at_hand and (args.fixed_1_0_only or args.run_missing),
+            rescore=args.rescore,
+        )
         if isinstance(slow, str) and args.fixed_1_0_only:
             print(f"Error: {slow} in {store.root}.", file=sys.stderr)
             return 1
         if isinstance(slow, str):
-            print(f"note: {slow} in {store.root} ({hint}); claim (c) at 1.0 m/s reads the critics that have one",
-                  file=sys.stderr)
+            print(
+                f"note: {slow} in {store.root} ({hint}); claim (c) at 1.0 m/s reads the critics that have one",
+                file=sys.stderr,
+            )
         else:
             rescore[TRAINED_COMMAND] = slow
     ids_path.write_text(json.dumps(ids, indent=1) + "\n")
@@ -353,8 +433,10 @@ def main(argv: list[str] | None = None) -> int:
         for command_vx, used in rescore.items():
             flag = "--fixed-rollout-only" if command_vx == PAPER_COMMAND else "--fixed-rollout-1.0-only"
             for run in seed0_to_rescore(store, args.out, used, command_vx):
-                print(f"{run}: rescored on the new samples at {command_vx:.1f} m/s (what they change, beside the "
-                      "reference rows)")
+                print(
+                    f"{run}: rescored on the new samples at {command_vx:.1f} m/s (what they change, beside the "
+                    "reference rows)"
+                )
                 main([run, flag, "--rescore", "--out", str(args.out), "--store", str(args.store)])
     return 0
 

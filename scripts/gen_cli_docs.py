@@ -40,8 +40,23 @@ def typer_docs() -> str:
     """The raw Markdown of ``typer morfic_cli.cli utils docs --name morfic`` (run in a subprocess)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "cli.md"
-        subprocess.run([sys.executable, "-m", "typer", "morfic_cli.cli", "utils", "docs", "--name", "morfic",
-                        "--output", str(out)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "typer",
+                "morfic_cli.cli",
+                "utils",
+                "docs",
+                "--name",
+                "morfic",
+                "--output",
+                str(out),
+            ],
+            check=True,
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+        )
         return out.read_text(encoding="utf-8")
 
 
@@ -80,8 +95,13 @@ def clean(raw: str, short: dict[str, str]) -> str:
             item = _COMMAND_ITEM.match(line)
             if item and f"{group} {item.group(1)}" in short:
                 line = f"* `{item.group(1)}`: {short[f'{group} {item.group(1)}']}"
-            if line and lines and lines[-1] and not line.startswith(("* ", "```")) \
-                    and not lines[-1].startswith(("* ", "```")):
+            if (
+                line
+                and lines
+                and lines[-1]
+                and not line.startswith(("* ", "```"))
+                and not lines[-1].startswith(("* ", "```"))
+            ):
                 lines.append("")  # a line break of the help (Example: lines) is a paragraph in Markdown
         lines.append(line)
     return "\n".join(lines).strip() + "\n"

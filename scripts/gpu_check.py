@@ -60,13 +60,22 @@ def parity_from_junit(xml_text: str) -> dict[str, Any]:
                 outcome = "skipped" if tag == "skipped" else "failed"
                 message = (node.get("message") or node.text or "").strip()[:500]
                 break
-        worst = {p.get("name"): json.loads(p.get("value") or "{}") for p in case.iter("property")
-                 if (p.get("name") or "").startswith("worst")}
-        tests.append({"name": case.get("name"), "outcome": outcome, "seconds": round(float(case.get("time") or 0), 2),
-                      "message": message, "worst": worst})
+        worst = {
+            p.get("name"): json.loads(p.get("value") or "{}")
+            for p in case.iter("property")
+            if (p.get("name") or "").startswith("worst")
+        }
+        tests.append(
+            {
+                "name": case.get("name"),
+                "outcome": outcome,
+                "seconds": round(float(case.get("time") or 0), 2),
+                "message": message,
+                "worst": worst,
+            }
+        )
     counts = {k: sum(t["outcome"] == k for t in tests) for k in ("passed", "failed", "skipped")}
-    return {**counts, "ok": counts["passed"] > 0 and counts["failed"] == 0 and counts["skipped"] == 0,
-            "tests": tests}
+    return {**counts, "ok": counts["passed"] > 0 and counts["failed"] == 0 and counts["skipped"] == 0, "tests": tests}
 
 
 def worst_over_tests(parity: dict[str, Any], kind: str) -> dict[str, float]:
@@ -85,9 +94,14 @@ def worst_over_tests(parity: dict[str, Any], kind: str) -> dict[str, float]:
     return out
 
 
-def figures(bench_env: list[dict[str, Any]] | None, bench_train: dict[str, Any] | None,
-            train: dict[str, Any] | None, paper_s_per_iteration: tuple[float, float],
-            paper_hours: tuple[float, float], paper_iterations: float) -> dict[str, Any]:
+def figures(
+    bench_env: list[dict[str, Any]] | None,
+    bench_train: dict[str, Any] | None,
+    train: dict[str, Any] | None,
+    paper_s_per_iteration: tuple[float, float],
+    paper_hours: tuple[float, float],
+    paper_iterations: float,
+) -> dict[str, Any]:
     """The numbers docs/gpu.md and docs/benchmarks.md report, from the steps' JSON outputs.
 
     Args:
@@ -114,19 +128,28 @@ def figures(bench_env: list[dict[str, Any]] | None, bench_train: dict[str, Any] 
     if bench_train:
         spi = float(bench_train["s_per_iteration"])
         sps = float(bench_train["train_steps_per_s"])
-        out.update({
-            "preset": bench_train["preset"], "num_envs": bench_train["num_envs"], "s_per_iteration": spi,
-            "collect_s_per_iteration": bench_train["collect_s_per_iteration"],
-            "learn_s_per_iteration": bench_train["learn_s_per_iteration"], "train_steps_per_s": sps,
-            "fraction_of_floor": bench_train["fraction_of_floor"],
-            "x_paper_s_per_iteration": [round(spi / paper_s_per_iteration[0], 3),
-                                        round(spi / paper_s_per_iteration[1], 3)],
-            "projected_hours_400M": round(TRANSITIONS_400M / sps / 3600, 2) if sps > 0 else None,
-            "projected_hours_paper_iterations": round(paper_iterations * spi / 3600, 2),
-        })
+        out.update(
+            {
+                "preset": bench_train["preset"],
+                "num_envs": bench_train["num_envs"],
+                "s_per_iteration": spi,
+                "collect_s_per_iteration": bench_train["collect_s_per_iteration"],
+                "learn_s_per_iteration": bench_train["learn_s_per_iteration"],
+                "train_steps_per_s": sps,
+                "fraction_of_floor": bench_train["fraction_of_floor"],
+                "x_paper_s_per_iteration": [
+                    round(spi / paper_s_per_iteration[0], 3),
+                    round(spi / paper_s_per_iteration[1], 3),
+                ],
+                "projected_hours_400M": round(TRANSITIONS_400M / sps / 3600, 2) if sps > 0 else None,
+                "projected_hours_paper_iterations": round(paper_iterations * spi / 3600, 2),
+            }
+        )
     if train and train.get("wall_time_s"):
-        out["train_run"] = {k: train.get(k) for k in ("iteration", "env_steps", "wall_time_s", "mean_reward",
-                                                       "explained_variance", "interrupted")}
+        out["train_run"] = {
+            k: train.get(k)
+            for k in ("iteration", "env_steps", "wall_time_s", "mean_reward", "explained_variance", "interrupted")
+        }
         out["train_run"]["steps_per_s"] = round(float(train["env_steps"]) / float(train["wall_time_s"]), 1)
     return out
 
@@ -199,20 +222,41 @@ def cmd_info(out: Path) -> None:
     from packaging.markers import default_environment
     from packaging.utils import canonicalize_name
 
-    installed = {canonicalize_name(d.metadata["Name"]): d.version for d in metadata.distributions()
-                 if d.metadata["Name"]}
+    installed = {
+        canonicalize_name(d.metadata["Name"]): d.version for d in metadata.distributions() if d.metadata["Name"]
+    }
     env = {**default_environment(), "extra": ""}
     problems = requirement_problems(_morfic_requirements(), installed, env)
-    carried = [ln.split("==")[0].strip() for ln in (ROOT / "scripts" / "gpu_wheels.txt").read_text().splitlines()
-               if ln.strip() and not ln.startswith("#")]
+    carried = [
+        ln.split("==")[0].strip()
+        for ln in (ROOT / "scripts" / "gpu_wheels.txt").read_text().splitlines()
+        if ln.strip() and not ln.startswith("#")
+    ]
     for name in carried:  # the carried wheels' own needs, met by the device's packages or other carried ones
         dist = metadata.distribution(name) if canonicalize_name(name) in installed else None
         problems += [] if dist is None else requirement_problems(dist.requires or [], installed, env)
     doc: dict[str, Any] = {
-        "python": platform.python_version(), "platform": platform.platform(), "executable": sys.executable,
-        "cores": os.cpu_count(), "versions": {n: _version(n) for n in
-                                              ("torch", "numpy", "mujoco", "mujoco-warp", "warp-lang", "rsl-rl-lib",
-                                               "tensordict", "mcap", "typer", "rich", "pandas", "matplotlib")},
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "executable": sys.executable,
+        "cores": os.cpu_count(),
+        "versions": {
+            n: _version(n)
+            for n in (
+                "torch",
+                "numpy",
+                "mujoco",
+                "mujoco-warp",
+                "warp-lang",
+                "rsl-rl-lib",
+                "tensordict",
+                "mcap",
+                "typer",
+                "rich",
+                "pandas",
+                "matplotlib",
+            )
+        },
         "requirement_problems": sorted(set(problems)),
     }
     try:
@@ -225,8 +269,13 @@ def cmd_info(out: Path) -> None:
     except ImportError as exc:
         doc["torch_error"] = str(exc)
     try:
-        smi = subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version,memory.total,clocks.max.sm",
-                              "--format=csv,noheader"], capture_output=True, text=True, timeout=30, check=False)
+        smi = subprocess.run(
+            ["nvidia-smi", "--query-gpu=name,driver_version,memory.total,clocks.max.sm", "--format=csv,noheader"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=False,
+        )
         doc["nvidia_smi"] = smi.stdout.strip() or smi.stderr.strip()
     except (OSError, subprocess.TimeoutExpired) as exc:
         doc["nvidia_smi"] = f"not available: {exc}"
@@ -242,8 +291,12 @@ def cmd_warmup(device: str, out: Path) -> None:
     wp.init()
     t0 = time.perf_counter()
     wp.force_load(device=device, max_workers=os.cpu_count() or 1)
-    doc = {"device": device, "seconds": round(time.perf_counter() - t0, 1), "warp": wp.config.version,
-           "kernel_cache": wp.config.kernel_cache_dir}
+    doc = {
+        "device": device,
+        "seconds": round(time.perf_counter() - t0, 1),
+        "warp": wp.config.version,
+        "kernel_cache": wp.config.kernel_cache_dir,
+    }
     _write_json(out, doc)
     print(json.dumps(doc))
 
@@ -295,28 +348,48 @@ def cmd_summary(tmp: Path, out_dir: Path) -> None:
         "info": _read_json(tmp / "info.json"),
         "warmup": _read_json(tmp / "warmup.json"),
         "steps": _steps(tmp / "steps.jsonl"),
-        "parity": None if parity is None else {k: parity.get(k) for k in
-                                               ("ok", "passed", "failed", "skipped", "worst_one_step",
-                                                "worst_free_run", "missing_reports")},
-        "figures": figures(bench_env, bench_train if isinstance(bench_train, dict) else None,
-                           train if isinstance(train, dict) else None, paper.sec_per_iter, paper.gpu_hours,
-                           paper.iterations),
+        "parity": None
+        if parity is None
+        else {
+            k: parity.get(k)
+            for k in ("ok", "passed", "failed", "skipped", "worst_one_step", "worst_free_run", "missing_reports")
+        },
+        "figures": figures(
+            bench_env,
+            bench_train if isinstance(bench_train, dict) else None,
+            train if isinstance(train, dict) else None,
+            paper.sec_per_iter,
+            paper.gpu_hours,
+            paper.iterations,
+        ),
         "bundle": None,
     }
     bundle = out_dir / "checkpoint.tar"
     if bundle.exists():
-        doc["bundle"] = {"file": bundle.name, "bytes": bundle.stat().st_size,
-                         "manifest": _read_json(tmp / "bundle.json")}
+        doc["bundle"] = {
+            "file": bundle.name,
+            "bytes": bundle.stat().st_size,
+            "manifest": _read_json(tmp / "bundle.json"),
+        }
     _write_json(out_dir / "summary.json", doc)
     print(json.dumps(doc, indent=2))
 
 
 def main(argv: list[str]) -> None:
     """Dispatch a sub-command (see the module docstring)."""
-    commands = {"info": (cmd_info, 1), "warmup": (cmd_warmup, 2), "parity": (cmd_parity, -2),
-                "summary": (cmd_summary, 2)}  # -2: at least 2
-    if not argv or argv[0] not in commands or not (
-            len(argv) - 1 == commands[argv[0]][1] or (commands[argv[0]][1] < 0 and len(argv) > -commands[argv[0]][1])):
+    commands = {
+        "info": (cmd_info, 1),
+        "warmup": (cmd_warmup, 2),
+        "parity": (cmd_parity, -2),
+        "summary": (cmd_summary, 2),
+    }  # -2: at least 2
+    if (
+        not argv
+        or argv[0] not in commands
+        or not (
+            len(argv) - 1 == commands[argv[0]][1] or (commands[argv[0]][1] < 0 and len(argv) > -commands[argv[0]][1])
+        )
+    ):
         sys.exit(f"usage: gpu_check.py {{{'|'.join(commands)}}} ARGS (see the docstring)")
     fn, _ = commands[argv[0]]
     args = [Path(a) for a in argv[1:]]

@@ -82,8 +82,14 @@ def classify(report: dict, carried: dict[str, str], device: set[str]) -> tuple[d
     while changed:
         changed = False
         for name, item in names.items():
-            if (name not in carried and name not in device and name not in device_only and not item.get("requested")
-                    and requirers.get(name) and requirers[name] <= device | device_only):
+            if (
+                name not in carried
+                and name not in device
+                and name not in device_only
+                and not item.get("requested")
+                and requirers.get(name)
+                and requirers[name] <= device | device_only
+            ):
                 device_only.add(name)
                 changed = True
     got_carried, got_device, problems, notes = {}, {}, [], []
@@ -96,14 +102,19 @@ def classify(report: dict, carried: dict[str, str], device: set[str]) -> tuple[d
         elif name in device:
             got_device[name] = item
         elif name in device_only:
-            notes.append(f"{name} {version}: needed only by device packages (or by packages only they need) "
-                         f"({', '.join(sorted(requirers[name]))}) in the versions resolved here;"
-                         " the device has its own")
+            notes.append(
+                f"{name} {version}: needed only by device packages (or by packages only they need) "
+                f"({', '.join(sorted(requirers[name]))}) in the versions resolved here;"
+                " the device has its own"
+            )
         else:
-            problems.append(f"{name} {version}: needed, but neither carried nor on the device; add "
-                            f"'{name}=={version}' to scripts/gpu_wheels.txt")
-    problems += [f"{name}: pinned in scripts/gpu_wheels.txt but not needed" for name in carried
-                 if name not in got_carried]
+            problems.append(
+                f"{name} {version}: needed, but neither carried nor on the device; add "
+                f"'{name}=={version}' to scripts/gpu_wheels.txt"
+            )
+    problems += [
+        f"{name}: pinned in scripts/gpu_wheels.txt but not needed" for name in carried if name not in got_carried
+    ]
     return got_carried, got_device, problems, notes
 
 
@@ -115,17 +126,25 @@ def stub_requires(requires: list[str], keep: set[str]) -> list[str]:
     return [r for r in requires if canonicalize_name(Requirement(r).name) in keep]
 
 
-def write_stub(directory: Path, name: str, version: str, requires: list[str], requires_python: str | None,
-               extras: list[str] | None = None) -> Path:
+def write_stub(
+    directory: Path,
+    name: str,
+    version: str,
+    requires: list[str],
+    requires_python: str | None,
+    extras: list[str] | None = None,
+) -> Path:
     """A metadata-only wheel ``NAME-VERSION-py3-none-any.whl`` (no files) standing in for an installed package."""
     dist = f"{name.replace('-', '_')}-{version}"
     meta = ["Metadata-Version: 2.1", f"Name: {name}", f"Version: {version}"]
     meta += [f"Requires-Python: {requires_python}"] if requires_python else []
     meta += [f"Provides-Extra: {e}" for e in extras or []]
     meta += [f"Requires-Dist: {r}" for r in requires]
-    files = {f"{dist}.dist-info/METADATA": "\n".join(meta) + "\n",
-             f"{dist}.dist-info/WHEEL": "Wheel-Version: 1.0\nGenerator: morfic-gpu-wheels\nRoot-Is-Purelib: true\n"
-                                       "Tag: py3-none-any\n"}
+    files = {
+        f"{dist}.dist-info/METADATA": "\n".join(meta) + "\n",
+        f"{dist}.dist-info/WHEEL": "Wheel-Version: 1.0\nGenerator: morfic-gpu-wheels\nRoot-Is-Purelib: true\n"
+        "Tag: py3-none-any\n",
+    }
     files[f"{dist}.dist-info/RECORD"] = "".join(f"{p},,\n" for p in [*files, f"{dist}.dist-info/RECORD"])
     path = directory / f"{dist}-py3-none-any.whl"
     with zipfile.ZipFile(path, "w") as zf:
@@ -144,8 +163,10 @@ def cmd_stubs(report_path: Path, stub_dir: Path) -> None:
         md = item["metadata"]
         requires = [] if name == "torch" else stub_requires(list(md.get("requires_dist") or []), keep)
         write_stub(stub_dir, name, md["version"], requires, md.get("requires_python"), md.get("provides_extra"))
-    print(f"resolved for CPython 3.12: {len(got_carried)} carried ({', '.join(sorted(got_carried))}); "
-          f"{len(got_device)} from the device ({', '.join(sorted(got_device))})")
+    print(
+        f"resolved for CPython 3.12: {len(got_carried)} carried ({', '.join(sorted(got_carried))}); "
+        f"{len(got_device)} from the device ({', '.join(sorted(got_device))})"
+    )
     for note in notes:
         print(f"  note: {note}")
     if problems:
@@ -162,14 +183,17 @@ def cmd_verify(report_path: Path, wheel_dir: Path) -> None:
         name = canonicalize_name(item["metadata"]["name"])
         url = item.get("download_info", {}).get("url", "")
         chosen[name] = url
-        if name in pins and (Path(url.removeprefix("file://")).parent != wheel_dir.resolve()
-                             or item["metadata"]["version"] != pins[name]):
+        if name in pins and (
+            Path(url.removeprefix("file://")).parent != wheel_dir.resolve() or item["metadata"]["version"] != pins[name]
+        ):
             problems.append(f"{name}: took {item['metadata']['version']} from {url}, not the carried wheel")
     problems += [f"{name}: carried but not chosen" for name in pins if name not in chosen]
     if problems:
         sys.exit("Error: offline resolution:\n  " + "\n  ".join(problems))
-    print(f"offline resolution (--no-index, CPython 3.12, manylinux x86_64) OK: {len(pins)} carried wheels chosen, "
-          f"{len(chosen) - len(pins)} device packages (stubs)")
+    print(
+        f"offline resolution (--no-index, CPython 3.12, manylinux x86_64) OK: {len(pins)} carried wheels chosen, "
+        f"{len(chosen) - len(pins)} device packages (stubs)"
+    )
 
 
 def plan(tree_bytes: int, parts: list[tuple[str, int]]) -> list[str]:
@@ -184,10 +208,12 @@ def plan(tree_bytes: int, parts: list[tuple[str, int]]) -> list[str]:
         last = k == len(parts)
         command = "bash scripts/gpu_check.sh run" if last else "bash scripts/gpu_check.sh stash"
         total = tree_bytes + size
-        lines.append(f"call {k}: carry [\"{folder}\"]  command: {command}"
-                     f"{'  timeout_s: 600' if last else '  timeout_s: 60'}"
-                     f"  ({size / MIB:.1f} MiB + tree {tree_bytes / MIB:.1f} MiB = {total / MIB:.1f} MiB"
-                     f" of {CALL_LIMIT // MIB} MiB){'  <-- OVER THE LIMIT' if total > CALL_LIMIT else ''}")
+        lines.append(
+            f'call {k}: carry ["{folder}"]  command: {command}'
+            f"{'  timeout_s: 600' if last else '  timeout_s: 60'}"
+            f"  ({size / MIB:.1f} MiB + tree {tree_bytes / MIB:.1f} MiB = {total / MIB:.1f} MiB"
+            f" of {CALL_LIMIT // MIB} MiB){'  <-- OVER THE LIMIT' if total > CALL_LIMIT else ''}"
+        )
     return lines
 
 

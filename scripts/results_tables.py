@@ -93,8 +93,9 @@ def load(results: Path, kind: str) -> pd.DataFrame:
 
 def load_artifacts(results: Path) -> dict[str, dict[str, Any]]:
     """Run name -> its ``<run>-artifacts.json`` (ids of checkpoint, eval, diagnosis, fixed rollouts)."""
-    return {p.name[: -len("-artifacts.json")]: json.loads(p.read_text())
-            for p in sorted(results.glob("*-artifacts.json"))}
+    return {
+        p.name[: -len("-artifacts.json")]: json.loads(p.read_text()) for p in sorted(results.glob("*-artifacts.json"))
+    }
 
 
 def load_fixed_all(results: Path) -> pd.DataFrame:
@@ -145,8 +146,9 @@ def sample_effect(results: Path) -> pd.DataFrame:
     if rows.empty:
         return rows
     rows = rows[rows["variant"] != "mc"]
-    both = rows[~rows["reference"]].merge(rows[rows["reference"]], on=["command_vx", "robot", "critic"],
-                                          suffixes=("", "_ref"))
+    both = rows[~rows["reference"]].merge(
+        rows[rows["reference"]], on=["command_vx", "robot", "critic"], suffixes=("", "_ref")
+    )
     both["d_flip"] = both["flip"] - both["flip_ref"]
     both["d_cos"] = both["cos_grad"] - both["cos_grad_ref"]
     return both[["command_vx", "robot", "critic", "samples", "d_flip", "d_cos"]]
@@ -201,8 +203,11 @@ def transfer_table(ev: pd.DataFrame, mode: str, command_vx: float) -> list[str]:
 
     rows = frame_at(ev[ev["mode"] == mode], command_vx)
     variants = list(dict.fromkeys(rows["variant"]))
-    paper = [v for v in variants if mode == "descriptor" and any(
-        transfer_values(v, r, command_vx)["vx"] is not None for r in ROBOTS)]
+    paper = [
+        v
+        for v in variants
+        if mode == "descriptor" and any(transfer_values(v, r, command_vx)["vx"] is not None for r in ROBOTS)
+    ]
     head = ["robot", "d", *[_seeds_label(rows, v) for v in variants], *[f"paper {v}" for v in paper]]
     lines = ["| " + " | ".join(head) + " |", "|---|---:|" + "---|" * (len(head) - 2)]
     for robot in ROBOTS:
@@ -221,11 +226,16 @@ def calibration_table(cal: pd.DataFrame) -> list[str]:
 
     variants = list(dict.fromkeys(cal["variant"]))
     paper = [v for v in variants if critic_values(v, "go2")["abs_nvb"] is not None]
-    head = ["robot", *[f"{_seeds_label(cal, v)} EV" for v in variants],
-            *[f"{_seeds_label(cal, v)} \\|NVB\\|/NVE/ASA" for v in variants],
-            *[f"paper {v} \\|NVB\\|/NVE/ASA" for v in paper]]
-    lines = ["| " + " | ".join(head) + " |",
-             "|---|" + "---:|" * len(variants) + "---|" * (len(head) - 1 - len(variants))]
+    head = [
+        "robot",
+        *[f"{_seeds_label(cal, v)} EV" for v in variants],
+        *[f"{_seeds_label(cal, v)} \\|NVB\\|/NVE/ASA" for v in variants],
+        *[f"paper {v} \\|NVB\\|/NVE/ASA" for v in paper],
+    ]
+    lines = [
+        "| " + " | ".join(head) + " |",
+        "|---|" + "---:|" * len(variants) + "---|" * (len(head) - 1 - len(variants)),
+    ]
     for robot in ROBOTS:
         at = cal[cal["robot"] == robot]
         if at.empty:
@@ -295,43 +305,61 @@ def sample_note(results: Path, fixed: pd.DataFrame) -> list[str]:
     effect = sample_effect(results)
     effect = effect[effect["command_vx"].isin(set(other["command_vx"]))] if not effect.empty else effect
     who = ", ".join(f"`{c}` ({', '.join(sorted(set(g['robot'])))})" for c, g in other.groupby("critic", sort=True))
-    text = (f"† scored on another rollout of the same frozen actor (same config, collected again on another machine: "
-            f"the reference rollout's log is not shipped and another CPU's rounding does not reproduce it): {who}.")
-    parts = [f"on {robot} ({len(g)} critics) by {g['d_flip'].mean():+.3f} on average (|Δ| at most "
-             f"{g['d_flip'].abs().max():.3f}) and Cos by {g['d_cos'].mean():+.3f} (|Δ| at most "
-             f"{g['d_cos'].abs().max():.3f})" for robot, g in effect.groupby("robot", sort=True)]
+    text = (
+        f"† scored on another rollout of the same frozen actor (same config, collected again on another machine: "
+        f"the reference rollout's log is not shipped and another CPU's rounding does not reproduce it): {who}."
+    )
+    parts = [
+        f"on {robot} ({len(g)} critics) by {g['d_flip'].mean():+.3f} on average (|Δ| at most "
+        f"{g['d_flip'].abs().max():.3f}) and Cos by {g['d_cos'].mean():+.3f} (|Δ| at most "
+        f"{g['d_cos'].abs().max():.3f})"
+        for robot, g in effect.groupby("robot", sort=True)
+    ]
     if parts:
         text += " Scored on both, a critic's Flip changes " + "; ".join(parts) + "."
     return [text, ""]
 
 
 #: The fixed-rollout tables' titles, per command (m/s).
-FIXED_TITLES = {PAPER_COMMAND: "Fixed rollout (`morfic diagnose --fixed-rollout ROBOT`: the film actor frozen, every "
-                               "critic scored on its one rollout), 2.0 m/s",
-                TRAINED_COMMAND: "Fixed rollout at 1.0 m/s (the trained regime; the critics whose weights a store "
-                                 "held, `fixed-rollout-1.0-<robot>.csv`; the paper reports none)"}
+FIXED_TITLES = {
+    PAPER_COMMAND: "Fixed rollout (`morfic diagnose --fixed-rollout ROBOT`: the film actor frozen, every "
+    "critic scored on its one rollout), 2.0 m/s",
+    TRAINED_COMMAND: "Fixed rollout at 1.0 m/s (the trained regime; the critics whose weights a store "
+    "held, `fixed-rollout-1.0-<robot>.csv`; the paper reports none)",
+}
 
 
 def render(results: Path) -> str:
     """All tables as one markdown block (without the markers)."""
     ev, cal, fixed = load_evals(results), load(results, "calibration"), load_fixed(results)
     out: list[str] = []
-    titles = {("descriptor", 1.0): "Descriptor mode, 1.0 m/s (the trained regime: every run, `<run>-eval-1.0.csv`; "
-                                   "the paper reports none)",
-              ("descriptor", 2.0): "Descriptor mode (the paper's protocol), 2.0 m/s",
-              ("descriptor", 2.5): "Descriptor mode, 2.5 m/s (the paper reports only MorFiC-F, as v_x^max)",
-              ("full", 2.0): "Full mode (the targets' own models; a morfic extension, no paper column), 2.0 m/s",
-              ("full", 2.5): "Full mode, 2.5 m/s"}
+    titles = {
+        ("descriptor", 1.0): "Descriptor mode, 1.0 m/s (the trained regime: every run, `<run>-eval-1.0.csv`; "
+        "the paper reports none)",
+        ("descriptor", 2.0): "Descriptor mode (the paper's protocol), 2.0 m/s",
+        ("descriptor", 2.5): "Descriptor mode, 2.5 m/s (the paper reports only MorFiC-F, as v_x^max)",
+        ("full", 2.0): "Full mode (the targets' own models; a morfic extension, no paper column), 2.0 m/s",
+        ("full", 2.5): "Full mode, 2.5 m/s",
+    }
     if not ev.empty:
         for (mode, vx), title in titles.items():
             out += [f"### {title}", "", *transfer_table(ev, mode, vx), ""]
     if not cal.empty:
-        out += ["### Critic calibration (`morfic diagnose RUN`: descriptor mode, 2.0 m/s, 64 envs x 800 steps)", "",
-                *calibration_table(cal), ""]
+        out += [
+            "### Critic calibration (`morfic diagnose RUN`: descriptor mode, 2.0 m/s, 64 envs x 800 steps)",
+            "",
+            *calibration_table(cal),
+            "",
+        ]
     slow = load(results, "calibration-1.0")
     if not slow.empty:
-        out += ["### Critic calibration at 1.0 m/s (the trained regime; the runs whose weights a store held, "
-                "`<run>-calibration-1.0.csv`; the paper reports none)", "", *calibration_table(slow), ""]
+        out += [
+            "### Critic calibration at 1.0 m/s (the trained regime; the runs whose weights a store held, "
+            "`<run>-calibration-1.0.csv`; the paper reports none)",
+            "",
+            *calibration_table(slow),
+            "",
+        ]
     if not fixed.empty:
         for vx, title in FIXED_TITLES.items():
             if not frame_at(fixed, vx).empty:
@@ -359,11 +387,19 @@ def walk_table(results: Path) -> list[str]:
     if not evals.empty:
         at = (evals["command_vx"] - TEMPLATE_VX).abs() < 1e-9
         evals = evals[(evals["robot"] == TEMPLATE) & (evals["mode"] == "descriptor") & at].set_index("run")
-    runs = sorted((p.name[: -len("-walk.json")] for p in results.glob("*-cpu-s*-walk.json")
-                   if parse_run(p.name[: -len("-walk.json")])),
-                  key=lambda n: (variant_order(parse_run(n)[0]), parse_run(n)[1]))
-    lines = ["| run | v_x ± σ (m/s) | S | verdict | walks (v_x >= 0.8, S >= 0.9) | curriculum past 1 m/s at iteration "
-             "| final vx range | Go2 at 2.0 m/s: v_x / S |", "|---|---:|---:|---|---|---:|---:|---|"]
+    runs = sorted(
+        (
+            p.name[: -len("-walk.json")]
+            for p in results.glob("*-cpu-s*-walk.json")
+            if parse_run(p.name[: -len("-walk.json")])
+        ),
+        key=lambda n: (variant_order(parse_run(n)[0]), parse_run(n)[1]),
+    )
+    lines = [
+        "| run | v_x ± σ (m/s) | S | verdict | walks (v_x >= 0.8, S >= 0.9) | curriculum past 1 m/s at iteration "
+        "| final vx range | Go2 at 2.0 m/s: v_x / S |",
+        "|---|---:|---:|---|---|---:|---:|---|",
+    ]
     for run in runs:
         row = json.loads((results / f"{run}-walk.json").read_text())[0]
         walks = row["vx_mean"] >= WALK_VX and row["survival"] >= WALK_S
@@ -378,8 +414,10 @@ def walk_table(results: Path) -> list[str]:
         if run in evals.index:
             hit = evals.loc[run]
             at_cmd = f"{hit['vx_mean']:.2f} / {hit['survival']:.3f}"
-        lines.append(f"| `{run}` | {row['vx_mean']:.2f} ± {row['vx_std']:.2f} | {row['survival']:.3f} | "
-                     f"{row['verdict']} | {'yes' if walks else '**no**'} | {opened} | {top} | {at_cmd} |")
+        lines.append(
+            f"| `{run}` | {row['vx_mean']:.2f} ± {row['vx_std']:.2f} | {row['survival']:.3f} | "
+            f"{row['verdict']} | {'yes' if walks else '**no**'} | {opened} | {top} | {at_cmd} |"
+        )
     return lines
 
 
@@ -391,8 +429,12 @@ def bundle_table(bundles: Path) -> list[str]:
     ``results/<run>.tar`` a run's results only, ``partial/<run>.tar`` an unfinished run with its trainer state. Sizes
     are the files' own, in MiB (2^20 bytes), so the total is what git carries.
     """
-    kinds = (("", "weights-only"), ("weights/", "weights-only (seed >= 1)"), ("results/", "results only"),
-             ("partial/", "partial, with trainer state"))
+    kinds = (
+        ("", "weights-only"),
+        ("weights/", "weights-only (seed >= 1)"),
+        ("results/", "results only"),
+        ("partial/", "partial, with trainer state"),
+    )
     rows, totals = [], {}
     for sub, kind in kinds:
         for tar in sorted((bundles / sub).glob("*.tar")):
@@ -402,8 +444,10 @@ def bundle_table(bundles: Path) -> list[str]:
     if not rows:
         return [f"No bundle under {bundles}."]
     lines = ["| bundle | ships | MiB |", "|---|---|---:|", *rows]
-    lines += [f"| {len(rows)} tars | {', '.join(f'{k} {v:.1f}' for k, v in totals.items())} | "
-              f"**{sum(totals.values()):.1f}** |"]
+    lines += [
+        f"| {len(rows)} tars | {', '.join(f'{k} {v:.1f}' for k, v in totals.items())} | "
+        f"**{sum(totals.values()):.1f}** |"
+    ]
     return lines
 
 
@@ -454,11 +498,16 @@ def claim_rows(results: Path) -> tuple[list[dict], list[dict], list[dict]]:
         for r in fixed.to_dict("records"):
             owner = r["critic"] if r["variant"] != "mc" else str(r["actor"])
             suffix = command_suffix(float(r["command_vx"]))  # the 1.0 m/s analyses: fixed_rollout-1.0, ...-1.0-<robot>
-            r["artifact"] = (ids.get(owner, {}).get(f"fixed_rollout{suffix}", {}).get(r["robot"])
-                             or f"fixed-rollout{suffix}-{r['robot']}.csv")
+            r["artifact"] = (
+                ids.get(owner, {}).get(f"fixed_rollout{suffix}", {}).get(r["robot"])
+                or f"fixed-rollout{suffix}-{r['robot']}.csv"
+            )
             fixed_rows.append(r)
-    return paper_only(records(("eval", *EXTRA_EVALS))), paper_only(records(("calibration", *EXTRA_CALIBRATIONS))), \
-        paper_only(fixed_rows)
+    return (
+        paper_only(records(("eval", *EXTRA_EVALS))),
+        paper_only(records(("calibration", *EXTRA_CALIBRATIONS))),
+        paper_only(fixed_rows),
+    )
 
 
 def paper_only(rows: list[dict]) -> list[dict]:
@@ -474,8 +523,11 @@ def _short(artifact: str) -> str:
 
 
 #: The title of each command's block of claims.
-COMMAND_TITLES = {2.0: "At 2.0 m/s (the paper's command)", 1.0: "At 1.0 m/s (the trained regime, where every run but "
-                  "adaln's seeds 0 and 2 walks on Go2; the paper reports no numbers there)"}
+COMMAND_TITLES = {
+    2.0: "At 2.0 m/s (the paper's command)",
+    1.0: "At 1.0 m/s (the trained regime, where every run but "
+    "adaln's seeds 0 and 2 walks on Go2; the paper reports no numbers there)",
+}
 
 
 def render_claims(results: Path) -> str:
@@ -490,18 +542,24 @@ def render_claims(results: Path) -> str:
     commands = list(dict.fromkeys(c.command_vx for c in claims))
     verdicts = {(c.key, c.command_vx): c.verdict for c in claims}
     titles = {c.key: SHORT.get(c.key, c.claim) for c in claims}
-    lines = ["| claim | " + " | ".join(f"{vx:.1f} m/s" for vx in commands) + " |",
-             "|---|" + "---|" * len(commands)]
+    lines = ["| claim | " + " | ".join(f"{vx:.1f} m/s" for vx in commands) + " |", "|---|" + "---|" * len(commands)]
     for key, title in titles.items():
-        lines.append(f"| ({key}) {title} | " + " | ".join(f"**{verdicts.get((key, vx), '-')}**"
-                                                         for vx in commands) + " |")
+        lines.append(
+            f"| ({key}) {title} | " + " | ".join(f"**{verdicts.get((key, vx), '-')}**" for vx in commands) + " |"
+        )
     lines.append("")
     for vx in commands:
         lines += [f"### {COMMAND_TITLES.get(vx, f'At {vx:.1f} m/s')}", ""]
         for claim in (c for c in claims if c.command_vx == vx):
-            lines += [f"**({claim.key}) {claim.claim}** Verdict: **{claim.verdict}**.", "",
-                      f"- Paper: {claim.paper}", f"- Ours: {claim.ours or '-'}", f"- Why: {claim.reason}",
-                      "- From: " + (", ".join(f"`{_short(i)}`" for i in claim.artifacts) or "-"), ""]
+            lines += [
+                f"**({claim.key}) {claim.claim}** Verdict: **{claim.verdict}**.",
+                "",
+                f"- Paper: {claim.paper}",
+                f"- Ours: {claim.ours or '-'}",
+                f"- Why: {claim.reason}",
+                "- From: " + (", ".join(f"`{_short(i)}`" for i in claim.artifacts) or "-"),
+                "",
+            ]
     return "\n".join(lines).rstrip() + "\n"
 
 
@@ -517,8 +575,9 @@ def verdict_groups(claims: list[Any], command_vx: float) -> str:
     from morfic_cli.report.claims import VERDICTS
 
     at = [c for c in claims if c.command_vx == command_vx]
-    return "; ".join(f"{_keys([c.key for c in at if c.verdict == v])} {v}" for v in VERDICTS
-                     if any(c.verdict == v for c in at))
+    return "; ".join(
+        f"{_keys([c.key for c in at if c.verdict == v])} {v}" for v in VERDICTS if any(c.verdict == v for c in at)
+    )
 
 
 def _decided(c: Any) -> list[str]:
@@ -527,8 +586,10 @@ def _decided(c: Any) -> list[str]:
     for r in c.comparisons:
         if r["outcome"] in ("for", "against"):
             ci = f" [{r['lo']:+.2f}, {r['hi']:+.2f}]" if r["lo"] is not None else ""
-            out.append(f"{robot_label(r['unit'])} {r['comparison']} {r['effect']:+.2f}{ci} (Holm p {r['p_holm']:.2g}, "
-                       f"{r['outcome']} the claim)")
+            out.append(
+                f"{robot_label(r['unit'])} {r['comparison']} {r['effect']:+.2f}{ci} (Holm p {r['p_holm']:.2g}, "
+                f"{r['outcome']} the claim)"
+            )
     return out
 
 
@@ -580,8 +641,10 @@ def _study_design(results: Path) -> str:
     rows = pd.read_csv(results / STUDY_CSV).to_dict("records")
     if study_unit(rows) == ACTOR:
         return f"its unit is the frozen actor, {len({r['actor'] for r in rows})} of them, converged fits only"
-    return ("its unit is the fit seed of one actor's critics, fitted for a fixed epoch count (the study's layout 1, "
-            "before issue 54), so it speaks of that actor only")
+    return (
+        "its unit is the fit seed of one actor's critics, fitted for a fixed epoch count (the study's layout 1, "
+        "before issue 54), so it speaks of that actor only"
+    )
 
 
 def render_answer(results: Path) -> str:
@@ -594,28 +657,51 @@ def render_answer(results: Path) -> str:
 
     claims = check_claims(*claim_rows(results))
     commands = list(dict.fromkeys(c.command_vx for c in claims))
-    lines = [f"*Generated by `scripts/results_tables.py` from the run CSVs under [results/](results/) "
-             f"({_runs_text(results)}); the rule: docs/report.md \"How a verdict is read\" (Welch and t-contrast "
-             "tests over training seeds, Holm-corrected per claim).*", ""]
+    lines = [
+        f"*Generated by `scripts/results_tables.py` from the run CSVs under [results/](results/) "
+        f'({_runs_text(results)}); the rule: docs/report.md "How a verdict is read" (Welch and t-contrast '
+        "tests over training seeds, Holm-corrected per claim).*",
+        "",
+    ]
     paper_note = " (the paper's command)"
-    lines.append("**" + " ".join(f"At {vx:.1f} m/s{paper_note if is_paper_command(vx) else ''}: "
-                                 f"{verdict_groups(claims, vx)}." for vx in commands) + "**")
-    lines += ["", "| claim | " + " | ".join(f"{vx:.1f} m/s" for vx in commands)
-              + " | significant comparisons | the undecided comparison closest to an answer (seeds per side for "
-              "80 % power) |", "|---|" + "---|" * len(commands) + "---|---|"]
+    lines.append(
+        "**"
+        + " ".join(
+            f"At {vx:.1f} m/s{paper_note if is_paper_command(vx) else ''}: {verdict_groups(claims, vx)}."
+            for vx in commands
+        )
+        + "**"
+    )
+    lines += [
+        "",
+        "| claim | "
+        + " | ".join(f"{vx:.1f} m/s" for vx in commands)
+        + " | significant comparisons | the undecided comparison closest to an answer (seeds per side for "
+        "80 % power) |",
+        "|---|" + "---|" * len(commands) + "---|---|",
+    ]
     for key in dict.fromkeys(c.key for c in claims):
         mine = [c for c in claims if c.key == key]
         decided = [f"{d} at {c.command_vx:.1f} m/s" for c in mine for d in _decided(c)]
         closest = "; ".join(f"{c.command_vx:.1f} m/s: {_closest(c)}" for c in mine)
-        lines.append(f"| ({key}) {SHORT.get(key, key)} | " + " | ".join(f"**{c.verdict}**" for c in mine)
-                     + f" | {'; '.join(decided) or 'none'} | {closest} |")
+        lines.append(
+            f"| ({key}) {SHORT.get(key, key)} | "
+            + " | ".join(f"**{c.verdict}**" for c in mine)
+            + f" | {'; '.join(decided) or 'none'} | {closest} |"
+        )
     study = _study_verdicts(results)
     if study:
-        lines += ["", "With the actor fixed ([the critic study](#the-critic-study-the-conditioning-alone-the-actor-"
-                  f"fixed); {_study_design(results)}): {study}."]
-    lines += ["", "Every comparison, with its interval, p, Holm p and the seeds it would need: "
-              "[the paper's claims](#the-papers-claims). The dated lab notes of sessions 1-29: "
-              "[results-history.md](results-history.md)."]
+        lines += [
+            "",
+            "With the actor fixed ([the critic study](#the-critic-study-the-conditioning-alone-the-actor-"
+            f"fixed); {_study_design(results)}): {study}.",
+        ]
+    lines += [
+        "",
+        "Every comparison, with its interval, p, Holm p and the seeds it would need: "
+        "[the paper's claims](#the-papers-claims). The dated lab notes of sessions 1-29: "
+        "[results-history.md](results-history.md).",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -626,15 +712,20 @@ def render_headline(results: Path) -> str:
     claims = check_claims(*claim_rows(results))
     commands = list(dict.fromkeys(c.command_vx for c in claims))
     decided = [f"{d} at {c.command_vx:.1f} m/s" for c in claims for d in _decided(c)]
-    lines = [f"- The paper's five claims on the trained policies ({_runs_text(results)}, the `cpu` preset), read "
-             "with Holm-corrected Welch and t-contrast tests over seeds: "
-             + "; ".join(f"at {vx:.1f} m/s {verdict_groups(claims, vx)}" for vx in commands) + ".",
-             "- Significant: " + ("; ".join(decided) if decided else "no comparison") + "."]
+    lines = [
+        f"- The paper's five claims on the trained policies ({_runs_text(results)}, the `cpu` preset), read "
+        "with Holm-corrected Welch and t-contrast tests over seeds: "
+        + "; ".join(f"at {vx:.1f} m/s {verdict_groups(claims, vx)}" for vx in commands)
+        + ".",
+        "- Significant: " + ("; ".join(decided) if decided else "no comparison") + ".",
+    ]
     study = _study_verdicts(results)
     if study:
         lines.append(f"- With the actor fixed (`morfic critic-study`; {_study_design(results)}): {study}.")
-    lines.append("- Every comparison, the seeds an undecided one would need, and the artifact ids: "
-                 "[docs/results.md](docs/results.md).")
+    lines.append(
+        "- Every comparison, the seeds an undecided one would need, and the artifact ids: "
+        "[docs/results.md](docs/results.md)."
+    )
     return "\n".join(lines) + "\n"
 
 
@@ -669,14 +760,22 @@ def write_figures(results: Path, out: Path) -> list[Path]:
     cal = load(results, "calibration")
     if not cal.empty:
         pooled = cal.groupby(["variant", "robot"], sort=False).agg(ev=("ev", "mean"), n=("seed", "nunique"))
-        rows = [{"run": f"{v}, {n} seed{'s' if n > 1 else ''}", "variant": v,
-                 "robot": ROBOT_LABELS.get(robot, robot), "ev": float(e)}
-                for (v, robot), e, n in zip(pooled.index, pooled["ev"], pooled["n"], strict=True)]
+        rows = [
+            {
+                "run": f"{v}, {n} seed{'s' if n > 1 else ''}",
+                "variant": v,
+                "robot": ROBOT_LABELS.get(robot, robot),
+                "ev": float(e),
+            }
+            for (v, robot), e, n in zip(pooled.index, pooled["ev"], pooled["n"], strict=True)
+        ]
         png, _ = ev_figure(rows)
         (out / "results-ev.png").write_bytes(png)
         written.append(out / "results-ev.png")
-    curves = {p.name[: -len("-curve.csv")]: pd.read_csv(p).to_dict("records")
-              for p in sorted(results.glob("*-cpu-s*-curve.csv"))}
+    curves = {
+        p.name[: -len("-curve.csv")]: pd.read_csv(p).to_dict("records")
+        for p in sorted(results.glob("*-cpu-s*-curve.csv"))
+    }
     if curves:
         from morfic_cli.report.figures import curves_figure
 
@@ -686,8 +785,11 @@ def write_figures(results: Path, out: Path) -> list[Path]:
     ev = load(results, "eval")
     if not ev.empty:
         sel = ev[ev["mode"] == "descriptor"]
-        pooled = sel.groupby(["variant", "robot", "mode", "command_vx"], sort=False).agg(
-            vx=("vx_mean", "mean"), vx_std=("vx_std", "mean"), d=("d", "first")).reset_index()
+        pooled = (
+            sel.groupby(["variant", "robot", "mode", "command_vx"], sort=False)
+            .agg(vx=("vx_mean", "mean"), vx_std=("vx_std", "mean"), d=("d", "first"))
+            .reset_index()
+        )
         rows = [{**r, "preset": "cpu"} for r in pooled.to_dict("records")]
         png, _ = distance_figure(rows, command_vx=2.0, with_paper=True)
         (out / "results-distance.png").write_bytes(png)

@@ -60,12 +60,14 @@ def run_cli(capsys):
 def gl_backend():
     """The backend that renders here (probed in a subprocess: a GL failure can abort the process), else skip."""
     env = probe_env()
-    proc = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=300,
-                          check=False)
+    proc = subprocess.run(
+        [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=300, check=False
+    )
     if proc.returncode != 0:
         last = ((proc.stderr or proc.stdout).strip().splitlines() or ["(no output)"])[-1]
-        pytest.skip(f"no working OpenGL backend for offscreen rendering (MUJOCO_GL={env.get('MUJOCO_GL', '')!r}): "
-                    f"{last[:300]}")
+        pytest.skip(
+            f"no working OpenGL backend for offscreen rendering (MUJOCO_GL={env.get('MUJOCO_GL', '')!r}): {last[:300]}"
+        )
     backend = proc.stdout.strip().splitlines()[-1]
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("MUJOCO_GL", backend)

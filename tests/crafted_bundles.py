@@ -30,8 +30,16 @@ def oid_of(data: bytes) -> str:
 
 def manifest_bytes(**fields: Any) -> bytes:
     """A manifest document with defaults for every key (canonical JSON unless ``allow_nan`` is needed)."""
-    doc = {"schema": 1, "kind": "report", "morfic_version": "0.1.0", "created": GOOD_TIME, "config": {},
-           "inputs": {}, "files": {}, "meta": {}}
+    doc = {
+        "schema": 1,
+        "kind": "report",
+        "morfic_version": "0.1.0",
+        "created": GOOD_TIME,
+        "config": {},
+        "inputs": {},
+        "files": {},
+        "meta": {},
+    }
     doc.update(fields)
     return json.dumps(doc, sort_keys=True, separators=(",", ":"), ensure_ascii=True).encode("ascii")
 
@@ -39,14 +47,22 @@ def manifest_bytes(**fields: Any) -> bytes:
 def history_bytes(ids: list[str], times: list[str] | None = None) -> bytes:
     """A legacy (unchained) ref history, as every morfic before the hash chain wrote it."""
     times = times or [GOOD_TIME] * len(ids)
-    lines = [json.dumps({"id": oid, "time": t, "version": n}, sort_keys=True, separators=(",", ":"))
-             for n, (oid, t) in enumerate(zip(ids, times, strict=True), start=1)]
+    lines = [
+        json.dumps({"id": oid, "time": t, "version": n}, sort_keys=True, separators=(",", ":"))
+        for n, (oid, t) in enumerate(zip(ids, times, strict=True), start=1)
+    ]
     return "".join(line + "\n" for line in lines).encode()
 
 
-def write_bundle(path: Path, *, blobs: list[bytes] = (), manifests: list[bytes] = (),
-                 refs: dict[str, bytes] | None = None, header: dict | None = None,
-                 extra: dict[str, bytes] | None = None) -> Path:
+def write_bundle(
+    path: Path,
+    *,
+    blobs: list[bytes] = (),
+    manifests: list[bytes] = (),
+    refs: dict[str, bytes] | None = None,
+    header: dict | None = None,
+    extra: dict[str, bytes] | None = None,
+) -> Path:
     """An export tar holding ``blobs`` and ``manifests`` as objects (manifests indexed) and ``refs`` histories."""
     refs = refs or {}
     objects = {oid_of(b): b for b in [*blobs, *manifests]}
@@ -73,8 +89,9 @@ def report_bundle(path: Path, files: dict[str, bytes], **fields: Any) -> tuple[P
     """A one-ref bundle (``reports/evil``) whose report manifest names ``files`` (any names, true sizes)."""
     entries = {name: {"id": oid_of(data), "size": len(data)} for name, data in files.items()}
     manifest = manifest_bytes(files=entries, **fields)
-    write_bundle(path, blobs=list(files.values()), manifests=[manifest],
-                 refs={"reports/evil": history_bytes([oid_of(manifest)])})
+    write_bundle(
+        path, blobs=list(files.values()), manifests=[manifest], refs={"reports/evil": history_bytes([oid_of(manifest)])}
+    )
     return path, oid_of(manifest)
 
 
@@ -118,12 +135,20 @@ DATA = b"a,b\n1,2\n"
 
 def header_bytes(objects: int, refs: list[str], **extra: Any) -> bytes:
     """An export header (``morfic-export.json``) declaring ``objects`` and ``refs``."""
-    return json.dumps({"format": 1, "morfic_version": "0.1.0", "objects": objects, "refs": sorted(refs),
-                       **extra}).encode()
+    return json.dumps(
+        {"format": 1, "morfic_version": "0.1.0", "objects": objects, "refs": sorted(refs), **extra}
+    ).encode()
 
 
-def member(name: str, data: bytes = b"", *, kind: bytes = tarfile.REGTYPE, linkname: str = "",
-           size: int | None = None, pax: dict[str, str] | None = None) -> tuple[tarfile.TarInfo, bytes]:
+def member(
+    name: str,
+    data: bytes = b"",
+    *,
+    kind: bytes = tarfile.REGTYPE,
+    linkname: str = "",
+    size: int | None = None,
+    pax: dict[str, str] | None = None,
+) -> tuple[tarfile.TarInfo, bytes]:
     """A tar member: ``kind`` is a tarfile type (``SYMTYPE``, ``LNKTYPE``, ``CHRTYPE``, ``FIFOTYPE``, ...)."""
     info = tarfile.TarInfo(name)
     info.type = kind
@@ -138,10 +163,12 @@ def member(name: str, data: bytes = b"", *, kind: bytes = tarfile.REGTYPE, linkn
 def good_members(ref: str = "runs/x", blob: bytes = DATA) -> list[tuple[tarfile.TarInfo, bytes]]:
     """The members of a well-formed one-ref bundle: header, a blob, a report manifest naming it, its marker, the ref."""
     manifest = manifest_bytes(files={"t.csv": {"id": oid_of(blob), "size": len(blob)}})
-    return [member("morfic-export.json", header_bytes(2, [ref])),
-            *[member(f"objects/{oid_of(d)[:2]}/{oid_of(d)[2:]}", d) for d in sorted([blob, manifest], key=oid_of)],
-            member(f"manifests/{oid_of(manifest)}"),
-            member(f"refs/{ref}", history_bytes([oid_of(manifest)]))]
+    return [
+        member("morfic-export.json", header_bytes(2, [ref])),
+        *[member(f"objects/{oid_of(d)[:2]}/{oid_of(d)[2:]}", d) for d in sorted([blob, manifest], key=oid_of)],
+        member(f"manifests/{oid_of(manifest)}"),
+        member(f"refs/{ref}", history_bytes([oid_of(manifest)])),
+    ]
 
 
 def object_name(data: bytes) -> str:
@@ -150,8 +177,9 @@ def object_name(data: bytes) -> str:
     return f"objects/{oid[:2]}/{oid[2:]}"
 
 
-def write_members(path: Path, members: list[tuple[tarfile.TarInfo, bytes]], *, fmt: int = tarfile.PAX_FORMAT,
-                  compression: str = "") -> Path:
+def write_members(
+    path: Path, members: list[tuple[tarfile.TarInfo, bytes]], *, fmt: int = tarfile.PAX_FORMAT, compression: str = ""
+) -> Path:
     """A tar of exactly ``members`` (in order, duplicates kept); ``compression``: ``gz``, ``bz2``, ``xz`` or ``""``."""
     with tarfile.open(path, f"w:{compression}" if compression else "w", format=fmt) as tar:
         for info, data in members:
@@ -164,21 +192,28 @@ def write_members(path: Path, members: list[tuple[tarfile.TarInfo, bytes]], *, f
 BLOCK = 512
 
 
-def ustar_block(name: bytes, size: int | bytes = 0, *, typeflag: bytes = b"0", linkname: bytes = b"",
-                checksum: bool = True, extra: dict[int, bytes] | None = None) -> bytes:
+def ustar_block(
+    name: bytes,
+    size: int | bytes = 0,
+    *,
+    typeflag: bytes = b"0",
+    linkname: bytes = b"",
+    checksum: bool = True,
+    extra: dict[int, bytes] | None = None,
+) -> bytes:
     """One ustar header block, byte by byte: ``size`` as a number or as the raw 12-byte field, ``extra``: raw bytes
     at offsets (e.g. the GNU sparse fields), ``checksum=False``: a wrong checksum."""
     buf = bytearray(BLOCK)
-    buf[0:len(name[:100])] = name[:100]
+    buf[0 : len(name[:100])] = name[:100]
     buf[100:108] = b"0000644\0"
     buf[108:116] = buf[116:124] = b"0000000\0"
     buf[124:136] = size if isinstance(size, bytes) else b"%011o\0" % size
     buf[136:148] = b"00000000000\0"
     buf[156:157] = typeflag
-    buf[157:157 + len(linkname[:100])] = linkname[:100]
+    buf[157 : 157 + len(linkname[:100])] = linkname[:100]
     buf[257:265] = b"ustar\x0000"
     for offset, raw in (extra or {}).items():
-        buf[offset:offset + len(raw)] = raw
+        buf[offset : offset + len(raw)] = raw
     buf[148:156] = b" " * 8
     total = sum(buf) + (0 if checksum else 1)
     buf[148:156] = b"%06o\0 " % total
@@ -230,6 +265,7 @@ def member_header(name: str, size: int) -> bytes:
 
 # ---------------------------------------------------------------------------------------------- runs (issue 53)
 
+
 def run_config(variant: str = "film", **changes: Any) -> dict:
     """A run's stored training config (the smoke preset), with dotted ``changes`` (``{"env.obs.history_len": -3}``;
     the value ``DROP`` removes a key)."""
@@ -264,15 +300,31 @@ def trainer_state(num_envs: int = 2, **changes: Any) -> dict:
     n = num_envs
     rows = {"a": torch.zeros(n), "b": torch.zeros(n, 3)}
     state = {
-        "iteration": 1, "learning_rate": 1e-3, "torch_rng": torch.get_rng_state(),
+        "iteration": 1,
+        "learning_rate": 1e-3,
+        "torch_rng": torch.get_rng_state(),
         "alg": {"optimizer_state_dict": {"state": {}, "param_groups": [{"lr": 1e-3, "params": []}]}},
-        "env": {"num_envs": n, "mode": "train", "tensors": {k: torch.zeros(n) for k in LocomotionEnv._TENSORS},
-                "episode_sums": dict(rows), "obs": dict(rows), "params": dict(rows), "backend": dict(rows),
-                "counters": {"common_step_counter": 8, "nonfinite_resets": 0, "tracking_sum": 0.0,
-                             "tracking_count": 0},
-                "command_vx": (-1.0, 1.0), "generator": torch.Generator().manual_seed(0).get_state()},
-        "logger": {"rewbuffer": [1.5], "lenbuffer": [20.0], "cur_reward_sum": torch.zeros(n),
-                   "cur_episode_length": torch.zeros(n), "tot_timesteps": 64, "tot_time": 0.1, "wall_time_s": 1.0},
+        "env": {
+            "num_envs": n,
+            "mode": "train",
+            "tensors": {k: torch.zeros(n) for k in LocomotionEnv._TENSORS},
+            "episode_sums": dict(rows),
+            "obs": dict(rows),
+            "params": dict(rows),
+            "backend": dict(rows),
+            "counters": {"common_step_counter": 8, "nonfinite_resets": 0, "tracking_sum": 0.0, "tracking_count": 0},
+            "command_vx": (-1.0, 1.0),
+            "generator": torch.Generator().manual_seed(0).get_state(),
+        },
+        "logger": {
+            "rewbuffer": [1.5],
+            "lenbuffer": [20.0],
+            "cur_reward_sum": torch.zeros(n),
+            "cur_episode_length": torch.zeros(n),
+            "tot_timesteps": 64,
+            "tot_time": 0.1,
+            "wall_time_s": 1.0,
+        },
     }
     state.update(changes)
     return state

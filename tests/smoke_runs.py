@@ -7,8 +7,9 @@ from pathlib import Path
 from morfic_cli.store import Store
 
 
-def train_smoke_runs(root: Path, variants: tuple[str, ...] = ("film",), seed: int = 0,
-                     name: str = "{variant}-s{seed}") -> Store:
+def train_smoke_runs(
+    root: Path, variants: tuple[str, ...] = ("film",), seed: int = 0, name: str = "{variant}-s{seed}"
+) -> Store:
     """Train each variant with the smoke preset into the store at ``root`` as ``runs/<name>``, in order.
 
     ``name`` is formatted with ``variant`` and ``seed``: the default is an older store's name (``film-s0``, which
@@ -70,8 +71,9 @@ class SmokeRuns:
 
 def _fingerprint(root: Path) -> list[tuple[str, int, int]]:
     """Every file under ``root``: (relative path, size, mtime in ns), sorted."""
-    return sorted((str(p.relative_to(root)), p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*")
-                  if p.is_file())
+    return sorted(
+        (str(p.relative_to(root)), p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()
+    )
 
 
 #: The first shipped policy (`film`, cpu preset, trained by morfic 0.1.0 before the method fixes of issue 16; ref

@@ -17,18 +17,33 @@ PACKAGE = Path(__file__).resolve().parents[1] / "morfic_cli"
 #: (layer, the module prefixes in it, why it sits there), lowest first. A module belongs to the layer of its
 #: longest matching prefix; it may import its own layer and the ones below.
 LAYERS: list[tuple[str, tuple[str, ...], str]] = [
-    ("base", ("morfic_cli.__init__", "morfic_cli.errors", "morfic_cli.threads",
-              "morfic_cli.runs", "morfic_cli.quaternion", "morfic_cli.quaternion_torch", "morfic_cli.variant_names",
-              "morfic_cli.config", "morfic_cli.validation", "morfic_cli.diagnostics.metrics"),
-     "Errors, names, typed configs and their checks, quaternions and the pure critic metrics: imported everywhere."),
+    (
+        "base",
+        (
+            "morfic_cli.__init__",
+            "morfic_cli.errors",
+            "morfic_cli.threads",
+            "morfic_cli.runs",
+            "morfic_cli.quaternion",
+            "morfic_cli.quaternion_torch",
+            "morfic_cli.variant_names",
+            "morfic_cli.config",
+            "morfic_cli.validation",
+            "morfic_cli.diagnostics.metrics",
+        ),
+        "Errors, names, typed configs and their checks, quaternions and the pure critic metrics: imported everywhere.",
+    ),
     ("store", ("morfic_cli.store",), "The artifact store knows manifests and refs, never a policy, an env or a sim."),
     ("morphology", ("morfic_cli.morphology",), "Robots, descriptors and MjSpec models, built without a simulator."),
     ("sim", ("morfic_cli.sim",), "The physics backends (MuJoCo CPU, MuJoCo Warp) step a morphology's model."),
     ("envs", ("morfic_cli.envs",), "The locomotion env turns sim frames into observations, rewards and resets."),
     ("recording", ("morfic_cli.recording",), "Curves, tables, MCAP logs and videos: files from arrays and rows."),
     ("rl", ("morfic_cli.rl",), "Training with rsl-rl: checkpoints go to a sink; trained runs load from a store."),
-    ("evaluation", ("morfic_cli.evaluation", "morfic_cli.export"),
-     "Evaluating and exporting trained runs: rollouts, metrics, figures, policies for deployment."),
+    (
+        "evaluation",
+        ("morfic_cli.evaluation", "morfic_cli.export"),
+        "Evaluating and exporting trained runs: rollouts, metrics, figures, policies for deployment.",
+    ),
     ("diagnostics", ("morfic_cli.diagnostics",), "Critic diagnostics read rollouts of evaluated runs."),
     ("report", ("morfic_cli.report",), "The report gathers evals and diagnoses into tables and figures."),
     ("pipeline", ("morfic_cli.pipeline", "morfic_cli.benchmarks"), "Reproduce and bench chain the steps above."),
@@ -70,8 +85,9 @@ def imports(source: str, module: str, *, top_level_only: bool = False) -> set[st
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
-                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base
-                                                                                                    else []))
+                base = ".".join(
+                    package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else [])
+                )
             out.update(f"{base}.{a.name}" for a in node.names)  # resolve(): the module, or ``base`` for a name
     return {name for name in out if name == "morfic_cli" or name.startswith("morfic_cli.")}
 
@@ -142,8 +158,10 @@ def cycles(mods: dict[str, str], *, top_level_only: bool = True) -> list[list[st
     ``top_level_only``: count what runs at import; False: the imports inside functions too (hidden cycles).
     """
     known = known_modules(mods)
-    graph = {m: {t for n in imports(s, m, top_level_only=top_level_only) if (t := resolve(n, known)) not in (None, m)}
-             for m, s in mods.items()}
+    graph = {
+        m: {t for n in imports(s, m, top_level_only=top_level_only) if (t := resolve(n, known)) not in (None, m)}
+        for m, s in mods.items()
+    }
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -183,15 +201,21 @@ def test_lower_layers_never_import_upper_ones():
     known = {(a, b) for a, b, _ in KNOWN_UPWARD}
     new = sorted(found - known)
     assert not new, "upward imports (move the shared piece down, or pass it in):\n" + "\n".join(
-        f"  {a} ({LAYERS[layer_of(a)][0]}) imports {b} ({LAYERS[layer_of(b)][0]})" for a, b in new)
+        f"  {a} ({LAYERS[layer_of(a)][0]}) imports {b} ({LAYERS[layer_of(b)][0]})" for a, b in new
+    )
     gone = sorted(known - found)
     assert not gone, f"these KNOWN_UPWARD imports are gone; remove them from the list: {gone}"
 
 
 def test_the_store_imports_neither_rl_nor_envs_nor_sim():
     mods = sources()
-    bad = sorted((m, n) for m, s in mods.items() if m.startswith("morfic_cli.store")
-                 for n in imports(s, m) if n.startswith(("morfic_cli.rl", "morfic_cli.envs", "morfic_cli.sim")))
+    bad = sorted(
+        (m, n)
+        for m, s in mods.items()
+        if m.startswith("morfic_cli.store")
+        for n in imports(s, m)
+        if n.startswith(("morfic_cli.rl", "morfic_cli.envs", "morfic_cli.sim"))
+    )
     assert bad == []
 
 
@@ -202,8 +226,16 @@ def test_no_import_cycle_between_modules():
 #: Cycles still hidden by imports inside functions, each with why; the test fails when one changes or goes away.
 KNOWN_HIDDEN_CYCLES: list[tuple[list[str], str]] = [
     (["morfic_cli.rl.config", "morfic_cli.validation"], "validation checks a TrainCfg that rl.config builds with it"),
-    (["morfic_cli.store", "morfic_cli.store.gc", "morfic_cli.store.publish", "morfic_cli.store.results",
-      "morfic_cli.store.transfer"], "the store's parts take a Store and the Store calls them"),
+    (
+        [
+            "morfic_cli.store",
+            "morfic_cli.store.gc",
+            "morfic_cli.store.publish",
+            "morfic_cli.store.results",
+            "morfic_cli.store.transfer",
+        ],
+        "the store's parts take a Store and the Store calls them",
+    ),
 ]
 
 
@@ -222,14 +254,23 @@ def _tree(tmp_path: Path, files: dict[str, str]) -> dict[str, str]:
 
 
 def test_a_planted_upward_import_is_caught_even_inside_a_function(tmp_path):
-    mods = _tree(tmp_path, {
-        "__init__.py": "", "errors.py": "", "store/__init__.py": "", "rl/__init__.py": "",
-        "store/transfer.py": "from morfic_cli.errors import X\n\ndef f():\n    from morfic_cli.rl.variants import V\n",
-        "rl/variants.py": "from morfic_cli.store import Store\n",
-    })
+    mods = _tree(
+        tmp_path,
+        {
+            "__init__.py": "",
+            "errors.py": "",
+            "store/__init__.py": "",
+            "rl/__init__.py": "",
+            "store/transfer.py": (
+                "from morfic_cli.errors import X\n\ndef f():\n    from morfic_cli.rl.variants import V\n"
+            ),
+            "rl/variants.py": "from morfic_cli.store import Store\n",
+        },
+    )
     assert upward_imports(mods) == {("morfic_cli.store.transfer", "morfic_cli.rl.variants")}
     assert upward_imports({**mods, "morfic_cli.store.transfer": "import morfic_cli.rl\n"}) == {
-        ("morfic_cli.store.transfer", "morfic_cli.rl")}
+        ("morfic_cli.store.transfer", "morfic_cli.rl")
+    }
     relative = {**mods, "morfic_cli.store.transfer": "from ..rl import variants\n"}
     assert upward_imports(relative) == {("morfic_cli.store.transfer", "morfic_cli.rl.variants")}
 
@@ -238,7 +279,8 @@ def test_the_real_tree_with_one_planted_import_fails_the_layer_check(tmp_path):
     mods = sources()
     mods["morfic_cli.sim.warp"] += "\n\ndef _planted():\n    from morfic_cli.envs.math import quat_rotate\n"
     assert ("morfic_cli.sim.warp", "morfic_cli.envs.math") in upward_imports(mods) - {
-        (a, b) for a, b, _ in KNOWN_UPWARD}
+        (a, b) for a, b, _ in KNOWN_UPWARD
+    }
 
 
 def test_a_planted_cycle_is_caught_but_not_one_inside_a_function_or_type_checking(tmp_path):
@@ -252,9 +294,15 @@ def test_a_planted_cycle_is_caught_but_not_one_inside_a_function_or_type_checkin
     assert cycles(_tree(tmp_path / "3", {**base, "b.py": typing_only})) == []
 
 
-@pytest.mark.parametrize(("module", "layer"), [
-    ("morfic_cli.validation", "base"), ("morfic_cli.rl.runner", "rl"), ("morfic_cli.store.run_sink", "store"),
-    ("morfic_cli.cli.train", "cli"), ("morfic_cli.evaluation.names", "evaluation"),
-])
+@pytest.mark.parametrize(
+    ("module", "layer"),
+    [
+        ("morfic_cli.validation", "base"),
+        ("morfic_cli.rl.runner", "rl"),
+        ("morfic_cli.store.run_sink", "store"),
+        ("morfic_cli.cli.train", "cli"),
+        ("morfic_cli.evaluation.names", "evaluation"),
+    ],
+)
 def test_a_module_takes_the_layer_of_its_longest_prefix(module, layer):
     assert LAYERS[layer_of(module)][0] == layer

@@ -110,16 +110,25 @@ RobotsOpt = Annotated[
     str,
     typer.Option("--robots", help="Comma-separated robot names, or 'all'. See `morfic robots ls`."),
 ]
-ModeOpt = Annotated[EvalMode, typer.Option("--mode", help="descriptor (Go2 template with the target's 11-D "
-                                           "descriptor, the paper's) or full (the target's own model).")]
+ModeOpt = Annotated[
+    EvalMode,
+    typer.Option(
+        "--mode",
+        help="descriptor (Go2 template with the target's 11-D "
+        "descriptor, the paper's) or full (the target's own model).",
+    ),
+]
 EnvsOpt = Annotated[int, typer.Option("--envs", min=1, help="Parallel envs per rollout.")]
 
 TrustOpt = Annotated[
     list[str] | None,
-    typer.Option("--trust-variant", metavar="MODULE:CLASS",
-                 help="Import this user variant (module.path:Class, or an entry-point name) when a stored run names "
-                 "it; repeatable. A stored run's own code is imported only when named here or listed by `morfic "
-                 "trust` (docs/extending.md)."),
+    typer.Option(
+        "--trust-variant",
+        metavar="MODULE:CLASS",
+        help="Import this user variant (module.path:Class, or an entry-point name) when a stored run names "
+        "it; repeatable. A stored run's own code is imported only when named here or listed by `morfic "
+        "trust` (docs/extending.md).",
+    ),
 ]
 
 DEFAULT_STORE = Path("artifacts")

@@ -21,8 +21,13 @@ class StepBar:
             from rich.console import Console
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-            self.bar = Progress(TextColumn(f"[bold]{self.label}[/] {{task.description}}"), BarColumn(),
-                                MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True, emoji=False))
+            self.bar = Progress(
+                TextColumn(f"[bold]{self.label}[/] {{task.description}}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeRemainingColumn(),
+                console=Console(stderr=True, emoji=False),
+            )
             self.bar.__enter__()
             self.task = self.bar.add_task("", total=self.total)
         return self

@@ -57,8 +57,24 @@ class Column:
 
 
 #: Keys of columns a user copies into the next command; never cut (``Column.whole``).
-WHOLE_KEYS = frozenset({"ref", "id", "run", "name", "robot", "mode", "variant", "critic", "preset", "kind",
-                        "file", "path", "version", "bundle"})
+WHOLE_KEYS = frozenset(
+    {
+        "ref",
+        "id",
+        "run",
+        "name",
+        "robot",
+        "mode",
+        "variant",
+        "critic",
+        "preset",
+        "kind",
+        "file",
+        "path",
+        "version",
+        "bundle",
+    }
+)
 
 
 def _cell(value: Any, col: Column) -> str:
@@ -110,10 +126,13 @@ def emit_rows(
     for i in keep:
         col = cols[i]
         folded = widths is not None and widths[i] < max((len(row[i]) for row in cells), default=0)
-        table.add_column(col.header or col.key, justify=col.justify,  # type: ignore[arg-type]
-                         no_wrap=(col.no_wrap or col.is_whole) and not folded,
-                         overflow="fold" if col.is_whole else col.overflow,  # type: ignore[arg-type]
-                         width=None if widths is None else widths[i])
+        table.add_column(
+            col.header or col.key,
+            justify=col.justify,  # type: ignore[arg-type]
+            no_wrap=(col.no_wrap or col.is_whole) and not folded,
+            overflow="fold" if col.is_whole else col.overflow,  # type: ignore[arg-type]
+            width=None if widths is None else widths[i],
+        )
     for row in cells:
         table.add_row(*(Text(row[i]) for i in keep))  # Text: no markup in cells
     out_console.print(table)
@@ -127,8 +146,11 @@ def _longest_word(text: str) -> int:
     return max((len(word) for word in text.split()), default=0)
 
 
-def fit_columns(cols: Sequence[Column], cells: Sequence[Sequence[str]], width: int,
-                ) -> tuple[list[int], list[int] | None]:
+def fit_columns(
+    cols: Sequence[Column],
+    cells: Sequence[Sequence[str]],
+    width: int,
+) -> tuple[list[int], list[int] | None]:
     """Which columns a rich table of ``width`` characters shows, and how wide, so that no whole column is cut.
 
     While the columns at their longest cells are wider than ``width``, the column with the highest ``drop`` is
@@ -149,11 +171,15 @@ def fit_columns(cols: Sequence[Column], cells: Sequence[Sequence[str]], width: i
     """
     n = len(cols)
     heads = [col.header or col.key for col in cols]
-    longest = [max([len(line) for text in [heads[i], *(row[i] for row in cells)] for line in text.splitlines()]
-                   or [0]) for i in range(n)]
+    longest = [
+        max([len(line) for text in [heads[i], *(row[i] for row in cells)] for line in text.splitlines()] or [0])
+        for i in range(n)
+    ]
     rigid = [cols[i].is_whole or cols[i].no_wrap for i in range(n)]
-    least = [longest[i] if rigid[i] else max(_longest_word(heads[i]),
-                                             *(_longest_word(row[i]) for row in cells), 1) for i in range(n)]
+    least = [
+        longest[i] if rigid[i] else max(_longest_word(heads[i]), *(_longest_word(row[i]) for row in cells), 1)
+        for i in range(n)
+    ]
     keep = list(range(n))
 
     def room(shown: list[int]) -> int:  # content width left: each column has 2 of padding and 1 of border, + 1
@@ -172,9 +198,11 @@ def fit_columns(cols: Sequence[Column], cells: Sequence[Sequence[str]], width: i
         shrinkable = [i for i in keep if widths[i] > least[i]]
         if not shrinkable:  # even at their least the columns do not fit: the whole ones fold (nothing is lost) down
             # to FOLD_FLOOR, widest first, so numbers keep their width; then the lesser ones; then the whole ones
-            shrinkable = ([i for i in keep if widths[i] > FOLD_FLOOR and cols[i].is_whole]
-                          or [i for i in keep if widths[i] > 1 and not cols[i].is_whole]
-                          or [i for i in keep if widths[i] > 1])
+            shrinkable = (
+                [i for i in keep if widths[i] > FOLD_FLOOR and cols[i].is_whole]
+                or [i for i in keep if widths[i] > 1 and not cols[i].is_whole]
+                or [i for i in keep if widths[i] > 1]
+            )
             if not shrinkable:
                 break
         widest = max(shrinkable, key=lambda i: (widths[i], -i))
@@ -234,8 +262,9 @@ def emit_object(obj: Any, fmt: OutputFormat, title: str | None = None) -> None:
     """
     obj = json_safe(obj)
     if fmt == OutputFormat.csv and isinstance(obj, dict):
-        emit_rows([{"key": k, "value": json.dumps(v) if isinstance(v, dict | list) else v}
-                   for k, v in obj.items()], fmt)
+        emit_rows(
+            [{"key": k, "value": json.dumps(v) if isinstance(v, dict | list) else v} for k, v in obj.items()], fmt
+        )
         return
     if fmt == OutputFormat.table:
         table = Table(title=title, show_header=False)

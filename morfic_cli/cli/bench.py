@@ -14,27 +14,51 @@ from morfic_cli.validation import check_args
 
 
 def bench(
-    what: Annotated[_options.Benchmark, typer.Argument(help="env (env steps/s vs the physics floor) or train (PPO "
-                                              "iterations of a preset vs the same floor).")],
+    what: Annotated[
+        _options.Benchmark,
+        typer.Argument(
+            help="env (env steps/s vs the physics floor) or train (PPO iterations of a preset vs the same floor)."
+        ),
+    ],
     envs: Annotated[str, typer.Option("--envs", help="Comma-separated env counts, e.g. 256,1024,4096.")] = "256",
     steps: Annotated[int, typer.Option("--steps", min=1, help="Timed policy steps per measurement.")] = 50,
-    backend: Annotated[_options.Backend, typer.Option(
-        "--backend", help="Simulation backend: cpu (MuJoCo C) or warp (MuJoCo Warp; alias gpu; pip install "
-        "'morfic[gpu]'); --device cuda implies warp.")] = _options.Backend.cpu,
+    backend: Annotated[
+        _options.Backend,
+        typer.Option(
+            "--backend",
+            help="Simulation backend: cpu (MuJoCo C) or warp (MuJoCo Warp; alias gpu; pip install "
+            "'morfic[gpu]'); --device cuda implies warp.",
+        ),
+    ] = _options.Backend.cpu,
     device: DeviceOpt = Device.cpu,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the env and the random actions.")] = 0,
     preset: Annotated[_options.Preset, typer.Option("--preset", help="bench train: training preset.")] = (
-        _options.Preset.cpu),
+        _options.Preset.cpu
+    ),
     variant: Annotated[str, typer.Option("--variant", help="bench train: actor-critic variant.")] = "film",
     iterations: Annotated[int, typer.Option("--iterations", min=1, help="bench train: timed PPO iterations.")] = 5,
-    repeats: Annotated[int, typer.Option("--repeats", min=1, help="bench env: alternating env / floor repetitions; the "
-                                         "result is their median.")] = 3,
-    compare: Annotated[str | None, typer.Option("--compare", help="bench train: also time this git commit, branch "
-                                                "or tag, side by side in alternating runs (e.g. main).")] = None,
+    repeats: Annotated[
+        int,
+        typer.Option(
+            "--repeats", min=1, help="bench env: alternating env / floor repetitions; the result is their median."
+        ),
+    ] = 3,
+    compare: Annotated[
+        str | None,
+        typer.Option(
+            "--compare",
+            help="bench train: also time this git commit, branch or tag, side by side in alternating runs (e.g. main).",
+        ),
+    ] = None,
     rounds: Annotated[int, typer.Option("--rounds", min=1, help="bench train --compare: runs per side.")] = 2,
-    overrides: Annotated[list[str] | None, typer.Option(
-        "--set", help="bench train: config override key=value, repeatable, as in `morfic train` (e.g. "
-        "ppo.use_mixed_precision=false).")] = None,
+    overrides: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            help="bench train: config override key=value, repeatable, as in `morfic train` (e.g. "
+            "ppo.use_mixed_precision=false).",
+        ),
+    ] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
@@ -74,8 +98,9 @@ def bench(
         if compare is not None:
             _compare_train(compare, preset.value, variant, iterations, rounds, seed, fmt, quiet, device.value, backend)
             return
-        _bench_train(preset.value, variant, iterations, seed, fmt, quiet, store, device.value, backend,
-                     list(overrides or []))
+        _bench_train(
+            preset.value, variant, iterations, seed, fmt, quiet, store, device.value, backend, list(overrides or [])
+        )
         return
     if compare is not None:
         raise MorficError("--compare times training; use it with `morfic bench train`.")
@@ -112,8 +137,9 @@ def bench(
             columns=[
                 Column("num_envs", "envs", justify="right"),
                 Column("env_steps_per_s", "env steps/s", fmt=lambda v: f"{v:,.0f}", justify="right"),
-                Column("physics_floor_steps_per_s", "physics floor steps/s", fmt=lambda v: f"{v:,.0f}",
-                       justify="right"),
+                Column(
+                    "physics_floor_steps_per_s", "physics floor steps/s", fmt=lambda v: f"{v:,.0f}", justify="right"
+                ),
                 Column("floor_env_steps_per_s", "floor env steps/s", fmt=lambda v: f"{v:,.0f}", justify="right"),
                 Column("ratio", justify="right", fmt=lambda v: "noisy" if v is None else f"{v:.2f}"),
                 Column("ratio_spread", "ratio min-max", justify="right", fmt=lambda v: f"{v[0]:.2f}-{v[1]:.2f}"),
@@ -121,7 +147,7 @@ def bench(
                 Column("load_before", "load", justify="right", fmt=lambda v: f"{v:.1f}"),
             ],
             title=f"morfic bench env: {rows[0]['backend']} on {rows[0]['device']} ({rows[0]['cpu_model']}, "
-                  f"{rows[0]['cores']} cores)",
+            f"{rows[0]['cores']} cores)",
         )
     _warn_noisy([r for r in rows if r["noisy"]], "env")
     if not quiet:
@@ -140,11 +166,22 @@ def _warn_noisy(rows: list[dict], what: str) -> None:
             f"Warning: bench {what} at {row['num_envs']} envs measured the env faster than its own physics floor "
             f"(ratio {lo:.2f}-{hi:.2f} over the repetitions, above {MAX_CREDIBLE_RATIO}), so no ratio is reported: "
             f"the machine was too noisy (load average {row['load_before']:.1f} -> {row['load_after']:.1f}); rerun "
-            "it when the machine is quieter.\n")
+            "it when the machine is quieter.\n"
+        )
 
 
-def _compare_train(ref: str, preset: str, variant: str, iterations: int, rounds: int, seed: int,
-                   fmt: OutputFormat, quiet: bool, device: str, backend: str) -> None:
+def _compare_train(
+    ref: str,
+    preset: str,
+    variant: str,
+    iterations: int,
+    rounds: int,
+    seed: int,
+    fmt: OutputFormat,
+    quiet: bool,
+    device: str,
+    backend: str,
+) -> None:
     from morfic_cli.benchmarks import compare_train
 
     if iterations < 1 or rounds < 1:
@@ -164,18 +201,29 @@ def _compare_train(ref: str, preset: str, variant: str, iterations: int, rounds:
             Column("collect_s_per_iteration", "collect s", justify="right", fmt=lambda v: f"{v:.2f}"),
             Column("learn_s_per_iteration", "learn s", justify="right", fmt=lambda v: f"{v:.2f}"),
             Column("train_steps_per_s", "steps/s", justify="right", fmt=lambda v: f"{v:,.0f}"),
-            Column("fraction_of_floor", "of floor", justify="right",
-                   fmt=lambda v: "noisy" if v is None else f"{v:.2f}"),
+            Column(
+                "fraction_of_floor", "of floor", justify="right", fmt=lambda v: "noisy" if v is None else f"{v:.2f}"
+            ),
             Column("load", "load min-max", justify="right", fmt=lambda v: f"{v[0]:.1f}-{v[1]:.1f}"),
         ],
         title=f"morfic bench train --compare {ref}: {preset} preset, {variant}, {iterations} iterations x "
-              f"{result.rounds} rounds per side; s/iter ratio this / {ref} = {result.s_per_iteration_ratio:.3f} "
-              f"(rounds {result.ratio_spread[0]:.3f}-{result.ratio_spread[1]:.3f})",
+        f"{result.rounds} rounds per side; s/iter ratio this / {ref} = {result.s_per_iteration_ratio:.3f} "
+        f"(rounds {result.ratio_spread[0]:.3f}-{result.ratio_spread[1]:.3f})",
     )
 
 
-def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: OutputFormat, quiet: bool,
-                 store, device: str, backend: str, overrides: list[str]) -> None:
+def _bench_train(
+    preset: str,
+    variant: str,
+    iterations: int,
+    seed: int,
+    fmt: OutputFormat,
+    quiet: bool,
+    store,
+    device: str,
+    backend: str,
+    overrides: list[str],
+) -> None:
     from morfic_cli.benchmarks import bench_train
     from morfic_cli.recording.tables import write_bench_table
     from morfic_cli.rl.config import apply_overrides, preset_cfg
@@ -185,8 +233,11 @@ def _bench_train(preset: str, variant: str, iterations: int, seed: int, fmt: Out
     check_device(device)
     cfg = apply_overrides(preset_cfg(preset, variant, seed), overrides)  # unknown keys: Error before any work
     if not quiet:
-        info(f"bench train: {preset} preset, {variant}, {device}, 1 warm-up + {iterations} timed iterations"
-             + (f", {' '.join(overrides)}" if overrides else "") + " ...")
+        info(
+            f"bench train: {preset} preset, {variant}, {device}, 1 warm-up + {iterations} timed iterations"
+            + (f", {' '.join(overrides)}" if overrides else "")
+            + " ..."
+        )
     note = float32_note(bf16_matmul(device, cpu_bf16_kernels())) if cfg.ppo.use_mixed_precision else None
     if note and not quiet:
         info(note)

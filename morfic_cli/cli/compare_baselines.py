@@ -40,47 +40,91 @@ def _columns(table: str, with_paper: bool) -> list[Column]:
     head = [Column("preset", "preset"), Column("variant", "variant")]
     command = Column("command_vx", "vx_cmd", fmt=lambda v: f"{v:g}", justify="right")
     if table == "verdicts":
-        return [Column("claim", "claim"), command, Column("verdict", "verdict"), Column("unit", "on"),
-                Column("comparison", "comparison"), Column("cell", "effect [95 %]", justify="right"),
-                Column("p_holm", "Holm p", fmt=lambda v: _n(v, 4), justify="right"), Column("outcome", "outcome"),
-                Column("seeds_needed", "seeds for 80 %", fmt=lambda v: "-" if v is None else
-                       (f">{v - 1}" if v > 1000 else str(v)), justify="right")]
+        return [
+            Column("claim", "claim"),
+            command,
+            Column("verdict", "verdict"),
+            Column("unit", "on"),
+            Column("comparison", "comparison"),
+            Column("cell", "effect [95 %]", justify="right"),
+            Column("p_holm", "Holm p", fmt=lambda v: _n(v, 4), justify="right"),
+            Column("outcome", "outcome"),
+            Column(
+                "seeds_needed",
+                "seeds for 80 %",
+                fmt=lambda v: "-" if v is None else (f">{v - 1}" if v > 1000 else str(v)),
+                justify="right",
+            ),
+        ]
     if table == "transfer":
-        cols = [*head, Column("robot", "robot"), Column("mode", "mode"), command,
-                Column("n_seeds", "seeds", justify="right"), Column("cell", "v_x ± σ / S", justify="right"),
-                *_seed_columns()]
+        cols = [
+            *head,
+            Column("robot", "robot"),
+            Column("mode", "mode"),
+            command,
+            Column("n_seeds", "seeds", justify="right"),
+            Column("cell", "v_x ± σ / S", justify="right"),
+            *_seed_columns(),
+        ]
         if with_paper:
-            cols += [Column("paper_quantity", "paper qty"),
-                     Column("paper_vx", "paper v", fmt=lambda v: _n(v, 3), justify="right"),
-                     Column("paper_vx_std", "paper σ", fmt=lambda v: _n(v, 3), justify="right"),
-                     Column("paper_survival", "paper S", fmt=lambda v: _n(v, 3), justify="right")]
+            cols += [
+                Column("paper_quantity", "paper qty"),
+                Column("paper_vx", "paper v", fmt=lambda v: _n(v, 3), justify="right"),
+                Column("paper_vx_std", "paper σ", fmt=lambda v: _n(v, 3), justify="right"),
+                Column("paper_survival", "paper S", fmt=lambda v: _n(v, 3), justify="right"),
+            ]
         return cols
     if table == "calibration":
-        cols = [*head, Column("robot", "robot"), command, Column("n_seeds", "seeds", justify="right"), _pm("ev"),
-                Column("cell", "|NVB|/NVE/ASA", justify="right"), _pm("flip"), _pm("cos_grad")]
+        cols = [
+            *head,
+            Column("robot", "robot"),
+            command,
+            Column("n_seeds", "seeds", justify="right"),
+            _pm("ev"),
+            Column("cell", "|NVB|/NVE/ASA", justify="right"),
+            _pm("flip"),
+            _pm("cos_grad"),
+        ]
         if with_paper:
-            cols += [Column("paper_abs_nvb", "paper |NVB|", fmt=_n, justify="right"),
-                     Column("paper_nve", "paper NVE", fmt=_n, justify="right"),
-                     Column("paper_asa", "paper ASA", fmt=_n, justify="right")]
+            cols += [
+                Column("paper_abs_nvb", "paper |NVB|", fmt=_n, justify="right"),
+                Column("paper_nve", "paper NVE", fmt=_n, justify="right"),
+                Column("paper_asa", "paper ASA", fmt=_n, justify="right"),
+            ]
         return cols
     if table == "fixed_rollout":
-        cols = [*head, Column("robot", "robot"), command, Column("n_seeds", "critics", justify="right"), _pm("flip"),
-                _pm("cos_grad")]
+        cols = [
+            *head,
+            Column("robot", "robot"),
+            command,
+            Column("n_seeds", "critics", justify="right"),
+            _pm("flip"),
+            _pm("cos_grad"),
+        ]
         if with_paper:
-            cols += [Column("paper_flip", "paper Flip", fmt=_n, justify="right"),
-                     Column("paper_cos_grad", "paper Cos.", fmt=_n, justify="right")]
+            cols += [
+                Column("paper_flip", "paper Flip", fmt=_n, justify="right"),
+                Column("paper_cos_grad", "paper Cos.", fmt=_n, justify="right"),
+            ]
         return cols
-    cols = [*head, Column("n_seeds", "seeds", justify="right"),
-            Column("transitions", "transitions", fmt=lambda v: f"{v:,.0f}", justify="right"),
-            Column("iterations", "iters", fmt=lambda v: f"{v:,.0f}", justify="right"),
-            Column("s_per_iteration", "s/iter", fmt=lambda v: _n(v, 2), justify="right"),
-            Column("device_hours", "device-h", fmt=lambda v: _n(v, 4), justify="right"),
-            Column("device_hours_400m", "h@400M", fmt=lambda v: _n(v, 1), justify="right"), Column("device"),
-            Column("actor_params", "params", fmt=lambda v: "-" if v is None else f"{v:,}", justify="right"),
-            Column("critic_params", "/ critic", fmt=lambda v: "-" if v is None else f"{v:,}", justify="right")]
+    cols = [
+        *head,
+        Column("n_seeds", "seeds", justify="right"),
+        Column("transitions", "transitions", fmt=lambda v: f"{v:,.0f}", justify="right"),
+        Column("iterations", "iters", fmt=lambda v: f"{v:,.0f}", justify="right"),
+        Column("s_per_iteration", "s/iter", fmt=lambda v: _n(v, 2), justify="right"),
+        Column("device_hours", "device-h", fmt=lambda v: _n(v, 4), justify="right"),
+        Column("device_hours_400m", "h@400M", fmt=lambda v: _n(v, 1), justify="right"),
+        Column("device"),
+        Column("actor_params", "params", fmt=lambda v: "-" if v is None else f"{v:,}", justify="right"),
+        Column("critic_params", "/ critic", fmt=lambda v: "-" if v is None else f"{v:,}", justify="right"),
+    ]
     if with_paper:
-        cols += [Column("paper_s_per_iteration", "paper s/iter"), Column("paper_gpu_hours", "paper GPU-h"),
-                 Column("paper_gpu_hours_400m", "paper GPU-h@400M")]
+        cols += [
+            Column("paper_s_per_iteration", "paper s/iter"),
+            Column("paper_gpu_hours", "paper GPU-h"),
+            Column("paper_gpu_hours_400m", "paper GPU-h@400M"),
+        ]
     return cols
 
 
@@ -93,32 +137,51 @@ def _external_tables(rows: list[dict]) -> list[tuple[str, list[dict], list[Colum
     from morfic_cli.report.paper import ROBOT_LABELS, ROBOTS
 
     out = []
-    for mode, command in sorted({(r["mode"], r["command_vx"]) for r in rows}, key=lambda k: (k[0] != "descriptor",
-                                                                                           k[1])):
+    for mode, command in sorted(
+        {(r["mode"], r["command_vx"]) for r in rows}, key=lambda k: (k[0] != "descriptor", k[1])
+    ):
         sel = [r for r in rows if (r["mode"], r["command_vx"]) == (mode, command)]
         robots = [*ROBOTS, *sorted({r["robot"] for r in sel} - set(ROBOTS))]
         wide: dict[tuple, dict] = {}
         for r in sel:
             key = (r["group"] != "paper", r["preset"] or "", r["label"])
             seeds = "-" if r["n_seeds"] is None else str(r["n_seeds"])
-            row = wide.setdefault(key, {"group": "paper" if r["group"] == "paper" else "ours",
-                                        "preset": r["preset"] or "-", "label": r["label"], "n_seeds": seeds})
+            row = wide.setdefault(
+                key,
+                {
+                    "group": "paper" if r["group"] == "paper" else "ours",
+                    "preset": r["preset"] or "-",
+                    "label": r["label"],
+                    "n_seeds": seeds,
+                },
+            )
             row[r["robot"]] = r["cell"]
-        cols = [Column("group", "group"), Column("preset", "preset"), Column("label", "method"),
-                Column("n_seeds", "seeds", justify="right"),
-                *(Column(robot, ROBOT_LABELS.get(robot, robot), fmt=lambda v: v or "-", justify="right")
-                  for robot in robots)]
-        title = (f"external baselines at {command:g} m/s, {mode} mode: {PAPER_GROUP[0].lower()}{PAPER_GROUP[1:]}, "
-                 f"then {OURS_GROUP.lower()}")
+        cols = [
+            Column("group", "group"),
+            Column("preset", "preset"),
+            Column("label", "method"),
+            Column("n_seeds", "seeds", justify="right"),
+            *(
+                Column(robot, ROBOT_LABELS.get(robot, robot), fmt=lambda v: v or "-", justify="right")
+                for robot in robots
+            ),
+        ]
+        title = (
+            f"external baselines at {command:g} m/s, {mode} mode: {PAPER_GROUP[0].lower()}{PAPER_GROUP[1:]}, "
+            f"then {OURS_GROUP.lower()}"
+        )
         out.append((title, [wide[k] for k in sorted(wide, key=lambda k: k[:2])], cols))
     return out
 
 
 def compare_baselines(
-    runs: Annotated[list[str] | None, typer.Argument(help="Run refs (runs/film-cpu-s0) or checkpoint ids; none: every "
-                                                    "run in the store.")] = None,
-    with_paper: Annotated[bool, typer.Option("--with-paper", help="Add the paper's published numbers in "
-                                             "paper_* columns.")] = False,
+    runs: Annotated[
+        list[str] | None,
+        typer.Argument(help="Run refs (runs/film-cpu-s0) or checkpoint ids; none: every run in the store."),
+    ] = None,
+    with_paper: Annotated[
+        bool, typer.Option("--with-paper", help="Add the paper's published numbers in paper_* columns.")
+    ] = False,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     store: StoreOpt = DEFAULT_STORE,
@@ -153,8 +216,10 @@ def compare_baselines(
     tables = compare_tables(data, with_paper=with_paper)
     written, reused = store_comparison(st, data, tables, with_paper)
     if not quiet:
-        info(f"{'found' if reused else 'stored'} {written.ref}@{written.version} ({written.id[:12]}): "
-             f"{len(found)} runs, {', '.join(f'{k} {len(v)}' for k, v in tables.items()) or 'no results yet'}")
+        info(
+            f"{'found' if reused else 'stored'} {written.ref}@{written.version} ({written.id[:12]}): "
+            f"{len(found)} runs, {', '.join(f'{k} {len(v)}' for k, v in tables.items()) or 'no results yet'}"
+        )
     if fmt != OutputFormat.table:
         emit_rows(flat_rows(tables), fmt)
         return

@@ -37,44 +37,94 @@ def _interval(row: dict) -> str:
 def critic_study(
     actors: Annotated[
         str | None,
-        typer.Option("--actors", "--actor", help="Comma-separated frozen actors' runs, the unit of replication "
-                     "(default: runs/film-cpu-s0, -s1, -s2, runs/actor-only-cpu-s0, runs/concat-cpu-s0)."),
+        typer.Option(
+            "--actors",
+            "--actor",
+            help="Comma-separated frozen actors' runs, the unit of replication "
+            "(default: runs/film-cpu-s0, -s1, -s2, runs/actor-only-cpu-s0, runs/concat-cpu-s0).",
+        ),
     ] = None,
     variants: Annotated[
         str,
-        typer.Option("--variants", help="Comma-separated critics to fit, or 'all' (ppo, concat, film, film-scaled, "
-                     "hyper, adaln; actor-only's critic is ppo's); a user's critic as module:Class."),
+        typer.Option(
+            "--variants",
+            help="Comma-separated critics to fit, or 'all' (ppo, concat, film, film-scaled, "
+            "hyper, adaln; actor-only's critic is ppo's); a user's critic as module:Class.",
+        ),
     ] = "all",
-    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Fits per variant and actor (fit seeds 0..N-1), "
-                                       "averaged within the actor.")] = 2,
+    seeds: Annotated[
+        int,
+        typer.Option(
+            "--seeds", min=1, help="Fits per variant and actor (fit seeds 0..N-1), averaged within the actor."
+        ),
+    ] = 2,
     command_vx: Annotated[
         str, typer.Option("--command-vx", help="Forward command(s) in m/s; one fit set over all of them.")
     ] = "1.0,2.0",
     robots: RobotsOpt = "all",
-    train_envs: Annotated[int, typer.Option("--train-envs", min=2, help="Envs of the training-distribution "
-                                            "rollout per command (one sampled morphology each).")] = 128,
-    held_out: Annotated[int, typer.Option("--held-out", min=1, help="Of those, the last envs, never fitted on, "
-                                          "scored as robot 'train'.")] = 16,
-    val_envs: Annotated[int, typer.Option("--val-envs", min=1, help="The envs before those: the validation split "
-                                          "that stops each fit and decides whether it converged.")] = 16,
+    train_envs: Annotated[
+        int,
+        typer.Option(
+            "--train-envs",
+            min=2,
+            help="Envs of the training-distribution rollout per command (one sampled morphology each).",
+        ),
+    ] = 128,
+    held_out: Annotated[
+        int,
+        typer.Option("--held-out", min=1, help="Of those, the last envs, never fitted on, scored as robot 'train'."),
+    ] = 16,
+    val_envs: Annotated[
+        int,
+        typer.Option(
+            "--val-envs",
+            min=1,
+            help="The envs before those: the validation split that stops each fit and decides whether it converged.",
+        ),
+    ] = 16,
     target_envs: Annotated[int, typer.Option("--target-envs", min=1, help="Envs per target robot.")] = 32,
-    steps: Annotated[int, typer.Option("--steps", min=1, help="Policy steps per rollout (must exceed H_eps, 299 at "
-                                       "gamma 0.99).")] = 800,
-    max_epochs: Annotated[int, typer.Option("--max-epochs", "--epochs", min=1, help="Most passes over the fit set "
-                                            "(early stopping's cap).")] = 100,
-    patience: Annotated[int, typer.Option("--patience", min=1, help="Stop a fit after this many epochs without a "
-                                          "validation-loss improvement; keep its best epoch.")] = 8,
-    min_ev: Annotated[float, typer.Option("--min-ev", help="A fit whose validation EV stays below this, or that "
-                                          "--max-epochs cut short, is flagged unconverged and left out of the "
-                                          "averages.")] = 0.1,
+    steps: Annotated[
+        int, typer.Option("--steps", min=1, help="Policy steps per rollout (must exceed H_eps, 299 at gamma 0.99).")
+    ] = 800,
+    max_epochs: Annotated[
+        int,
+        typer.Option("--max-epochs", "--epochs", min=1, help="Most passes over the fit set (early stopping's cap)."),
+    ] = 100,
+    patience: Annotated[
+        int,
+        typer.Option(
+            "--patience",
+            min=1,
+            help="Stop a fit after this many epochs without a validation-loss improvement; keep its best epoch.",
+        ),
+    ] = 8,
+    min_ev: Annotated[
+        float,
+        typer.Option(
+            "--min-ev",
+            help="A fit whose validation EV stays below this, or that "
+            "--max-epochs cut short, is flagged unconverged and left out of the "
+            "averages.",
+        ),
+    ] = 0.1,
     minibatch: Annotated[int, typer.Option("--minibatch", min=1, help="Samples per gradient step.")] = 256,
     stride: Annotated[int, typer.Option("--stride", min=1, help="Take every N-th step of a training env.")] = 4,
-    trunc_eps: Annotated[float, typer.Option("--trunc-eps", help="I_eps is the window t <= T - H_eps with "
-                                             "gamma^H_eps <= this (docs/metrics.md).")] = 0.05,
+    trunc_eps: Annotated[
+        float,
+        typer.Option(
+            "--trunc-eps", help="I_eps is the window t <= T - H_eps with gamma^H_eps <= this (docs/metrics.md)."
+        ),
+    ] = 0.05,
     seed: SeedOpt = 0,
-    out: Annotated[Path | None, typer.Option(
-        "--out", "-o", help="Also write critic_study.csv, summary.csv, verdicts.csv, fits.csv and critic_study.png "
-        "into this directory.")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Also write critic_study.csv, summary.csv, verdicts.csv, fits.csv and critic_study.png "
+            "into this directory.",
+        ),
+    ] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     trust_variant: TrustOpt = None,
@@ -98,8 +148,17 @@ def critic_study(
     Example: morfic critic-study --actors runs/film-cpu-s0,runs/film-cpu-s1 --variants film,concat --robots aliengo
     """
     specs = [a.strip() for a in actors.split(",") if a.strip()] if actors else None
-    check_args(store=store, out_dir=out, seed=seed, envs=target_envs, steps=steps, command_vx=command_vx,
-               robots=robots, specs=specs, trust=trust_variant)
+    check_args(
+        store=store,
+        out_dir=out,
+        seed=seed,
+        envs=target_envs,
+        steps=steps,
+        command_vx=command_vx,
+        robots=robots,
+        specs=specs,
+        trust=trust_variant,
+    )
     from morfic_cli.diagnostics.critic_study import (
         DEFAULT_ACTORS,
         STUDY_VARIANTS,
@@ -117,22 +176,43 @@ def critic_study(
     try:
         commands = parse_commands(command_vx)
     except ValueError as exc:
-        raise MorficError(f"--command-vx takes comma-separated numbers in m/s (e.g. 1.0,2.0), got '{command_vx}'.") \
-            from exc
-    names = STUDY_VARIANTS if variants.strip().lower() == "all" else tuple(
-        v.strip() for v in variants.split(",") if v.strip())
+        raise MorficError(
+            f"--command-vx takes comma-separated numbers in m/s (e.g. 1.0,2.0), got '{command_vx}'."
+        ) from exc
+    names = (
+        STUDY_VARIANTS
+        if variants.strip().lower() == "all"
+        else tuple(v.strip() for v in variants.split(",") if v.strip())
+    )
     trust_variants(names)  # the critics named by --variants: the user's consent to import them
-    cfg = StudyCfg(actors=tuple(specs or DEFAULT_ACTORS), variants=names, seeds=seeds, commands=commands,
-                   robots=tuple(parse_robot_list(robots)), train_envs=train_envs, held_out=held_out,
-                   val_envs=val_envs, target_envs=target_envs, steps=steps, seed=seed, stride=stride,
-                   max_epochs=max_epochs, patience=patience, min_ev=min_ev, minibatch=minibatch, trunc_eps=trunc_eps)
+    cfg = StudyCfg(
+        actors=tuple(specs or DEFAULT_ACTORS),
+        variants=names,
+        seeds=seeds,
+        commands=commands,
+        robots=tuple(parse_robot_list(robots)),
+        train_envs=train_envs,
+        held_out=held_out,
+        val_envs=val_envs,
+        target_envs=target_envs,
+        steps=steps,
+        seed=seed,
+        stride=stride,
+        max_epochs=max_epochs,
+        patience=patience,
+        min_ev=min_ev,
+        minibatch=minibatch,
+        trunc_eps=trunc_eps,
+    )
     check_cfg(cfg)
     st = Store(store)
     missing = [a for a in cfg.actors if not specs and not st.has_ref(a)]
     if missing:
-        raise MorficError(f"the default actors {', '.join(missing)} are not in store {st.root}; import their weights "
-                          "(`morfic store import artifacts/bundles/<run>.tar`, artifacts/README.md) or name the "
-                          "actors with --actors.")
+        raise MorficError(
+            f"the default actors {', '.join(missing)} are not in store {st.root}; import their weights "
+            "(`morfic store import artifacts/bundles/<run>.tar`, artifacts/README.md) or name the "
+            "actors with --actors."
+        )
     trained = {spec: load_trained(st, spec) for spec in cfg.actors}  # a bad checkpoint fails before any work
     with StepBar("critic-study", 0, quiet) as bar:
         result = run_study(st, cfg, actors=trained, progress=StudyProgress(phase=bar.phase, advance=bar.step))
@@ -142,15 +222,26 @@ def critic_study(
     if not quiet:
         s = result.seconds
         n_fits = len({(r["actor"], r["variant"], r["fit_seed"]) for r in result.fits})
-        info(f"stored diagnoses/critic-study@{result.version} ({result.id[:12]}): {n_fits} fits in {s['fits']:.0f} s "
-             f"({s['fits'] / max(n_fits, 1):.0f} s a fit), rollouts {s['rollouts']:.0f} s, "
-             f"scoring {s['scoring']:.0f} s; {convergence_text(result.rows)}")
+        info(
+            f"stored diagnoses/critic-study@{result.version} ({result.id[:12]}): {n_fits} fits in {s['fits']:.0f} s "
+            f"({s['fits'] / max(n_fits, 1):.0f} s a fit), rollouts {s['rollouts']:.0f} s, "
+            f"scoring {s['scoring']:.0f} s; {convergence_text(result.rows)}"
+        )
     summary = [r for r in cell_summary(result.rows) if r["metric"] in ("ev", "nve", "flip", "cos_grad")]
     wide: dict[tuple, dict] = {}
     for r in summary:
-        row = wide.setdefault((r["command_vx"], r["robot"], r["variant"]),
-                              {"command_vx": r["command_vx"], "robot": r["robot"], "variant": r["variant"],
-                               "n": r["n"], "unit": r["unit"], "n_fits": r["n_fits"], "n_flagged": r["n_flagged"]})
+        row = wide.setdefault(
+            (r["command_vx"], r["robot"], r["variant"]),
+            {
+                "command_vx": r["command_vx"],
+                "robot": r["robot"],
+                "variant": r["variant"],
+                "n": r["n"],
+                "unit": r["unit"],
+                "n_fits": r["n_fits"],
+                "n_flagged": r["n_flagged"],
+            },
+        )
         row[r["metric"]] = _interval(r)
         row[f"{r['metric']}_mean"], row[f"{r['metric']}_lo"], row[f"{r['metric']}_hi"] = r["mean"], r["lo"], r["hi"]
     emit_rows(

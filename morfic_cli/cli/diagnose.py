@@ -76,7 +76,8 @@ def diagnose(
     steps: Annotated[
         int,
         typer.Option(
-            "--steps", min=1,
+            "--steps",
+            min=1,
             help="Policy steps per rollout (50 per second); must exceed the horizon "
             "H_eps the returns need (299 at gamma 0.99, --trunc-eps 0.05).",
         ),
@@ -90,8 +91,12 @@ def diagnose(
         ),
     ] = 0.05,
     seed: SeedOpt = 0,
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="Also write the table CSV (calibration.csv or "
-                                                          "fixed_rollout.csv) into this directory.")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", "-o", help="Also write the table CSV (calibration.csv or fixed_rollout.csv) into this directory."
+        ),
+    ] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     trust_variant: TrustOpt = None,
@@ -109,8 +114,16 @@ def diagnose(
     Example: morfic diagnose runs/film-cpu-s0 runs/ppo-cpu-s0 --robots aliengo,mini_cheetah
     Example: morfic diagnose --fixed-rollout aliengo --actor runs/film-cpu-s0 --critics runs/film-cpu-s0,runs/ppo-cpu-s0
     """
-    check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=str(command_vx), specs=runs,
-               trust=trust_variant)
+    check_args(
+        store=store,
+        out_dir=out,
+        seed=seed,
+        envs=envs,
+        steps=steps,
+        command_vx=str(command_vx),
+        specs=runs,
+        trust=trust_variant,
+    )
     from morfic_cli.diagnostics.samples import DiagnoseCfg
     from morfic_cli.morphology.distance import parse_robot_list
     from morfic_cli.store import Store
@@ -149,8 +162,9 @@ def diagnose(
         robot = targets[0]
         critic_specs = [c.strip() for c in critics.split(",") if c.strip()] if critics is not None else None
         if critics is not None and not critic_specs:
-            raise MorficError("--critics is empty; give runs such as runs/film-cpu-s0,runs/ppo-cpu-s0, or leave it "
-                              "out.")
+            raise MorficError(
+                "--critics is empty; give runs such as runs/film-cpu-s0,runs/ppo-cpu-s0, or leave it out."
+            )
         cfg = DiagnoseCfg(robots=(robot,), **settings)
         _fixed(st, robot, actor, critic_specs, cfg, out, fmt, quiet)
 

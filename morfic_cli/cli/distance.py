@@ -24,8 +24,10 @@ def distance(
     reference: Annotated[str, typer.Option("--reference", help="Robot whose descriptor is m_train.")] = "go2",
     normalize: Annotated[
         Normalize,
-        typer.Option("--normalize", help="span: min/max over the support and all robots (d in [0,1]); "
-                     "support: the training support only."),
+        typer.Option(
+            "--normalize",
+            help="span: min/max over the support and all robots (d in [0,1]); support: the training support only.",
+        ),
     ] = Normalize.span,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -48,8 +50,10 @@ def distance(
     flat = [r.as_row(ref_name, normalize.value) for r in rows]
     artifact = write_distance_table(store, flat, names, ref_name, normalize.value)
     if fmt == OutputFormat.json:  # the out-of-support dimensions as a list, not the table's joined text
-        shown = [{**row, "outside": [{"dim": k, "side": "above" if v > 0 else "below"} for k, v in r.outside.items()]}
-                 for row, r in zip(flat, rows, strict=True)]
+        shown = [
+            {**row, "outside": [{"dim": k, "side": "above" if v > 0 else "below"} for k, v in r.outside.items()]}
+            for row, r in zip(flat, rows, strict=True)
+        ]
     else:
         shown = flat
     emit_rows(

@@ -28,17 +28,25 @@ if TYPE_CHECKING:
 
 
 def evaluate(
-    run: Annotated[str, typer.Argument(help="Run ref (runs/film-cpu-s0 = its latest checkpoint), ref@N or "
-                                       "checkpoint id.")],
+    run: Annotated[
+        str, typer.Argument(help="Run ref (runs/film-cpu-s0 = its latest checkpoint), ref@N or checkpoint id.")
+    ],
     robots: RobotsOpt = "all",
     command_vx: Annotated[
-        str | None, typer.Option("--command-vx", help="Forward command(s) in m/s, e.g. 2.0,2.5. Default 2.0; with "
-                                 "--training-conditions it is 1.0.")
+        str | None,
+        typer.Option(
+            "--command-vx",
+            help="Forward command(s) in m/s, e.g. 2.0,2.5. Default 2.0; with --training-conditions it is 1.0.",
+        ),
     ] = None,
     mode: Annotated[
-        EvalModes, typer.Option("--mode", help="descriptor (Go2 template with the target's descriptor, the paper's), "
-                                "full (the target's own model), actuation-matched (descriptor mode with Kp, Kd and "
-                                "torque limits x the target's mass / Go2's), or both (descriptor and full).")
+        EvalModes,
+        typer.Option(
+            "--mode",
+            help="descriptor (Go2 template with the target's descriptor, the paper's), "
+            "full (the target's own model), actuation-matched (descriptor mode with Kp, Kd and "
+            "torque limits x the target's mass / Go2's), or both (descriptor and full).",
+        ),
     ] = EvalModes.descriptor,
     envs: Annotated[int, typer.Option("--envs", min=1, help="Parallel envs per robot.")] = 64,
     steps: Annotated[
@@ -46,14 +54,24 @@ def evaluate(
     ] = None,
     seed: SeedOpt = 0,
     scene_envs: Annotated[
-        str, typer.Option("--scene-envs", help="Envs (the first ones) whose 3D scene (geoms, body frames) goes in "
-                          "each MCAP log for Foxglove: a number, or all. Frames roughly double a log's size.")
+        str,
+        typer.Option(
+            "--scene-envs",
+            help="Envs (the first ones) whose 3D scene (geoms, body frames) goes in "
+            "each MCAP log for Foxglove: a number, or all. Frames roughly double a log's size.",
+        ),
     ] = "4",
-    video: Annotated[bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")]
-    = False,
+    video: Annotated[
+        bool, typer.Option("--video", help="Render a few envs walking (MP4, or GIF without ffmpeg).")
+    ] = False,
     out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Also write eval.csv and, per robot and command, the MCAP "
-                                       "rollout log, a speed/survival figure (and the video) into this directory.")
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Also write eval.csv and, per robot and command, the MCAP "
+            "rollout log, a speed/survival figure (and the video) into this directory.",
+        ),
     ] = None,
     training_conditions: Annotated[
         bool,
@@ -83,8 +101,17 @@ def evaluate(
 
     Example: morfic eval runs/film-cpu-s0 --robots go2,go1,a1 --command-vx 2.0,2.5 --format json
     """
-    check_args(store=store, out_dir=out, seed=seed, envs=envs, steps=steps, command_vx=command_vx, robots=robots,
-               specs=[run], trust=trust_variant)
+    check_args(
+        store=store,
+        out_dir=out,
+        seed=seed,
+        envs=envs,
+        steps=steps,
+        command_vx=command_vx,
+        robots=robots,
+        specs=[run],
+        trust=trust_variant,
+    )
     if training_conditions:
         _training_check(run, robots, command_vx, mode, envs, steps, seed, video, out, fmt, quiet, store)
         return
@@ -102,28 +129,37 @@ def evaluate(
     try:
         commands = parse_commands(command_vx)
     except ValueError as exc:
-        raise MorficError(f"--command-vx takes comma-separated numbers in m/s (e.g. 2.0,2.5), got '{command_vx}'.") \
-            from exc
+        raise MorficError(
+            f"--command-vx takes comma-separated numbers in m/s (e.g. 2.0,2.5), got '{command_vx}'."
+        ) from exc
     if scene_envs != "all" and not (scene_envs.isdigit()):
         raise MorficError(f"--scene-envs takes a number of envs (0 for none) or 'all', got '{scene_envs}'.")
     n_scene = envs if scene_envs == "all" else min(int(scene_envs), envs)
-    cfg = EvalCfg(robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed,
-                  scene_envs=n_scene)
+    cfg = EvalCfg(
+        robots=tuple(names), modes=modes, command_vx=commands, num_envs=envs, steps=steps, seed=seed, scene_envs=n_scene
+    )
     st = Store(store)
     from morfic_cli.rl.load import load_trained
 
     trained = load_trained(st, run)  # bad refs fail here, before the progress bar starts
 
     with StepBar("eval", len(names) * len(modes) * len(commands) * steps, quiet) as bar:
-        result = run_eval(st, run, cfg, on_rollout_start=lambda r, m, vx: bar.describe(f"{r} {m} vx={vx:g}"),
-                          on_step=bar.step,
-                          keep_models=4 if video else 0, trained=trained)
+        result = run_eval(
+            st,
+            run,
+            cfg,
+            on_rollout_start=lambda r, m, vx: bar.describe(f"{r} {m} vx={vx:g}"),
+            on_step=bar.step,
+            keep_models=4 if video else 0,
+            trained=trained,
+        )
         if video:  # minutes in software GL: a phase of its own, counted in frames
             from morfic_cli.evaluation.media import store_videos, video_frames
 
             bar.phase("videos", video_frames(result))
-            videos = store_videos(st, result, out, on_video=lambda name: bar.describe(f"videos {name}"),
-                                  on_frame=bar.step)
+            videos = store_videos(
+                st, result, out, on_video=lambda name: bar.describe(f"videos {name}"), on_frame=bar.step
+            )
     if video:
         for path in videos:
             info(f"video: {path}")
@@ -164,13 +200,30 @@ def evaluate(
 def metric_column(term: MetricTerm) -> Column:
     """The ``morfic eval`` table's column of a registered metric (header, format, alignment, drop order)."""
     spec = term.fmt
-    return Column(term.name, term.header or term.name,
-                  fmt=None if spec is None else (lambda v: "-" if v is None else format(v, spec)),
-                  justify=term.align, no_wrap=spec is None, drop=term.drop)
+    return Column(
+        term.name,
+        term.header or term.name,
+        fmt=None if spec is None else (lambda v: "-" if v is None else format(v, spec)),
+        justify=term.align,
+        no_wrap=spec is None,
+        drop=term.drop,
+    )
 
 
-def _training_check(run: str, robots: str, command_vx: str | None, mode: str, envs: int, steps: int | None, seed: int,
-                    video: bool, out: Path | None, fmt: OutputFormat, quiet: bool, store: Path) -> None:
+def _training_check(
+    run: str,
+    robots: str,
+    command_vx: str | None,
+    mode: str,
+    envs: int,
+    steps: int | None,
+    seed: int,
+    video: bool,
+    out: Path | None,
+    fmt: OutputFormat,
+    quiet: bool,
+    store: Path,
+) -> None:
     """``morfic eval RUN --training-conditions``."""
     from morfic_cli.evaluation.training_check import CHECK_COLUMNS, CheckCfg, check_rows, steps_per_row, training_check
     from morfic_cli.morphology.distance import parse_robot_list
@@ -178,8 +231,10 @@ def _training_check(run: str, robots: str, command_vx: str | None, mode: str, en
     from morfic_cli.store import Store
 
     if steps is not None or video or mode != EvalModes.descriptor:
-        raise MorficError("--training-conditions runs one episode length of the run's own training env; it takes "
-                          "no --steps, --video or --mode (use --envs, --seed, --robots, --command-vx).")
+        raise MorficError(
+            "--training-conditions runs one episode length of the run's own training env; it takes "
+            "no --steps, --video or --mode (use --envs, --seed, --robots, --command-vx)."
+        )
     names = ["go2"] if robots == "all" else parse_robot_list(robots)
     if len(names) != 1:
         raise MorficError(f"--training-conditions compares on one robot; give --robots with one name, got '{robots}'.")
@@ -203,9 +258,11 @@ def _training_check(run: str, robots: str, command_vx: str | None, mode: str, en
         (out / "training-check.csv").write_bytes(rows_to_csv(result.rows, CHECK_COLUMNS))
     ref = result.reference
     if not quiet:
-        info(f"training: {ref.length_s:.2f} ± {ref.sd_s:.2f} s mean episode length over iterations "
-             f"{ref.iterations[0]}-{ref.iterations[1]}; commands vx in [{result.vx_range[0]:g}, "
-             f"{result.vx_range[1]:g}]")
+        info(
+            f"training: {ref.length_s:.2f} ± {ref.sd_s:.2f} s mean episode length over iterations "
+            f"{ref.iterations[0]}-{ref.iterations[1]}; commands vx in [{result.vx_range[0]:g}, "
+            f"{result.vx_range[1]:g}]"
+        )
         info(f"stored {result.ref}@{result.version} ({result.id[:12]})")
     emit_rows(
         result.rows,

@@ -37,8 +37,11 @@ def export(
     ] = None,
     to: Annotated[
         ExportTo,
-        typer.Option("--to", help="Model format: onnx (onnxruntime-verified), torchscript, or rsl-rl (a checkpoint "
-                     "rsl-rl's OnPolicyRunner.load reads, with its runner config agent.json)."),
+        typer.Option(
+            "--to",
+            help="Model format: onnx (onnxruntime-verified), torchscript, or rsl-rl (a checkpoint "
+            "rsl-rl's OnPolicyRunner.load reads, with its runner config agent.json).",
+        ),
     ] = ExportTo.onnx,
     targets: Annotated[
         bool,
@@ -125,6 +128,7 @@ def _phases(quiet: bool) -> Iterator[Callable[[str], None]]:
             info(f"export: {text}: {time.perf_counter() - start:.1f} s")
 
     with err_console.status("export") as status:
+
         def on_phase(text: str) -> None:
             finish()
             current.append((text, time.perf_counter()))
@@ -134,23 +138,36 @@ def _phases(quiet: bool) -> Iterator[Callable[[str], None]]:
         finish()
 
 
-def _rsl_rl(st: Store, run: str, out: Path | None, robot: str | None, targets: bool, quiet: bool,
-            fmt: OutputFormat) -> None:
+def _rsl_rl(
+    st: Store, run: str, out: Path | None, robot: str | None, targets: bool, quiet: bool, fmt: OutputFormat
+) -> None:
     """``--to rsl-rl``: the checkpoint in rsl-rl's layout (the actor keeps the descriptor as an input)."""
     from morfic_cli.export.artifact import export_rsl_rl
 
     if robot is not None or targets:
-        raise MorficError("--to rsl-rl exports the whole checkpoint (actor and critic, the descriptor stays an "
-                          "input); drop --robot / --targets.")
+        raise MorficError(
+            "--to rsl-rl exports the whole checkpoint (actor and critic, the descriptor stays an "
+            "input); drop --robot / --targets."
+        )
     result = export_rsl_rl(st, run, out=out)
     if not quiet:
-        info(f"{'reused' if result.reused else 'stored'} {result.ref} ({result.id[:12]})"
-             + (f", wrote {out}" if out is not None else "")
-             + ("; optimizer state: fresh (this checkpoint carries weights only)" if result.optimizer == "fresh"
-                else ""))
-    emit_object({"ref": result.ref, "id": result.id, "checkpoint": result.checkpoint, "format": "rsl-rl",
-                 "optimizer": result.optimizer, "files": {name: len(data) for name, data in result.files.items()},
-                 "written": [str(p) for p in result.written]}, fmt)
+        info(
+            f"{'reused' if result.reused else 'stored'} {result.ref} ({result.id[:12]})"
+            + (f", wrote {out}" if out is not None else "")
+            + ("; optimizer state: fresh (this checkpoint carries weights only)" if result.optimizer == "fresh" else "")
+        )
+    emit_object(
+        {
+            "ref": result.ref,
+            "id": result.id,
+            "checkpoint": result.checkpoint,
+            "format": "rsl-rl",
+            "optimizer": result.optimizer,
+            "files": {name: len(data) for name, data in result.files.items()},
+            "written": [str(p) for p in result.written],
+        },
+        fmt,
+    )
 
 
 def _check(st: Store, source: str, samples: int, quiet: bool, fmt: OutputFormat) -> None:

@@ -13,20 +13,35 @@ from morfic_cli.validation import check_args
 
 
 def report(
-    runs: Annotated[list[str] | None, typer.Argument(help="Run refs or checkpoint ids to report on; none: every "
-                                                    "run in the store.")] = None,
-    preset: Annotated[str | None, typer.Option("--preset", help="Only the runs trained with this preset (smoke, "
-                                               "cpu, paper; comma-separated for several), so smoke runs do not sit "
-                                               "beside cpu runs.")] = None,
-    latex: Annotated[bool, typer.Option("--latex", help="Write a standalone report.tex (booktabs), and report.pdf "
-                                        "where pdflatex is installed.")] = False,
-    markdown: Annotated[bool, typer.Option("--markdown", help="Write report.md (the default when neither --latex "
-                                           "nor --markdown is given).")] = False,
+    runs: Annotated[
+        list[str] | None, typer.Argument(help="Run refs or checkpoint ids to report on; none: every run in the store.")
+    ] = None,
+    preset: Annotated[
+        str | None,
+        typer.Option(
+            "--preset",
+            help="Only the runs trained with this preset (smoke, "
+            "cpu, paper; comma-separated for several), so smoke runs do not sit "
+            "beside cpu runs.",
+        ),
+    ] = None,
+    latex: Annotated[
+        bool,
+        typer.Option(
+            "--latex", help="Write a standalone report.tex (booktabs), and report.pdf where pdflatex is installed."
+        ),
+    ] = False,
+    markdown: Annotated[
+        bool,
+        typer.Option("--markdown", help="Write report.md (the default when neither --latex nor --markdown is given)."),
+    ] = False,
     figures: Annotated[bool, typer.Option("--figures", help="Draw the figures (PNG and PDF).")] = False,
-    with_paper: Annotated[bool, typer.Option("--with-paper", help="Put the paper's published tables after "
-                                             "ours.")] = False,
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="Also write the report's files into this "
-                                             "directory.")] = None,
+    with_paper: Annotated[
+        bool, typer.Option("--with-paper", help="Put the paper's published tables after ours.")
+    ] = False,
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Also write the report's files into this directory.")
+    ] = None,
     name: Annotated[str, typer.Option("--name", help="The report's ref is reports/NAME.")] = "latest",
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -48,14 +63,23 @@ def report(
     from morfic_cli.store import Store
 
     presets = tuple(p.strip() for p in (preset or "").split(",") if p.strip())
-    cfg = ReportCfg(runs=tuple(runs or ()), presets=presets, latex=latex, markdown=markdown or not latex,
-                    figures=figures, with_paper=with_paper, name=name)
+    cfg = ReportCfg(
+        runs=tuple(runs or ()),
+        presets=presets,
+        latex=latex,
+        markdown=markdown or not latex,
+        figures=figures,
+        with_paper=with_paper,
+        name=name,
+    )
     st = Store(store)
     result = build_report(st, cfg, out=out, on_stage=None if quiet else (lambda s: info(f"report: {s} ...")))
     if not quiet:
         how = "found" if result.reused else "stored"
-        info(f"{how} {result.ref}@{result.version} ({result.id[:12]}): {result.tables} tables, "
-             f"{len(result.provenance)} artifacts in its provenance")
+        info(
+            f"{how} {result.ref}@{result.version} ({result.id[:12]}): {result.tables} tables, "
+            f"{len(result.provenance)} artifacts in its provenance"
+        )
         if latex and result.pdf_error:
             info(f"note: no PDF: {result.pdf_error.splitlines()[0]}")
         if out is not None:
@@ -65,8 +89,18 @@ def report(
 
             mixed = sorted({r.preset for r in resolve_runs(st, cfg.runs)})
             if len(mixed) > 1:
-                info(f"note: the report mixes runs of presets {', '.join(mixed)}; --preset {mixed[0]} (or another) "
-                     "reports one")
-    emit_object({"ref": f"{result.ref}@{result.version}", "id": result.id, "reused": result.reused,
-                 "files": result.files, "out": str(out) if out is not None else None,
-                 "provenance": len(result.provenance)}, fmt)
+                info(
+                    f"note: the report mixes runs of presets {', '.join(mixed)}; --preset {mixed[0]} (or another) "
+                    "reports one"
+                )
+    emit_object(
+        {
+            "ref": f"{result.ref}@{result.version}",
+            "id": result.id,
+            "reused": result.reused,
+            "files": result.files,
+            "out": str(out) if out is not None else None,
+            "provenance": len(result.provenance),
+        },
+        fmt,
+    )

@@ -39,6 +39,7 @@ def _step_line(result) -> str:
         line += f" [dim]{result.id[:12]}[/]"
     return line
 
+
 class PipelinePreset(str, Enum):
     """``reproduce``'s presets: the training presets and ``shipped`` (the shipped trained runs)."""
 
@@ -55,51 +56,89 @@ class Executor(str, Enum):
     ray = "ray"
 
 
-_MARKS = {"done": "[green]done[/]", "resumed": "[green]resumed[/]", "skipped": "[dim]skipped (in the store)[/]",
-          "interrupted": "[yellow]interrupted[/]"}
+_MARKS = {
+    "done": "[green]done[/]",
+    "resumed": "[green]resumed[/]",
+    "skipped": "[dim]skipped (in the store)[/]",
+    "interrupted": "[yellow]interrupted[/]",
+}
 
 
 def reproduce(
-    preset: Annotated[PipelinePreset, typer.Option(
-        "--preset", help="shipped: no training; import the trained cpu runs shipped in artifacts/bundles/ and "
-        "evaluate, diagnose and report them (~10 min on 2 cores). smoke: minutes, exercises the pipeline (its "
-        "numbers are not results). cpu: trains, ~1 h per run on 2 cores. paper: GPU.")] = PipelinePreset.smoke,
+    preset: Annotated[
+        PipelinePreset,
+        typer.Option(
+            "--preset",
+            help="shipped: no training; import the trained cpu runs shipped in artifacts/bundles/ and "
+            "evaluate, diagnose and report them (~10 min on 2 cores). smoke: minutes, exercises the pipeline (its "
+            "numbers are not results). cpu: trains, ~1 h per run on 2 cores. paper: GPU.",
+        ),
+    ] = PipelinePreset.smoke,
     seeds: Annotated[int, typer.Option("--seeds", help="Seeds per variant (0..N-1).")] = 1,
     variants: Annotated[
-        str, typer.Option("--variants", help=f"Comma-separated variants to train, or 'all' (the paper's: "
-                          f"{', '.join(REPRODUCE_VARIANTS)}); a user variant by import path module:Class (named "
-                          "here, it is imported, and added to your allow-list of trusted variants: `morfic trust`).")
+        str,
+        typer.Option(
+            "--variants",
+            help=f"Comma-separated variants to train, or 'all' (the paper's: "
+            f"{', '.join(REPRODUCE_VARIANTS)}); a user variant by import path module:Class (named "
+            "here, it is imported, and added to your allow-list of trusted variants: `morfic trust`).",
+        ),
     ] = "all",
     out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Folder for the report's files (default: "
-                                  "reports/<preset> in the store's folder).")
+        Path | None,
+        typer.Option(
+            "--out", "-o", help="Folder for the report's files (default: reports/<preset> in the store's folder)."
+        ),
     ] = None,
     overrides: Annotated[
-        list[str] | None, typer.Option("--set", help="Training config override key=value for every run "
-                                       "(as `morfic train --set`), e.g. max_iterations=1.")
+        list[str] | None,
+        typer.Option(
+            "--set",
+            help="Training config override key=value for every run (as `morfic train --set`), e.g. max_iterations=1.",
+        ),
     ] = None,
     bundles: Annotated[
-        Path | None, typer.Option("--bundles", help="With --preset shipped: the folder of run bundles "
-                                  "(<variant>-cpu-s0.tar; default the checkout's artifacts/bundles).")
+        Path | None,
+        typer.Option(
+            "--bundles",
+            help="With --preset shipped: the folder of run bundles "
+            "(<variant>-cpu-s0.tar; default the checkout's artifacts/bundles).",
+        ),
     ] = None,
     full_protocol: Annotated[
-        bool, typer.Option("--full-protocol", help="With --preset shipped: evaluate and diagnose with the paper's "
-                           "protocol (both modes at 2.0 and 2.5 m/s, 64 envs; ~10 min per variant on 2 cores) "
-                           "instead of the quick one (descriptor mode at 2.0 m/s, 16 envs).")
+        bool,
+        typer.Option(
+            "--full-protocol",
+            help="With --preset shipped: evaluate and diagnose with the paper's "
+            "protocol (both modes at 2.0 and 2.5 m/s, 64 envs; ~10 min per variant on 2 cores) "
+            "instead of the quick one (descriptor mode at 2.0 m/s, 16 envs).",
+        ),
     ] = False,
     device: DeviceOpt = Device.cpu,
     executor: Annotated[
-        Executor, typer.Option("--executor", help="local: every step here, one after another (default). ray: "
-                               "train, eval, diagnose and fixed-rollout jobs as Ray tasks, results imported into the "
-                               "store (pip install 'morfic[cluster]'; docs/cluster.md).")
+        Executor,
+        typer.Option(
+            "--executor",
+            help="local: every step here, one after another (default). ray: "
+            "train, eval, diagnose and fixed-rollout jobs as Ray tasks, results imported into the "
+            "store (pip install 'morfic[cluster]'; docs/cluster.md).",
+        ),
     ] = Executor.local,
     address: Annotated[
-        str | None, typer.Option("--address", help="With --executor ray: the cluster's HOST:PORT (from `ray start "
-                                 "--head`); default: start a local Ray instance on this machine.")
+        str | None,
+        typer.Option(
+            "--address",
+            help="With --executor ray: the cluster's HOST:PORT (from `ray start "
+            "--head`); default: start a local Ray instance on this machine.",
+        ),
     ] = None,
     retries: Annotated[
-        int, typer.Option("--retries", help="With --executor ray: times a job is retried when its worker process "
-                          "dies (user errors are never retried).")
+        int,
+        typer.Option(
+            "--retries",
+            help="With --executor ray: times a job is retried when its worker process "
+            "dies (user errors are never retried).",
+        ),
     ] = 3,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -129,11 +168,20 @@ def reproduce(
     from morfic_cli.rl.devices import check_device
     from morfic_cli.store import Store
 
-    names = REPRODUCE_VARIANTS if variants.strip().lower() == "all" else tuple(
-        v.strip() for v in variants.split(",") if v.strip())
+    names = (
+        REPRODUCE_VARIANTS
+        if variants.strip().lower() == "all"
+        else tuple(v.strip() for v in variants.split(",") if v.strip())
+    )
     shipped = preset is PipelinePreset.shipped
-    cfg = reproduce_cfg(preset.value, seeds=seeds, variants=None if shipped and names == REPRODUCE_VARIANTS else names,
-                        device=device.value, bundles=bundles, full_protocol=full_protocol)
+    cfg = reproduce_cfg(
+        preset.value,
+        seeds=seeds,
+        variants=None if shipped and names == REPRODUCE_VARIANTS else names,
+        device=device.value,
+        bundles=bundles,
+        full_protocol=full_protocol,
+    )
     if overrides:
         import dataclasses
 
@@ -164,17 +212,21 @@ def reproduce(
             info(note)
     if not quiet:
         where = "" if executor is Executor.local else f", executor ray ({address or 'local instance'})"
-        info(f"reproduce: preset {preset.value}, {len(cfg.variants)} variants ({', '.join(cfg.variants)}) x "
-             f"{cfg.seeds} seed(s), "
-             f"{len(pipeline.plan())} steps, store {st.root}{where}")
+        info(
+            f"reproduce: preset {preset.value}, {len(cfg.variants)} variants ({', '.join(cfg.variants)}) x "
+            f"{cfg.seeds} seed(s), "
+            f"{len(pipeline.plan())} steps, store {st.root}{where}"
+        )
     if executor is Executor.ray:
         _run_ray(pipeline, view, address, retries, quiet, fmt, out_dir)
         return
 
     def on_sigint(signum, frame):  # noqa: ARG001
         if pipeline.interrupt():
-            info("Ctrl-C: finishing this training iteration and checkpointing; run the same command again to "
-                 "continue (Ctrl-C again to abort at once).")
+            info(
+                "Ctrl-C: finishing this training iteration and checkpointing; run the same command again to "
+                "continue (Ctrl-C again to abort at once)."
+            )
             return
         raise KeyboardInterrupt
 
@@ -185,21 +237,25 @@ def reproduce(
     finally:
         signal.signal(signal.SIGINT, previous)
     if result.interrupted:
-        info("stopped after Ctrl-C; the checkpoint is in the store. Run the same `morfic reproduce` command again "
-             "to continue where it stopped.")
+        info(
+            "stopped after Ctrl-C; the checkpoint is in the store. Run the same `morfic reproduce` command again "
+            "to continue where it stopped."
+        )
         sys.exit(130)
     _summary(result, quiet, fmt, out_dir)
 
 
-def _check_shipped(preset: PipelinePreset, bundles: Path | None, full_protocol: bool, executor: Executor,
-                   overrides: list[str] | None) -> None:
+def _check_shipped(
+    preset: PipelinePreset, bundles: Path | None, full_protocol: bool, executor: Executor, overrides: list[str] | None
+) -> None:
     from morfic_cli.errors import MorficError
 
     if preset is not PipelinePreset.shipped:
         for flag, given in (("--bundles", bundles is not None), ("--full-protocol", full_protocol)):
             if given:
-                raise MorficError(f"{flag} is for --preset shipped (the shipped runs); the {preset.value} preset "
-                                  f"trains its own.")
+                raise MorficError(
+                    f"{flag} is for --preset shipped (the shipped runs); the {preset.value} preset trains its own."
+                )
         return
     if executor is not Executor.local:
         raise MorficError("--preset shipped trains nothing and runs here; use it without --executor ray.")
@@ -214,8 +270,10 @@ def _check_executor(executor: Executor, address: str | None, retries: int) -> No
         raise MorficError("--address is the Ray cluster to run on; use it with --executor ray.")
     if address is not None and (":" not in address or not address.rsplit(":", 1)[1].isdigit()):
         if address != "auto":
-            raise MorficError(f"--address {address!r} is not HOST:PORT (or 'auto'), e.g. --address 127.0.0.1:6379 "
-                              f"as printed by `ray start --head`.")
+            raise MorficError(
+                f"--address {address!r} is not HOST:PORT (or 'auto'), e.g. --address 127.0.0.1:6379 "
+                f"as printed by `ray start --head`."
+            )
     if retries < 0:
         raise MorficError(f"--retries must be 0 or more, got {retries}.")
 
@@ -227,8 +285,10 @@ def _run_ray(pipeline, view, address: str | None, retries: int, quiet: bool, fmt
     with view:
         result = runner.run()
     if result.interrupted:
-        info("stopped after Ctrl-C: outstanding jobs were cancelled; every finished job is in the store. Run the "
-             "same `morfic reproduce` command again to continue (it skips what the store holds).")
+        info(
+            "stopped after Ctrl-C: outstanding jobs were cancelled; every finished job is in the store. Run the "
+            "same `morfic reproduce` command again to continue (it skips what the store holds)."
+        )
         sys.exit(130)
     _summary(result, quiet, fmt, out_dir)
 
@@ -242,19 +302,28 @@ def _summary(result, quiet: bool, fmt, out_dir: Path) -> None:
     rep = result.report
     done = result.work_done
     files = [str(p) for p in rep.out_files] if rep else []
-    emit_object({
-        "report": rep.ref if rep else None, "id": rep.id if rep else None, "out": str(out_dir),
-        "files": files_summary(rep.out_files if rep else []) if fmt == OutputFormat.table else files,
-        "steps": len(result.steps), "work_done": done,
-        "skipped": len(result.steps) - done, "wall_time_s": round(result.seconds, 1),
-    }, fmt)
+    emit_object(
+        {
+            "report": rep.ref if rep else None,
+            "id": rep.id if rep else None,
+            "out": str(out_dir),
+            "files": files_summary(rep.out_files if rep else []) if fmt == OutputFormat.table else files,
+            "steps": len(result.steps),
+            "work_done": done,
+            "skipped": len(result.steps) - done,
+            "wall_time_s": round(result.seconds, 1),
+        },
+        fmt,
+    )
     if not quiet:
         info(f"reproduce: {done} step(s) did work, {len(result.steps) - done} skipped, {result.seconds:.1f} s")
         if rep is not None:
             if rep.pdf_error:
                 info(f"note: no PDF: {rep.pdf_error.splitlines()[0]}")
-            main = next((p for p in rep.out_files if p.name == "report.pdf"),
-                        next((p for p in rep.out_files if p.name == "report.md"), out_dir))
+            main = next(
+                (p for p in rep.out_files if p.name == "report.pdf"),
+                next((p for p in rep.out_files if p.name == "report.md"), out_dir),
+            )
             info(f"[bold]report:[/] {main}  (folder {out_dir}; store ref {rep.ref}, id {rep.id[:12]})")
 
 
@@ -290,8 +359,14 @@ class _View:
         self.console = Console(stderr=True, emoji=False)
         self.live = self.console.is_terminal
         if self.live:
-            self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                TextColumn("{task.fields[detail]}"), TimeElapsedColumn(), console=self.console)
+            self.bar = Progress(
+                TextColumn("{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[detail]}"),
+                TimeElapsedColumn(),
+                console=self.console,
+            )
             self.bar.__enter__()
             self.overall = self.bar.add_task("[bold]reproduce[/]", total=self.total, detail="steps")
         return self
@@ -335,8 +410,14 @@ class _View:
 class _RayView(_View):
     """The ``--executor ray`` view: a live table of jobs (queued / running / done / failed, where each ran)."""
 
-    _STYLE = {"queued": "dim", "running": "yellow", "done": "green", "skipped": "dim", "failed": "red",
-              "cancelled": "red"}
+    _STYLE = {
+        "queued": "dim",
+        "running": "yellow",
+        "done": "green",
+        "skipped": "dim",
+        "failed": "red",
+        "cancelled": "red",
+    }
 
     def __init__(self, quiet: bool) -> None:
         super().__init__(quiet)
@@ -366,8 +447,9 @@ class _RayView(_View):
         counts: dict[str, int] = {}
         for js in run.jobs.values():
             counts[js.state] = counts.get(js.state, 0) + 1
-        title = (f"reproduce on Ray ({run.address}: {run.resources}): "
-                 + ", ".join(f"{n} {state}" for state, n in sorted(counts.items())))
+        title = f"reproduce on Ray ({run.address}: {run.resources}): " + ", ".join(
+            f"{n} {state}" for state, n in sorted(counts.items())
+        )
         table = Table(title=title, title_justify="left")
         for col in ("job", "state", "where", "detail"):
             table.add_column(col)

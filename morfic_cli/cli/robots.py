@@ -36,15 +36,17 @@ def ls(fmt: FormatOpt = OutputFormat.table) -> None:
     rows = []
     for spec in iter_robots():
         flags = spec.support_flags()
-        rows.append({
-            "robot": spec.name,
-            "display_name": spec.display_name,
-            "total_mass_kg": round(spec.total_mass, 4),
-            "base_mass_kg": round(spec.base_mass, 4),
-            "nominal_height_m": round(nominal_height(spec), 4),
-            "template": spec.is_template,
-            "n_outside_support": int((flags != 0).sum()),
-        })
+        rows.append(
+            {
+                "robot": spec.name,
+                "display_name": spec.display_name,
+                "total_mass_kg": round(spec.total_mass, 4),
+                "base_mass_kg": round(spec.base_mass, 4),
+                "nominal_height_m": round(nominal_height(spec), 4),
+                "template": spec.is_template,
+                "n_outside_support": int((flags != 0).sum()),
+            }
+        )
     emit_rows(
         rows,
         fmt,
@@ -89,19 +91,35 @@ def show(
         "nominal_height_m": round(nominal_height(spec), 4),
     }
     if fmt == OutputFormat.json:  # values as numbers and lists, not the table's text
-        emit_object({**summary, "facts": fact_rows(spec, raw=True), "descriptor": descriptor,
-                     "descriptor_source": spec.descriptor_source, "conflicts": conflict_rows(spec, raw=True)}, fmt)
+        emit_object(
+            {
+                **summary,
+                "facts": fact_rows(spec, raw=True),
+                "descriptor": descriptor,
+                "descriptor_source": spec.descriptor_source,
+                "conflicts": conflict_rows(spec, raw=True),
+            },
+            fmt,
+        )
         return
     if fmt == OutputFormat.csv:
         rows = [{"section": "summary", "field": k, "value": v, "unit": "", "source": ""} for k, v in summary.items()]
         rows += [{"section": "fact", **r} for r in facts]
-        rows += [{"section": "descriptor", "field": r["name"], "value": r["value"], "unit": r["unit"],
-                  "source": spec.descriptor_source, "mark": r["mark"]} for r in descriptor]
+        rows += [
+            {
+                "section": "descriptor",
+                "field": r["name"],
+                "value": r["value"],
+                "unit": r["unit"],
+                "source": spec.descriptor_source,
+                "mark": r["mark"],
+            }
+            for r in descriptor
+        ]
         emit_rows(rows, fmt)
         return
     emit_rows([{"field": k, "value": v} for k, v in summary.items()], fmt, title=f"{spec.display_name} ({spec.name})")
-    emit_rows(facts, fmt, columns=[Column("field"), Column("value"), Column("unit"), Column("source")],
-              title="Facts")
+    emit_rows(facts, fmt, columns=[Column("field"), Column("value"), Column("unit"), Column("source")], title="Facts")
     emit_rows(
         descriptor,
         fmt,

@@ -40,9 +40,11 @@ def human_size(size: Any) -> str:
 def _left_out(omitted: Any, files: Any = ()) -> str:
     """The note on what a weights-only or results-only export left out (``omitted``, ``files``: their ids)."""
     if files:
-        return (f"{len(omitted)} trainer state(s) and {len(files)} weight, rollout-log, curve and figure file(s) left "
-                "out (results only: `morfic report` reads it and draws the figures; it cannot evaluate, diagnose or "
-                "resume)")
+        return (
+            f"{len(omitted)} trainer state(s) and {len(files)} weight, rollout-log, curve and figure file(s) left "
+            "out (results only: `morfic report` reads it and draws the figures; it cannot evaluate, diagnose or "
+            "resume)"
+        )
     return f"{len(omitted)} trainer state(s) left out (weights only: evaluates and exports, cannot be resumed)"
 
 
@@ -74,12 +76,14 @@ def _emit(rows: list[dict[str, Any]], fmt: OutputFormat, columns: list[Column], 
 
 @app.command("ls")
 def ls(
-    kind: Annotated[
-        Optional[str], typer.Option("--kind", help=f"Only this kind: {', '.join(MANIFEST_KINDS)}.")
-    ] = None,
+    kind: Annotated[Optional[str], typer.Option("--kind", help=f"Only this kind: {', '.join(MANIFEST_KINDS)}.")] = None,
     all_: Annotated[
-        bool, typer.Option("--all", help="Also list unnamed artifacts (the inputs refs point to: trainer states, "
-                           "rollouts, ...) and old ref versions (shown as name@N).")
+        bool,
+        typer.Option(
+            "--all",
+            help="Also list unnamed artifacts (the inputs refs point to: trainer states, "
+            "rollouts, ...) and old ref versions (shown as name@N).",
+        ),
     ] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
@@ -99,8 +103,10 @@ def ls(
     _emit(rows, fmt, _LS_COLUMNS, title=f"artifacts in {store}")
     if unnamed:
         size = human_size(sum(r["size"] or 0 for r in unnamed))
-        info(f"{len(unnamed)} unnamed artifact(s) not listed ({size} held here; the inputs of the refs above, such as "
-             "trainer states and rollouts); --all lists them and the old ref versions.")
+        info(
+            f"{len(unnamed)} unnamed artifact(s) not listed ({size} held here; the inputs of the refs above, such as "
+            "trainer states and rollouts); --all lists them and the old ref versions."
+        )
 
 
 @app.command("show")
@@ -119,18 +125,25 @@ def show(
         emit_object(st.describe(spec), fmt)
         return
     entries = st.ref_history(spec)
-    rows = [{"version": e.version, "id": e.id, "time": e.time, "current": e.version == len(entries)}
-            for e in entries]
-    columns = [Column("version", justify="right"), Column("id", fmt=_short_id),
-               Column("time", header="time (UTC)", fmt=_short_time), Column("current")]
+    rows = [{"version": e.version, "id": e.id, "time": e.time, "current": e.version == len(entries)} for e in entries]
+    columns = [
+        Column("version", justify="right"),
+        Column("id", fmt=_short_id),
+        Column("time", header="time (UTC)", fmt=_short_time),
+        Column("current"),
+    ]
     _emit(rows, fmt, columns, title=f"history of {spec}")
 
 
 @app.command("get")
 def get(
     spec: Annotated[str, typer.Argument(help="Ref (runs/film-cpu-s0), ref@N, id or unique id prefix.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Directory to write the files into (created if "
-                                      "missing); each file's path is printed.")],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out", "-o", help="Directory to write the files into (created if missing); each file's path is printed."
+        ),
+    ],
     files: Annotated[
         Optional[list[str]], typer.Option("--file", help="Only this file of the artifact (repeatable).")
     ] = None,
@@ -152,8 +165,12 @@ def get(
 
     got = get_files(Store(store), spec, out, files, force=force)
     rows = [{"file": g.name, "path": str(g.path), "id": g.id, "size": g.size} for g in got]
-    columns = [Column("file"), Column("path", overflow="fold"), Column("id", fmt=_short_id),
-               Column("size", fmt=human_size, justify="right")]
+    columns = [
+        Column("file"),
+        Column("path", overflow="fold"),
+        Column("id", fmt=_short_id),
+        Column("size", fmt=human_size, justify="right"),
+    ]
     _emit(rows, fmt, columns, title=f"files of {spec}")
 
 
@@ -167,17 +184,26 @@ def verify(store: StoreOpt = DEFAULT_STORE) -> None:
     for problem in report.problems:
         err_console.print(f"  {printable(problem)}", markup=False, highlight=False, soft_wrap=True)
     if not report.ok:
-        raise StoreError(f"{len(report.problems)} problem(s) found in store {store} (listed above); restore "
-                         "damaged objects from an export (`morfic store import`) or drop what no longer "
-                         "matters and run `morfic store gc`.")
-    leftovers = f"; {report.temp_files} leftover temp file(s), `morfic store gc --yes` removes them" \
-        if report.temp_files else ""
+        raise StoreError(
+            f"{len(report.problems)} problem(s) found in store {store} (listed above); restore "
+            "damaged objects from an export (`morfic store import`) or drop what no longer "
+            "matters and run `morfic store gc`."
+        )
+    leftovers = (
+        f"; {report.temp_files} leftover temp file(s), `morfic store gc --yes` removes them"
+        if report.temp_files
+        else ""
+    )
     omitted = f"; {report.omitted} trainer state(s) left out by a weights-only import" if report.omitted else ""
     if report.omitted_files:
-        omitted = (f"; {report.omitted} trainer state(s) and {report.omitted_files} weight, rollout-log, curve and "
-                   "figure file(s) left out by a results-only import")
-    info(f"store {escape(str(store))} OK: {report.objects} objects ({human_size(report.bytes)}), "
-         f"{report.manifests} manifests, {report.refs} refs checked{leftovers}{omitted}")
+        omitted = (
+            f"; {report.omitted} trainer state(s) and {report.omitted_files} weight, rollout-log, curve and "
+            "figure file(s) left out by a results-only import"
+        )
+    info(
+        f"store {escape(str(store))} OK: {report.objects} objects ({human_size(report.bytes)}), "
+        f"{report.manifests} manifests, {report.refs} refs checked{leftovers}{omitted}"
+    )
 
 
 @app.command("gc")
@@ -195,8 +221,10 @@ def gc(
     if rows or fmt != OutputFormat.table:
         columns = [Column("id"), Column("kind"), Column("size", fmt=human_size, justify="right")]
         _emit(rows, fmt, columns, title="unreachable objects")
-    what = f"{len(rows)} unreachable object(s) ({human_size(report.removed_bytes)}) and " \
+    what = (
+        f"{len(rows)} unreachable object(s) ({human_size(report.removed_bytes)}) and "
         f"{report.temp_files} leftover temp file(s); {report.reachable} reachable object(s) kept"
+    )
     if report.dry_run:
         hint = "; run `morfic store gc --yes` to delete them" if rows or report.temp_files else ""
         info(f"dry run: would remove {what}{hint}")
@@ -210,19 +238,38 @@ def export(
     out: Annotated[Path, typer.Option("--out", "-o", help="Directory to write the tar into (created if missing).")],
     name: Annotated[
         Optional[str],
-        typer.Option("--name", help="The tar's file name, NAME.tar (default: one ref's last part, e.g. "
-                     "film-cpu-s0.tar; several refs' last parts joined by '+').")
+        typer.Option(
+            "--name",
+            help="The tar's file name, NAME.tar (default: one ref's last part, e.g. "
+            "film-cpu-s0.tar; several refs' last parts joined by '+').",
+        ),
     ] = None,
-    latest: Annotated[bool, typer.Option("--latest", help="Only each ref's current version (a small snapshot, "
-                                         "e.g. a trained policy without its earlier checkpoints).")] = False,
-    without_trainer_state: Annotated[bool, typer.Option(
-        "--without-trainer-state", help="A weights-only bundle: leave out the runs' trainer states (optimiser, env "
-        "state, RNG; most of a run's size); it evaluates and exports, but cannot be resumed.")] = False,
-    results_only: Annotated[bool, typer.Option(
-        "--results-only", help="A results-only bundle of the named runs (runs/NAME; other refs are an error): each "
-        "run's current checkpoint (config, curve table) and every eval, diagnosis and check made from it (tables), "
-        "without weights, trainer states, rollout logs, rendered figures or other runs' curves. `morfic report` "
-        "reads it and draws its figures from the tables; it cannot evaluate, diagnose or resume.")] = False,
+    latest: Annotated[
+        bool,
+        typer.Option(
+            "--latest",
+            help="Only each ref's current version (a small snapshot, "
+            "e.g. a trained policy without its earlier checkpoints).",
+        ),
+    ] = False,
+    without_trainer_state: Annotated[
+        bool,
+        typer.Option(
+            "--without-trainer-state",
+            help="A weights-only bundle: leave out the runs' trainer states (optimiser, env "
+            "state, RNG; most of a run's size); it evaluates and exports, but cannot be resumed.",
+        ),
+    ] = False,
+    results_only: Annotated[
+        bool,
+        typer.Option(
+            "--results-only",
+            help="A results-only bundle of the named runs (runs/NAME; other refs are an error): each "
+            "run's current checkpoint (config, curve table) and every eval, diagnosis and check made from it (tables), "
+            "without weights, trainer states, rollout logs, rendered figures or other runs' curves. `morfic report` "
+            "reads it and draws its figures from the tables; it cannot evaluate, diagnose or resume.",
+        ),
+    ] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the tar if it exists.")] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
@@ -239,17 +286,29 @@ def export(
     """
     check_args(store=store, out_dir=out, specs=refs)
     path = export_path(out, refs, name, force=force)
-    report = Store(store).export_tar(refs, path, latest=latest, without_trainer_state=without_trainer_state,
-                                     results_only=results_only)
-    info(f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
-         f"to {escape(str(report.path))}")
+    report = Store(store).export_tar(
+        refs, path, latest=latest, without_trainer_state=without_trainer_state, results_only=results_only
+    )
+    info(
+        f"exported {len(report.refs)} ref(s), {report.objects} objects ({human_size(report.bytes)}) "
+        f"to {escape(str(report.path))}"
+    )
     if report.omitted or report.omitted_files:
         info(_left_out(report.omitted, report.omitted_files))
     if fmt == OutputFormat.table:  # the path alone, whole (a table would fold a long one), for `$(...)`
         sys.stdout.write(f"{report.path}\n")
         return
-    emit_object({"path": str(report.path), "refs": report.refs, "objects": report.objects, "bytes": report.bytes,
-                 "omitted": sorted(report.omitted), "omitted_files": sorted(report.omitted_files)}, fmt)
+    emit_object(
+        {
+            "path": str(report.path),
+            "refs": report.refs,
+            "objects": report.objects,
+            "bytes": report.bytes,
+            "omitted": sorted(report.omitted),
+            "omitted_files": sorted(report.omitted_files),
+        },
+        fmt,
+    )
 
 
 def _say_user_variants(bundle: str, named: dict[str, list[str]]) -> None:
@@ -260,21 +319,31 @@ def _say_user_variants(bundle: str, named: dict[str, list[str]]) -> None:
         if variant in STOCK:
             continue
         shown = escape(", ".join(refs[:5])) + (f" and {len(refs) - 5} more" if len(refs) > 5 else "")
-        how = ("trusted here" if is_trusted(variant) else
-               f"NOT trusted here: commands on them import it only with --trust-variant {variant}, or after "
-               f"`morfic trust {variant}`")
-        info(f"{escape(bundle)}: needs the user variant {variant} (code morfic imports to rebuild the models) for "
-             f"{shown}; {how}")
+        how = (
+            "trusted here"
+            if is_trusted(variant)
+            else f"NOT trusted here: commands on them import it only with --trust-variant {variant}, or after "
+            f"`morfic trust {variant}`"
+        )
+        info(
+            f"{escape(bundle)}: needs the user variant {variant} (code morfic imports to rebuild the models) for "
+            f"{shown}; {how}"
+        )
 
 
 @app.command("import")
 def import_(
     paths: Annotated[list[Path], typer.Argument(help="Tar files made by `morfic store export`, one or more.")],
-    append: Annotated[bool, typer.Option(
-        "--append", help="A result ref this store holds with another history (a shared log such as "
-                         "diagnoses/calibration, from bundles of different stores) gets the import's versions it "
-                         "never pointed at appended after its own, instead of being refused as diverged. A run's "
-                         "ref (runs/NAME) is never appended to: a diverged one is another run of that name.")] = False,
+    append: Annotated[
+        bool,
+        typer.Option(
+            "--append",
+            help="A result ref this store holds with another history (a shared log such as "
+            "diagnoses/calibration, from bundles of different stores) gets the import's versions it "
+            "never pointed at appended after its own, instead of being refused as diverged. A run's "
+            "ref (runs/NAME) is never appended to: a diverged one is another run of that name.",
+        ),
+    ] = False,
     fmt: FormatOpt = OutputFormat.table,
     store: StoreOpt = DEFAULT_STORE,
 ) -> None:
@@ -311,16 +380,21 @@ def import_(
             continue
         rows += [{"bundle": path.name, "ref": name, "status": status} for name, status in report.refs.items()]
         repaired = f", {report.objects_repaired} corrupt here and repaired" if report.objects_repaired else ""
-        left_out = (f"; {_left_out(report.omitted, report.omitted_files)}"
-                    if report.omitted or report.omitted_files else "")
+        left_out = (
+            f"; {_left_out(report.omitted, report.omitted_files)}" if report.omitted or report.omitted_files else ""
+        )
         filled = f"; {len(report.filled)} left-out object(s) filled in" if report.filled else ""
-        info(f"{escape(path.name)}: imported {report.objects_added} new object(s) ({report.objects_present} already "
-             f"present{repaired}), {len(report.refs)} ref(s) into {escape(str(store))}{left_out}{filled}")
+        info(
+            f"{escape(path.name)}: imported {report.objects_added} new object(s) ({report.objects_present} already "
+            f"present{repaired}), {len(report.refs)} ref(s) into {escape(str(store))}{left_out}{filled}"
+        )
         _say_user_variants(path.name, report.variants)
     if rows or not failed:
         title = f"refs imported from {paths[0].name}" if len(paths) == 1 else f"refs imported from {len(paths)} tars"
         _emit(rows, fmt, [Column("bundle"), Column("ref"), Column("status")], title=title)
     if failed:
         done = f"; the other {len(paths) - len(failed)} were imported" if len(failed) < len(paths) else ""
-        raise StoreError(f"{len(failed)} of {len(paths)} tar(s) not imported ({', '.join(failed)}; why above){done}. "
-                         "Fix or replace those and import them again (importing a tar twice is safe).")
+        raise StoreError(
+            f"{len(failed)} of {len(paths)} tar(s) not imported ({', '.join(failed)}; why above){done}. "
+            "Fix or replace those and import them again (importing a tar twice is safe)."
+        )

@@ -41,24 +41,37 @@ def train(
         Preset | None, typer.Option("--preset", help="Budget: smoke (seconds), cpu (2-core machine), paper (GPU).")
     ] = None,
     seed: SeedOpt = 0,
-    name: Annotated[str | None, typer.Option("--name", help="Run name: ref runs/NAME (default "
-                                             "variant-preset-sSEED, e.g. film-smoke-s0).")] = None,
+    name: Annotated[
+        str | None,
+        typer.Option("--name", help="Run name: ref runs/NAME (default variant-preset-sSEED, e.g. film-smoke-s0)."),
+    ] = None,
     resume: Annotated[
         str | None, typer.Option("--resume", help="Continue a run: runs/NAME (its latest checkpoint) or a checkpoint.")
     ] = None,
     device: DeviceOpt = Device.cpu,
     overrides: Annotated[
         list[str] | None,
-        typer.Option("--set", help="Config override key=value, repeatable (e.g. ppo.learning_rate=3e-4, "
-                     "env.num_envs=256, max_iterations=50). Unknown keys are an error."),
+        typer.Option(
+            "--set",
+            help="Config override key=value, repeatable (e.g. ppo.learning_rate=3e-4, "
+            "env.num_envs=256, max_iterations=50). Unknown keys are an error.",
+        ),
     ] = None,
     logger: Annotated[
-        Logger, typer.Option("--logger", help="Live curves while training: tensorboard event files, wandb "
-                             "(pip install 'morfic[wandb]'), or none. The store keeps the curve either way.")
+        Logger,
+        typer.Option(
+            "--logger",
+            help="Live curves while training: tensorboard event files, wandb "
+            "(pip install 'morfic[wandb]'), or none. The store keeps the curve either way.",
+        ),
     ] = Logger.tensorboard,
     log_dir: Annotated[
-        Path, typer.Option("--log-dir", envvar="MORFIC_LOG_DIR",
-                           help="Root of the run folders of --logger: <log-dir>/<run name> (env MORFIC_LOG_DIR).")
+        Path,
+        typer.Option(
+            "--log-dir",
+            envvar="MORFIC_LOG_DIR",
+            help="Root of the run folders of --logger: <log-dir>/<run name> (env MORFIC_LOG_DIR).",
+        ),
     ] = Path("logs"),
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -83,8 +96,7 @@ def train(
     Your own critic: morfic train --variant my_lab.critics:GatedCritic (docs/extending.md)
     """
     started = process_start()  # the training clock counts from here: imports and the env's construction too
-    check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None,
-               trust=trust_variant)
+    check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None, trust=trust_variant)
     named = [variant] if variant is not None and resume is None else []
     trust_variants(named)  # --variant names it on this command line: the user's consent to import it
     from morfic_cli.rl.config import apply_overrides, preset_cfg
@@ -113,11 +125,13 @@ def train(
     if named and run.dist.rank == 0:
         remember_variants(named, quiet)
     if not quiet:
-        info(f"train: runs/{run.name} variant={cfg.variant} preset={cfg.preset} seed={cfg.seed} "
-             f"envs={cfg.env.num_envs} iterations {run.iteration}->{cfg.max_iterations} "
-             f"({cfg.env.num_envs * cfg.num_steps_per_env:,} transitions each) "
-             f"sim={cfg.env.sim.backend} on {cfg.env.sim.device}"
-             + (f" x {run.dist.world_size} processes" if run.dist.world_size > 1 else ""))
+        info(
+            f"train: runs/{run.name} variant={cfg.variant} preset={cfg.preset} seed={cfg.seed} "
+            f"envs={cfg.env.num_envs} iterations {run.iteration}->{cfg.max_iterations} "
+            f"({cfg.env.num_envs * cfg.num_steps_per_env:,} transitions each) "
+            f"sim={cfg.env.sim.backend} on {cfg.env.sim.device}"
+            + (f" x {run.dist.world_size} processes" if run.dist.world_size > 1 else "")
+        )
         note = float32_note(run.runner.alg.bf16_matmul)
         if note:
             info(note)
@@ -142,8 +156,10 @@ def train(
     if run.dist.rank != 0:  # torchrun: rank 0 wrote the checkpoints and reports them
         return
     if last is None:
-        info(f"runs/{run.name} is already at iteration {run.iteration} of {cfg.max_iterations}; nothing to do "
-             "(extend it with --set max_iterations=N).")
+        info(
+            f"runs/{run.name} is already at iteration {run.iteration} of {cfg.max_iterations}; nothing to do "
+            "(extend it with --set max_iterations=N)."
+        )
         return
     row = run.rows[-1] if run.rows else {}
     result = {
@@ -213,24 +229,34 @@ class _progress:
                         f"{row.get('steps_per_s', 0):,.0f} steps/s  reward {_num(row.get('mean_reward'))}  "
                         f"EV {_num(row.get('explained_variance'))}  vx_err {_num(row.get('tracking.vx_error'))}  "
                         f"vx_max {row.get('curriculum.vx_max', 0):.1f}  ep {_seconds(row.get('episode_length_s'))}  "
-                        f"{row.get('wall_time_s', 0):.0f}s\n")
+                        f"{row.get('wall_time_s', 0):.0f}s\n"
+                    )
                     sys.stderr.flush()
 
             self.run.progress = log_line
             return self
         self.bar = Progress(
-            TextColumn("[bold]train[/]"), BarColumn(), MofNCompleteColumn(),
+            TextColumn("[bold]train[/]"),
+            BarColumn(),
+            MofNCompleteColumn(),
             TextColumn("{task.fields[sps]} steps/s  reward {task.fields[reward]}  EV {task.fields[ev]}"),
-            TimeRemainingColumn(), console=console, transient=False,
+            TimeRemainingColumn(),
+            console=console,
+            transient=False,
         )
         self.bar.__enter__()
-        task = self.bar.add_task("train", total=self.run.cfg.max_iterations, completed=self.run.iteration,
-                                 sps="-", reward="-", ev="-")
+        task = self.bar.add_task(
+            "train", total=self.run.cfg.max_iterations, completed=self.run.iteration, sps="-", reward="-", ev="-"
+        )
 
         def update(row: dict) -> None:
-            self.bar.update(task, completed=int(row["iteration"]), sps=f"{row.get('steps_per_s', 0):,.0f}",
-                            reward=f"{row.get('mean_reward', float('nan')):.2f}",
-                            ev=f"{row.get('explained_variance', float('nan')):.2f}")
+            self.bar.update(
+                task,
+                completed=int(row["iteration"]),
+                sps=f"{row.get('steps_per_s', 0):,.0f}",
+                reward=f"{row.get('mean_reward', float('nan')):.2f}",
+                ev=f"{row.get('explained_variance', float('nan')):.2f}",
+            )
 
         self.run.progress = update
         return self

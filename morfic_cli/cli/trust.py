@@ -15,8 +15,10 @@ from morfic_cli.errors import MorficError, printable
 def trust(
     names: Annotated[
         list[str] | None,
-        typer.Argument(help="User variants to trust: import paths module.path:Class, or "
-                       "entry-point names. None: print the allow-list."),
+        typer.Argument(
+            help="User variants to trust: import paths module.path:Class, or "
+            "entry-point names. None: print the allow-list."
+        ),
     ] = None,
     remove: Annotated[bool, typer.Option("--remove", help="Take the named variants off the allow-list.")] = False,
     list_: Annotated[bool, typer.Option("--list", help="Print the allow-list (also what no names does).")] = False,
@@ -53,9 +55,11 @@ def trust(
         info(f"allow-list {path}: {len(trusted)} trusted user variant(s)")
         if ignored:
             shown = printable(", ".join(ignored[:5])) + (f" and {len(ignored) - 5} more" if len(ignored) > 5 else "")
-            info(f"ignored: {shown}: the list is not signed by `morfic trust` (a file from elsewhere, e.g. fetched by "
-                 "`morfic store get`, or edited by hand), so it trusts nothing; `morfic trust NAME` for each you "
-                 "trust writes it again, signed.")
+            info(
+                f"ignored: {shown}: the list is not signed by `morfic trust` (a file from elsewhere, e.g. fetched by "
+                "`morfic store get`, or edited by hand), so it trusts nothing; `morfic trust NAME` for each you "
+                "trust writes it again, signed."
+            )
         emit_rows([{"variant": n} for n in trusted], fmt, columns=[Column("variant", "trusted user variant")])
         return
     try:
@@ -65,20 +69,26 @@ def trust(
             for n in removed:
                 info(f"no longer trusted: {n} ({path})")
             if missing:
-                raise MorficError(f"{', '.join(missing)} {'is' if len(missing) == 1 else 'are'} not on the allow-list "
-                                  f"{path}; `morfic trust --list` shows it.")
+                raise MorficError(
+                    f"{', '.join(missing)} {'is' if len(missing) == 1 else 'are'} not on the allow-list "
+                    f"{path}; `morfic trust --list` shows it."
+                )
             return
         for n in names:
             if n in STOCK:
                 info(f"{n} is a stock variant; it needs no trust.")
         added = add_to_allow_list(names)
     except OSError as exc:
-        raise MorficError(f"cannot write the allow-list {path} ({exc.strerror or exc}); check that folder's "
-                          "permissions, or pass --trust-variant to each command instead.") from exc
+        raise MorficError(
+            f"cannot write the allow-list {path} ({exc.strerror or exc}); check that folder's "
+            "permissions, or pass --trust-variant to each command instead."
+        ) from exc
     for n in names:
         if n in added:
-            info(f"trusted: {n} ({path}); commands import it when a stored run names it (`morfic trust --remove "
-                 f"{n}` undoes it).")
+            info(
+                f"trusted: {n} ({path}); commands import it when a stored run names it (`morfic trust --remove "
+                f"{n}` undoes it)."
+            )
         elif n not in STOCK:
             info(f"{n} was already trusted ({path}).")
 
@@ -96,12 +106,16 @@ def remember_variants(names: list[str], quiet: bool = False) -> None:
     except (OSError, MorficError) as exc:  # a folder that cannot be written; a key morfic trust did not write
         if not quiet:
             why = exc.strerror if isinstance(exc, OSError) else str(exc).rstrip(".")
-            info(f"note: could not add {', '.join(names)} to the allow-list {allow_list_path()} ({why}); "
-                 "later commands on its runs need --trust-variant.")
+            info(
+                f"note: could not add {', '.join(names)} to the allow-list {allow_list_path()} ({why}); "
+                "later commands on its runs need --trust-variant."
+            )
         return
     if added and not quiet:
-        info(f"trusted {', '.join(added)} for later commands on its runs (added to {allow_list_path()}; `morfic "
-             f"trust --remove {added[0]}` undoes it).")
+        info(
+            f"trusted {', '.join(added)} for later commands on its runs (added to {allow_list_path()}; `morfic "
+            f"trust --remove {added[0]}` undoes it)."
+        )
 
 
 def note_skipped(ref: str, why: str) -> None:

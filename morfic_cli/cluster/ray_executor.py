@@ -40,7 +40,8 @@ def import_ray():
     except ImportError as exc:
         raise MorficError(
             "--executor ray needs Ray, which is not installed: pip install 'morfic[cluster]' (or pip install "
-            "'ray[default]>=2.40') on this machine and on every node of the cluster; see docs/cluster.md.") from exc
+            "'ray[default]>=2.40') on this machine and on every node of the cluster; see docs/cluster.md."
+        ) from exc
     return ray
 
 
@@ -92,8 +93,13 @@ class RayExecutor:
         on_update: Called with the :class:`RayRun` whenever a job changes state (the CLI's progress view).
     """
 
-    def __init__(self, pipeline: Pipeline, address: str | None = None, retries: int = DEFAULT_RETRIES,
-                 on_update: Callable[[RayRun], None] | None = None) -> None:
+    def __init__(
+        self,
+        pipeline: Pipeline,
+        address: str | None = None,
+        retries: int = DEFAULT_RETRIES,
+        on_update: Callable[[RayRun], None] | None = None,
+    ) -> None:
         self.pipeline, self.address, self.retries = pipeline, address, retries
         self.on_update = on_update or (lambda _run: None)
         self.state = RayRun()
@@ -120,9 +126,11 @@ class RayExecutor:
             if failed:
                 first = failed[0]
                 finished = sum(s.state in ("done", "skipped") for s in self.state.jobs.values())
-                raise MorficError(f"{len(failed)} job(s) failed; the {finished} that finished are in the store "
-                                  f"(run the command again to retry the rest). First: {first.job.key}: "
-                                  f"{first.detail}")
+                raise MorficError(
+                    f"{len(failed)} job(s) failed; the {finished} that finished are in the store "
+                    f"(run the command again to retry the rest). First: {first.job.key}: "
+                    f"{first.detail}"
+                )
             study = [fn for kind, _, fn in self.pipeline.plan() if kind == "critic-study"]
             for fn in (*study, self.pipeline.compare, self.pipeline.report):  # the study on the driver, after the jobs
                 t0 = time.perf_counter()
@@ -138,22 +146,32 @@ class RayExecutor:
         if self.address is not None and self.address != "auto":
             _probe(self.address)
         try:  # "local": always a new instance (None would join whatever cluster /tmp/ray last recorded)
-            ray.init(address=self.address or "local", log_to_driver=False, configure_logging=True,
-                     logging_level="ERROR", include_dashboard=False if self.address is None else None)
+            ray.init(
+                address=self.address or "local",
+                log_to_driver=False,
+                configure_logging=True,
+                logging_level="ERROR",
+                include_dashboard=False if self.address is None else None,
+            )
         except (ConnectionError, RuntimeError, ValueError) as exc:
             where = f"the Ray cluster at {self.address}" if self.address else "a local Ray instance"
-            raise MorficError(f"cannot connect to {where}: {str(exc).splitlines()[0] if str(exc) else exc!r}; "
-                              f"start one with `ray start --head` and pass its address (docs/cluster.md).") from exc
+            raise MorficError(
+                f"cannot connect to {where}: {str(exc).splitlines()[0] if str(exc) else exc!r}; "
+                f"start one with `ray start --head` and pass its address (docs/cluster.md)."
+            ) from exc
         res = ray.cluster_resources()
         self.state.address = self.address or "local"
         self.state.resources = f"{len(ray.nodes())} node(s), {res.get('CPU', 0):g} CPU, {res.get('GPU', 0):g} GPU"
 
     def _options(self, job: Job) -> dict[str, Any]:
         cfg = self.pipeline.cfg
-        return {"num_cpus": CPUS_PER_JOB.get(cfg.preset, 1),
-                "num_gpus": 1 if cfg.device.startswith("cuda") else 0,
-                "max_retries": self.retries, "retry_exceptions": False,
-                "name": f"morfic-{job.kind}-{job.label.replace('/', '-')}"}
+        return {
+            "num_cpus": CPUS_PER_JOB.get(cfg.preset, 1),
+            "num_gpus": 1 if cfg.device.startswith("cuda") else 0,
+            "max_retries": self.retries,
+            "retry_exceptions": False,
+            "name": f"morfic-{job.kind}-{job.label.replace('/', '-')}",
+        }
 
     def _export(self, specs: list[str], *, with_resume: bool = False) -> bytes:
         """An export tar of ``specs`` from the user's store (latest version; a run to resume: full history)."""
@@ -193,8 +211,9 @@ class RayExecutor:
                 inputs = [self._export([job.label], with_resume=True)] if store.has_ref(job.label) else []
             else:
                 inputs = [train_refs[n] if n in train_refs else ray.put(self._export([n])) for n in job.needs]
-            ref = task.options(**self._options(job)).remote(job, cfg, __version__, *inputs, board=board,
-                                                            trusted=trusted)
+            ref = task.options(**self._options(job)).remote(
+                job, cfg, __version__, *inputs, board=board, trusted=trusted
+            )
             pending[ref] = job
             if job.kind == "train":
                 train_refs[job.label] = ref
@@ -282,8 +301,10 @@ def _probe(address: str, timeout_s: float = 10.0) -> None:
     try:
         socket.create_connection((host, int(port)), timeout=timeout_s).close()
     except OSError as exc:
-        raise MorficError(f"cannot reach a Ray cluster at --address {address} ({exc.strerror or exc}); start one "
-                          f"with `ray start --head` there and pass the address it prints (docs/cluster.md).") from exc
+        raise MorficError(
+            f"cannot reach a Ray cluster at --address {address} ({exc.strerror or exc}); start one "
+            f"with `ray start --head` there and pass the address it prints (docs/cluster.md)."
+        ) from exc
 
 
 @contextlib.contextmanager

@@ -60,7 +60,8 @@ def check_version(driver_version: str) -> None:
     if driver_version != __version__:
         raise MorficError(
             f"the worker on {where()} runs morfic {__version__}, the driver morfic {driver_version}; install the "
-            f"same morfic on every node of the cluster (docs/cluster.md), then run the command again.")
+            f"same morfic on every node of the cluster (docs/cluster.md), then run the command again."
+        )
 
 
 def _histories(store) -> dict[str, list[str]]:
@@ -80,8 +81,14 @@ def input_bundle(result: Outcome | bytes) -> bytes:
     return result
 
 
-def execute(job: Job, cfg: ReproduceCfg, driver_version: str, *inputs: Outcome | bytes,
-            board=None, trusted: tuple[str, ...] = ()) -> Outcome:
+def execute(
+    job: Job,
+    cfg: ReproduceCfg,
+    driver_version: str,
+    *inputs: Outcome | bytes,
+    board=None,
+    trusted: tuple[str, ...] = (),
+) -> Outcome:
     """Run ``job`` in a fresh store fed with ``inputs``; return its refs as one export bundle.
 
     ``trusted``: the user variants the driver's user consented to (its command line and allow-list,

@@ -278,6 +278,12 @@ def diagnose_runs(
     rows = [{**{k: row[k] for k in CALIBRATION_COLUMNS}, "reused": row["reused"]} for row in rows]
     png, pdf = ev_figure(rows)
     config = {"specs": list(specs), **diagnose_config(cfg)}
-    pub = store.publish("diagnosis", CALIBRATION_REF, config=config, inputs=inputs, meta={"runs": labels},
-                        files={"calibration.csv": rows_to_csv(rows, CALIBRATION_COLUMNS), "ev.png": png, "ev.pdf": pdf})
+    pub = store.publish(
+        "diagnosis",
+        CALIBRATION_REF,
+        config=config,
+        inputs=inputs,
+        meta={"runs": labels},
+        files={"calibration.csv": rows_to_csv(rows, CALIBRATION_COLUMNS), "ev.png": png, "ev.pdf": pdf},
+    )
     return DiagnosisResult(rows, pub.id, CALIBRATION_REF, pub.version)

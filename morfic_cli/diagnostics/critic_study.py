@@ -77,13 +77,49 @@ DEFAULT_ACTORS: tuple[str, ...] = tuple(RUNS_PREFIX + run_name(v, s, "cpu") for 
 
 #: Columns of ``critic_study.csv``, in order.
 STUDY_COLUMNS: tuple[str, ...] = (
-    "command_vx", "robot", "variant", "fit_seed", "multiplicative", "ev", "nvb", "abs_nvb", "nve", "asa", "flip",
-    "cos_grad", "cell", "n_samples", "g_mean", "g_std", "v_mean", "fit_loss", "fit_seconds", "epochs", "best_epoch",
-    "val_ev", "converged", "actor", "rollout",
+    "command_vx",
+    "robot",
+    "variant",
+    "fit_seed",
+    "multiplicative",
+    "ev",
+    "nvb",
+    "abs_nvb",
+    "nve",
+    "asa",
+    "flip",
+    "cos_grad",
+    "cell",
+    "n_samples",
+    "g_mean",
+    "g_std",
+    "v_mean",
+    "fit_loss",
+    "fit_seconds",
+    "epochs",
+    "best_epoch",
+    "val_ev",
+    "converged",
+    "actor",
+    "rollout",
 )
 #: Columns of ``fits.csv`` (a row per epoch of each fit).
-FIT_COLUMNS: tuple[str, ...] = ("actor", "variant", "fit_seed", "epoch", "loss", "val_loss", "val_ev", "best_epoch",
-                                "stopped_early", "converged", "seconds", "parameters", "n_train", "n_val")
+FIT_COLUMNS: tuple[str, ...] = (
+    "actor",
+    "variant",
+    "fit_seed",
+    "epoch",
+    "loss",
+    "val_loss",
+    "val_ev",
+    "best_epoch",
+    "stopped_early",
+    "converged",
+    "seconds",
+    "parameters",
+    "n_train",
+    "n_val",
+)
 
 
 @dataclass(frozen=True)
@@ -140,12 +176,26 @@ class StudyCfg:
     def diagnose_cfg(self, command_vx: float, train: bool) -> DiagnoseCfg:
         """The :class:`DiagnoseCfg` of the training-distribution rollout (``train``) or of the targets' one."""
         if train:  # each command's rollout draws other morphologies: the rollout seed advances with the command
-            return DiagnoseCfg(robots=("go2",), mode="train", command_vx=command_vx, num_envs=self.train_envs,
-                               steps=self.steps, seed=self.seed + self.commands.index(command_vx),
-                               trunc_eps=self.trunc_eps)
+            return DiagnoseCfg(
+                robots=("go2",),
+                mode="train",
+                command_vx=command_vx,
+                num_envs=self.train_envs,
+                steps=self.steps,
+                seed=self.seed + self.commands.index(command_vx),
+                trunc_eps=self.trunc_eps,
+            )
         batch = self.robots if len(self.robots) > 1 else ()
-        return DiagnoseCfg(robots=self.robots, mode="descriptor", command_vx=command_vx, num_envs=self.target_envs,
-                           steps=self.steps, seed=self.seed, trunc_eps=self.trunc_eps, batch=batch)
+        return DiagnoseCfg(
+            robots=self.robots,
+            mode="descriptor",
+            command_vx=command_vx,
+            num_envs=self.target_envs,
+            steps=self.steps,
+            seed=self.seed,
+            trunc_eps=self.trunc_eps,
+            batch=batch,
+        )
 
 
 def check_cfg(cfg: StudyCfg) -> None:
@@ -169,8 +219,10 @@ def check_cfg(cfg: StudyCfg) -> None:
     if len(set(cfg.actors)) != len(cfg.actors):
         raise MorficError(f"--actors names a run twice: {', '.join(cfg.actors)}; give each once.")
     if cfg.held_out < 1 or cfg.val_envs < 1 or cfg.held_out + cfg.val_envs >= cfg.train_envs:
-        raise MorficError(f"--held-out ({cfg.held_out}) and --val-envs ({cfg.val_envs}) must each be at least 1 and "
-                          f"leave fit envs: together at most --train-envs - 1 ({cfg.train_envs - 1}).")
+        raise MorficError(
+            f"--held-out ({cfg.held_out}) and --val-envs ({cfg.val_envs}) must each be at least 1 and "
+            f"leave fit envs: together at most --train-envs - 1 ({cfg.train_envs - 1})."
+        )
     if min(cfg.max_epochs, cfg.patience, cfg.minibatch, cfg.stride, cfg.cos_stride) < 1:
         raise MorficError("--max-epochs, --patience, --minibatch and the strides must be at least 1.")
     if cfg.min_delta < 0 or not cfg.min_ev <= 1:
@@ -247,9 +299,14 @@ def split_train(samples: Samples, held_out: int, val_envs: int = 0) -> tuple[Sam
 
     def part(envs: slice) -> Samples:
         return dataclasses.replace(
-            samples, obs={k: v[:, envs] for k, v in samples.obs.items()}, action=samples.action[:, envs],
-            reward=samples.reward[:, envs], value=samples.value[:, envs], done=samples.done[:, envs],
-            time_out=samples.time_out[:, envs])
+            samples,
+            obs={k: v[:, envs] for k, v in samples.obs.items()},
+            action=samples.action[:, envs],
+            reward=samples.reward[:, envs],
+            value=samples.value[:, envs],
+            done=samples.done[:, envs],
+            time_out=samples.time_out[:, envs],
+        )
 
     return part(slice(0, cut_val)), part(slice(cut_val, cut_held)), part(slice(cut_held, n))
 
@@ -279,8 +336,12 @@ def fit_data(parts: Sequence[Samples], gamma: float, cfg: DiagnoseCfg, stride: i
     if G.numel() == 0:
         raise MorficError("the training rollout has no sample in I_eps; raise --steps (see docs/metrics.md).")
     std = float(G.std(correction=0))
-    return FitData(TensorDict({k: torch.cat(v) for k, v in obs.items()}, batch_size=[G.numel()]), G,
-                   float(G.mean()), std if std > 0 else 1.0)
+    return FitData(
+        TensorDict({k: torch.cat(v) for k, v in obs.items()}, batch_size=[G.numel()]),
+        G,
+        float(G.mean()),
+        std if std > 0 else 1.0,
+    )
 
 
 def build_critic(actor_cfg: Any, variant: str, seed: int) -> torch.nn.Module:
@@ -293,9 +354,11 @@ def build_critic(actor_cfg: Any, variant: str, seed: int) -> torch.nn.Module:
     """
     from morfic_cli.rl.build import build_models
 
-    cfg = dataclasses.replace(actor_cfg, variant=variant,
-                              model=dataclasses.replace(actor_cfg.model, shared_morphology_encoder=False,
-                                                        critic_hidden_dims=None))
+    cfg = dataclasses.replace(
+        actor_cfg,
+        variant=variant,
+        model=dataclasses.replace(actor_cfg.model, shared_morphology_encoder=False, critic_hidden_dims=None),
+    )
     torch.manual_seed(seed)
     _, critic = build_models(cfg)
     return critic
@@ -370,8 +433,14 @@ def _predict(critic: torch.nn.Module, obs: TensorDict, chunk: int = 4096) -> tor
         return torch.cat([critic(obs[i : i + chunk]).reshape(-1) for i in range(0, obs.batch_size[0], chunk)])
 
 
-def fit_critic(critic: torch.nn.Module, data: FitData, cfg: StudyCfg, seed: int, val: FitData | None = None,
-               on_epoch: Callable[[], None] | None = None) -> Fit:
+def fit_critic(
+    critic: torch.nn.Module,
+    data: FitData,
+    cfg: StudyCfg,
+    seed: int,
+    val: FitData | None = None,
+    on_epoch: Callable[[], None] | None = None,
+) -> Fit:
     """Regress V_phi on the standardised G of the fit set (Adam, mean squared error, shuffled passes) to convergence.
 
     After each epoch the loss and EV on ``val`` (standardised with the fit set's map) are taken; the fit stops when
@@ -438,8 +507,15 @@ def batches_per_epoch(n: int, cfg: StudyCfg) -> int:
     return math.ceil(n / cfg.minibatch)
 
 
-def score_fits(actor: torch.nn.Module, fits: Sequence[Fit], samples: Samples, gamma: float, cfg: DiagnoseCfg,
-               clip_param: float, cos_stride: int = 1) -> list[dict[str, Any]]:
+def score_fits(
+    actor: torch.nn.Module,
+    fits: Sequence[Fit],
+    samples: Samples,
+    gamma: float,
+    cfg: DiagnoseCfg,
+    clip_param: float,
+    cos_stride: int = 1,
+) -> list[dict[str, Any]]:
     """Every fit's metrics on one sample set, CosGrad on the frozen ``actor`` (one forward pass for all fits).
 
     CosGrad compares g(A_phi) with g(A_MC) over the samples of I_eps at steps t % cos_stride == 0 (A_MC's mean
@@ -456,15 +532,33 @@ def score_fits(actor: torch.nn.Module, fits: Sequence[Fit], samples: Samples, ga
     cos_mask[np.arange(cos_mask.shape[0]) % cos_stride != 0] = False
     keep = torch.from_numpy(cos_mask[ref.mask])  # the strided samples among I_eps's, row-major
     G_cos = G[keep]
-    grads = actor_gradients(actor, samples.obs, samples.action, cos_mask,
-                            [mc_advantage(G_cos), *(critic_advantage(G_cos, v[keep]) for v in values)],
-                            clip_param=clip_param)
+    grads = actor_gradients(
+        actor,
+        samples.obs,
+        samples.action,
+        cos_mask,
+        [mc_advantage(G_cos), *(critic_advantage(G_cos, v[keep]) for v in values)],
+        clip_param=clip_param,
+    )
     rows = []
     for v, g_phi in zip(values, grads[1:], strict=True):
         m = critic_metrics(G, v, cfg.sigma_eps)
-        rows.append({"ev": m.ev, "nvb": m.nvb, "abs_nvb": abs(m.nvb), "nve": m.nve, "asa": m.asa, "flip": m.flip,
-                     "cos_grad": cos_grad(g_phi, grads[0]), "cell": paper_cell(m.nvb, m.nve, m.asa),
-                     "n_samples": m.n, "g_mean": m.g_mean, "g_std": m.g_std, "v_mean": m.v_mean})
+        rows.append(
+            {
+                "ev": m.ev,
+                "nvb": m.nvb,
+                "abs_nvb": abs(m.nvb),
+                "nve": m.nve,
+                "asa": m.asa,
+                "flip": m.flip,
+                "cos_grad": cos_grad(g_phi, grads[0]),
+                "cell": paper_cell(m.nvb, m.nve, m.asa),
+                "n_samples": m.n,
+                "g_mean": m.g_mean,
+                "g_std": m.g_std,
+                "v_mean": m.v_mean,
+            }
+        )
     return rows
 
 
@@ -482,8 +576,10 @@ def check_layout(config: dict[str, Any]) -> int:
     """
     layout = int(config.get("layout", 1))
     if layout > STUDY_LAYOUT:
-        raise MorficError(f"the critic study was stored with layout {layout}, newer than this morfic reads "
-                          f"({STUDY_LAYOUT}); upgrade morfic, or run `morfic critic-study` again.")
+        raise MorficError(
+            f"the critic study was stored with layout {layout}, newer than this morfic reads "
+            f"({STUDY_LAYOUT}); upgrade morfic, or run `morfic critic-study` again."
+        )
     return layout
 
 
@@ -510,16 +606,38 @@ def _fit_rows(fit: Fit, n_train: int, n_val: int) -> list[dict[str, Any]]:
     """The rows of ``fits.csv`` of one fit: one per epoch run."""
     val = fit.val_losses + [math.nan] * (len(fit.losses) - len(fit.val_losses))
     evs = fit.val_evs + [math.nan] * (len(fit.losses) - len(fit.val_evs))
-    return [{"actor": fit.actor, "variant": fit.variant, "fit_seed": fit.seed, "epoch": e + 1, "loss": loss,
-             "val_loss": v, "val_ev": ev, "best_epoch": fit.best_epoch, "stopped_early": fit.stopped_early,
-             "converged": fit.converged,
-             "seconds": fit.seconds, "parameters": fit.parameters, "n_train": n_train, "n_val": n_val}
-            for e, (loss, v, ev) in enumerate(zip(fit.losses, val, evs, strict=True))]
+    return [
+        {
+            "actor": fit.actor,
+            "variant": fit.variant,
+            "fit_seed": fit.seed,
+            "epoch": e + 1,
+            "loss": loss,
+            "val_loss": v,
+            "val_ev": ev,
+            "best_epoch": fit.best_epoch,
+            "stopped_early": fit.stopped_early,
+            "converged": fit.converged,
+            "seconds": fit.seconds,
+            "parameters": fit.parameters,
+            "n_train": n_train,
+            "n_val": n_val,
+        }
+        for e, (loss, v, ev) in enumerate(zip(fit.losses, val, evs, strict=True))
+    ]
 
 
-def _study_actor(store: Store, spec: str, trained: TrainedModels, cfg: StudyCfg, variants: Sequence[str],
-                 multiplicative: dict[str, bool | None], progress: StudyProgress, seconds: dict[str, float],
-                 inputs: dict[str, str]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+def _study_actor(
+    store: Store,
+    spec: str,
+    trained: TrainedModels,
+    cfg: StudyCfg,
+    variants: Sequence[str],
+    multiplicative: dict[str, bool | None],
+    progress: StudyProgress,
+    seconds: dict[str, float],
+    inputs: dict[str, str],
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """One actor's part of the study: its rollouts, its fits, their scores. Returns (rows, fit rows)."""
     gamma, clip = trained.cfg.ppo.gamma, trained.cfg.ppo.clip_param
     check_horizon(gamma, cfg.diagnose_cfg(cfg.commands[0], True))
@@ -542,8 +660,9 @@ def _study_actor(store: Store, spec: str, trained: TrainedModels, cfg: StudyCfg,
         val_parts.append(val_part)
         targets[command] = {}
         for k, robot in enumerate(cfg.robots):
-            targets[command][robot] = collect_samples(store, trained, robot, target_cfg,
-                                                      on_step=step if k == 0 or not joint else None)
+            targets[command][robot] = collect_samples(
+                store, trained, robot, target_cfg, on_step=step if k == 0 or not joint else None
+            )
             inputs[f"rollout/{label}/{command:g}/{robot}"] = targets[command][robot].rollout_id
     seconds["rollouts"] += time.perf_counter() - t0
     diag = cfg.diagnose_cfg(cfg.commands[0], True)  # eps and sigma_eps: the same for every command
@@ -552,8 +671,11 @@ def _study_actor(store: Store, spec: str, trained: TrainedModels, cfg: StudyCfg,
     del fit_parts, val_parts
     fits: list[Fit] = []
     fit_rows: list[dict[str, Any]] = []
-    progress.phase(f"{label}: fitting {len(variants)} x {cfg.seeds} critics on {data.G.shape[0]} samples "
-                   f"(at most {cfg.max_epochs} epochs)", len(variants) * cfg.seeds * cfg.max_epochs)
+    progress.phase(
+        f"{label}: fitting {len(variants)} x {cfg.seeds} critics on {data.G.shape[0]} samples "
+        f"(at most {cfg.max_epochs} epochs)",
+        len(variants) * cfg.seeds * cfg.max_epochs,
+    )
     for variant in variants:
         for seed in range(cfg.seeds):
             fit = fit_critic(build_critic(trained.cfg, variant, seed), data, cfg, seed, val, progress.advance)
@@ -572,18 +694,36 @@ def _study_actor(store: Store, spec: str, trained: TrainedModels, cfg: StudyCfg,
         for robot, samples in sets.items():
             scores = score_fits(trained.actor, fits, samples, gamma, diag, clip, cfg.cos_stride)
             for fit, score in zip(fits, scores, strict=True):
-                rows.append({"command_vx": command, "robot": robot, "variant": fit.variant, "fit_seed": fit.seed,
-                             "multiplicative": multiplicative[fit.variant], **score,
-                             "fit_loss": fit.losses[-1], "fit_seconds": fit.seconds, "epochs": len(fit.losses),
-                             "best_epoch": fit.best_epoch, "val_ev": fit.val_ev, "converged": fit.converged,
-                             "actor": label, "rollout": samples.rollout_id})
+                rows.append(
+                    {
+                        "command_vx": command,
+                        "robot": robot,
+                        "variant": fit.variant,
+                        "fit_seed": fit.seed,
+                        "multiplicative": multiplicative[fit.variant],
+                        **score,
+                        "fit_loss": fit.losses[-1],
+                        "fit_seconds": fit.seconds,
+                        "epochs": len(fit.losses),
+                        "best_epoch": fit.best_epoch,
+                        "val_ev": fit.val_ev,
+                        "converged": fit.converged,
+                        "actor": label,
+                        "rollout": samples.rollout_id,
+                    }
+                )
             progress.advance()
     seconds["scoring"] += time.perf_counter() - t0
     return rows, fit_rows
 
 
-def run_study(store: Store, cfg: StudyCfg, *, actors: dict[str, TrainedModels] | None = None,
-              progress: StudyProgress | None = None) -> StudyResult:
+def run_study(
+    store: Store,
+    cfg: StudyCfg,
+    *,
+    actors: dict[str, TrainedModels] | None = None,
+    progress: StudyProgress | None = None,
+) -> StudyResult:
     """The critic study of ``cfg.actors`` (module docstring); stored as a ``diagnosis``.
 
     Args:
@@ -624,8 +764,7 @@ def run_study(store: Store, cfg: StudyCfg, *, actors: dict[str, TrainedModels] |
         labels.append(run_label(trained, spec))
         if labels.count(labels[-1]) > 1:
             raise MorficError(f"--actors names run {labels[-1]} twice (as {spec}); give each run once.")
-        part, part_fits = _study_actor(store, spec, trained, cfg, variants, multiplicative, progress, seconds,
-                                       inputs)
+        part, part_fits = _study_actor(store, spec, trained, cfg, variants, multiplicative, progress, seconds, inputs)
         rows += part
         fit_rows += part_fits
         del trained
@@ -640,8 +779,21 @@ def run_study(store: Store, cfg: StudyCfg, *, actors: dict[str, TrainedModels] |
     }
     n_fits = len({(r["actor"], r["variant"], r["fit_seed"]) for r in fit_rows})
     n_flagged = len({(r["actor"], r["variant"], r["fit_seed"]) for r in fit_rows if not r["converged"]})
-    pub = store.publish("diagnosis", STUDY_REF, config=study_config(cfg), inputs=inputs, files=files,
-                        meta={"actor": ", ".join(labels), "actors": labels, "variants": variants, "seeds": cfg.seeds,
-                              "fits": n_fits, "unconverged": n_flagged, "layout": STUDY_LAYOUT,
-                              "seconds": {k: round(v, 1) for k, v in seconds.items()}})
+    pub = store.publish(
+        "diagnosis",
+        STUDY_REF,
+        config=study_config(cfg),
+        inputs=inputs,
+        files=files,
+        meta={
+            "actor": ", ".join(labels),
+            "actors": labels,
+            "variants": variants,
+            "seeds": cfg.seeds,
+            "fits": n_fits,
+            "unconverged": n_flagged,
+            "layout": STUDY_LAYOUT,
+            "seconds": {k: round(v, 1) for k, v in seconds.items()},
+        },
+    )
     return StudyResult(rows, fit_rows, pub.id, pub.version, seconds)

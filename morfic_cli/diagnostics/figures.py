@@ -52,19 +52,27 @@ def ev_plot(rows: Sequence[dict[str, Any]]):
         ax.bar(xs, values, width=width * 0.92, label=label, color=f"C{k}")
         for x, v in zip(xs, values, strict=True):
             if math.isnan(v):
-                ax.annotate("n/a", (x, 0.0), ha="center", va="bottom", fontsize=7, color="grey",
-                            rotation=90 if upright else 0)
+                ax.annotate(
+                    "n/a", (x, 0.0), ha="center", va="bottom", fontsize=7, color="grey", rotation=90 if upright else 0
+                )
             else:
-                ax.annotate(f"{v:.2f}" if abs(v) < 10 else f"{v:.1f}", (x, v), ha="center",
-                            va="bottom" if v >= 0 else "top", fontsize=7, xytext=(0, 2 if v >= 0 else -2),
-                            textcoords="offset points", rotation=90 if upright else 0)
+                ax.annotate(
+                    f"{v:.2f}" if abs(v) < 10 else f"{v:.1f}",
+                    (x, v),
+                    ha="center",
+                    va="bottom" if v >= 0 else "top",
+                    fontsize=7,
+                    xytext=(0, 2 if v >= 0 else -2),
+                    textcoords="offset points",
+                    rotation=90 if upright else 0,
+                )
     ax.axhline(0.0, color="black", lw=0.8)
     ax.axhline(1.0, color="grey", lw=0.8, ls="--")
     ax.set_xticks(range(len(robots)), robots, fontsize=9)
     if log_below:
         bottom = min(finite) * (6.0 if upright else 3.0)  # room for the labels below the longest bar
         ax.set_yscale("symlog", linthresh=1.0, linscale=1.5)
-        decades = [-(10.0 ** k) for k in range(1, int(math.ceil(math.log10(-min(finite)))) + 1)]
+        decades = [-(10.0**k) for k in range(1, int(math.ceil(math.log10(-min(finite)))) + 1)]
         ticks = sorted([t for t in decades if t >= bottom] + [-1.0, -0.5, 0.0, 0.5, 1.0])
         ax.set_yticks(ticks, [f"{t:g}" for t in ticks], fontsize=8)
         ax.axhspan(bottom, -1.0, color="grey", alpha=0.07, lw=0)
@@ -130,8 +138,13 @@ def critic_study_plot(summary: Sequence[dict[str, Any]]):
 
     mult = {r["variant"]: bool(group_of(r["multiplicative"])) for r in summary}
     cell = {(r["command_vx"], r["robot"], r["variant"], r["metric"]): r for r in summary}
-    fig, axes = plt.subplots(len(commands), len(STUDY_METRICS), squeeze=False, constrained_layout=True,
-                             figsize=(4.6 * len(STUDY_METRICS), 2.9 * len(commands) + 0.6))
+    fig, axes = plt.subplots(
+        len(commands),
+        len(STUDY_METRICS),
+        squeeze=False,
+        constrained_layout=True,
+        figsize=(4.6 * len(STUDY_METRICS), 2.9 * len(commands) + 0.6),
+    )
     width = 0.8 / max(len(variants), 1)
     for i, command in enumerate(commands):
         for j, (metric, ylabel, _higher) in enumerate(STUDY_METRICS):
@@ -166,14 +179,28 @@ def critic_study_plot(summary: Sequence[dict[str, Any]]):
             ax.grid(axis="y", alpha=0.3)
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], marker="o", ls="none", ms=6, mec=f"C{k}", mfc=f"C{k}" if mult.get(v) else "white",
-                      label=STUDY_LABELS.get(v, variant_label(v))) for k, v in enumerate(variants)]
+    handles = [
+        Line2D(
+            [],
+            [],
+            marker="o",
+            ls="none",
+            ms=6,
+            mec=f"C{k}",
+            mfc=f"C{k}" if mult.get(v) else "white",
+            label=STUDY_LABELS.get(v, variant_label(v)),
+        )
+        for k, v in enumerate(variants)
+    ]
     handles.append(Line2D([], [], marker="v", ls="none", ms=6, mec="grey", mfc="white", label="EV below -1"))
     if variants:
         fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
     unit = "actors" if any(r.get("unit") == "actor" for r in summary) else "fit seeds of one actor"
-    fig.suptitle("Critic study: critics fitted from scratch on frozen actors' data (mean and 95 % t interval over "
-                 f"{unit}; filled = multiplicative)", fontsize=10)
+    fig.suptitle(
+        "Critic study: critics fitted from scratch on frozen actors' data (mean and 95 % t interval over "
+        f"{unit}; filled = multiplicative)",
+        fontsize=10,
+    )
     return fig
 
 

@@ -187,7 +187,10 @@ class FixedRolloutModels:
 
 
 def load_models(
-    store: Store, actor_spec: str | None, critic_specs: Sequence[str] | None, cfg: DiagnoseCfg,
+    store: Store,
+    actor_spec: str | None,
+    critic_specs: Sequence[str] | None,
+    cfg: DiagnoseCfg,
     on_skip: Callable[[str, str], None] | None = None,
 ) -> FixedRolloutModels:
     """Resolve the defaults, load the actor and the critics, and check them against each other and ``cfg``.
@@ -220,8 +223,12 @@ def load_models(
     if any(c.cfg.env.obs.body_tokens for c in critics) and not actor.cfg.env.obs.body_tokens:
         # a urma critic reads the token groups: the actor's rollout records them too (same physics, more groups)
         env = actor.cfg.env
-        actor = dataclasses.replace(actor, cfg=dataclasses.replace(actor.cfg, env=dataclasses.replace(
-            env, obs=dataclasses.replace(env.obs, body_tokens=True))))
+        actor = dataclasses.replace(
+            actor,
+            cfg=dataclasses.replace(
+                actor.cfg, env=dataclasses.replace(env, obs=dataclasses.replace(env.obs, body_tokens=True))
+            ),
+        )
     check_horizon(actor.cfg.ppo.gamma, cfg)
     return FixedRolloutModels(actor_spec, actor, specs, critics)
 
@@ -295,7 +302,12 @@ def fixed_rollout(
     config = {"robot": robot, "actor": actor_spec, "critics": critic_specs, **diagnose_config(cfg)}
     config.pop("robots")
     ref_name = FIXED_ROLLOUT_PREFIX + robot
-    pub = store.publish("diagnosis", ref_name, config=config, inputs=inputs,
-                        files={"fixed_rollout.csv": rows_to_csv(rows, FIXED_ROLLOUT_COLUMNS)},
-                        meta={"actor": actor_label, "critics": [r["critic"] for r in rows[1:]]})
+    pub = store.publish(
+        "diagnosis",
+        ref_name,
+        config=config,
+        inputs=inputs,
+        files={"fixed_rollout.csv": rows_to_csv(rows, FIXED_ROLLOUT_COLUMNS)},
+        meta={"actor": actor_label, "critics": [r["critic"] for r in rows[1:]]},
+    )
     return DiagnosisResult(rows, pub.id, ref_name, pub.version)

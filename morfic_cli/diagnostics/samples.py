@@ -50,6 +50,7 @@ def kept_groups(env_cfg: Any) -> tuple[str, ...]:
 
     return OBS_GROUPS + (BODY_TOKEN_GROUPS if env_cfg.obs.body_tokens else ())
 
+
 ROLLOUT_PURPOSE = "diagnose"
 """Value of ``config["purpose"]`` of diagnostic rollout manifests (eval rollouts have none)."""
 
@@ -253,14 +254,26 @@ def _reused(cfg: DiagnoseCfg, on_step: Callable[[int], None] | None) -> None:
         on_step(t)
 
 
-def _diagnostic_rollouts(trained: TrainedModels, cfg: DiagnoseCfg, robots: tuple[str, ...],
-                         on_step: Callable[[int], None] | None) -> dict:
+def _diagnostic_rollouts(
+    trained: TrainedModels, cfg: DiagnoseCfg, robots: tuple[str, ...], on_step: Callable[[int], None] | None
+) -> dict:
     """Robot -> its rollout: the actor's sampled actions, the critic's inputs recorded, ``robots`` as one env."""
     from morfic_cli.evaluation.rollout import run_rollouts
 
-    return run_rollouts(trained.actor, trained.critic, trained.cfg.env, robots=robots, mode=cfg.mode,
-                        command_vx=cfg.command_vx, num_envs=cfg.num_envs, steps=cfg.steps, seed=cfg.seed,
-                        on_step=on_step, keep_obs=kept_groups(trained.cfg.env), sample_actions=True)
+    return run_rollouts(
+        trained.actor,
+        trained.critic,
+        trained.cfg.env,
+        robots=robots,
+        mode=cfg.mode,
+        command_vx=cfg.command_vx,
+        num_envs=cfg.num_envs,
+        steps=cfg.steps,
+        seed=cfg.seed,
+        on_step=on_step,
+        keep_obs=kept_groups(trained.cfg.env),
+        sample_actions=True,
+    )
 
 
 def collect_batch(
@@ -291,14 +304,16 @@ def collect_batch(
         return {robot: load_samples(store, rid) for robot, rid in found.items()}
     rollouts = _diagnostic_rollouts(trained, cfg, tuple(cfg.batch), on_step)
     return {
-        robot: load_samples(store, found[robot]) if found[robot] else
-        _store_samples(store, trained, rollouts.pop(robot), configs[robot], cfg)
+        robot: load_samples(store, found[robot])
+        if found[robot]
+        else _store_samples(store, trained, rollouts.pop(robot), configs[robot], cfg)
         for robot in cfg.batch
     }
 
 
-def _store_samples(store: Store, trained: TrainedModels, rollout: Rollout, config: dict[str, Any],
-                   cfg: DiagnoseCfg) -> Samples:
+def _store_samples(
+    store: Store, trained: TrainedModels, rollout: Rollout, config: dict[str, Any], cfg: DiagnoseCfg
+) -> Samples:
     """Store a collected diagnostic rollout (MCAP log + observation groups) as a ``rollout`` manifest."""
     from morfic_cli.evaluation.protocol import write_rollout_log
 
@@ -326,6 +341,5 @@ def _store_samples(store: Store, trained: TrainedModels, rollout: Rollout, confi
         )
     a = rollout.arrays
     return Samples(
-        rollout.robot, cfg.mode, rollout.obs, a["action"], a["reward"], a["value"], a["done"], a["time_out"], rid,
-        False
+        rollout.robot, cfg.mode, rollout.obs, a["action"], a["reward"], a["value"], a["done"], a["time_out"], rid, False
     )

@@ -100,8 +100,14 @@ def _values(rows: Sequence[dict[str, Any]], metric: str, **match: Any) -> list[f
 
 def flagged(rows: Sequence[dict[str, Any]], **match: Any) -> list[tuple[Any, Any, Any]]:
     """The (actor, variant, fit seed) of every fit flagged unconverged among the rows matching ``match``."""
-    return sorted({(r.get("actor"), r["variant"], r["fit_seed"]) for r in rows
-                   if not fit_kept(r) and all(r[k] == v for k, v in match.items())}, key=str)
+    return sorted(
+        {
+            (r.get("actor"), r["variant"], r["fit_seed"])
+            for r in rows
+            if not fit_kept(r) and all(r[k] == v for k, v in match.items())
+        },
+        key=str,
+    )
 
 
 def convergence_text(rows: Sequence[dict[str, Any]]) -> str:
@@ -136,17 +142,31 @@ def cell_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         for metric in SUMMARY_METRICS:
             vals = unit_values(mine, metric, unit)
             mean, lo, hi = stats.mean_interval(vals)
-            out.append({"command_vx": command, "robot": robot, "variant": variant, "multiplicative": mult[variant],
-                        "metric": metric, "mean": mean, "lo": lo, "hi": hi, "n": len([v for v in vals if v == v]),
-                        "n_fits": kept, "n_flagged": bad, "unit": unit})
+            out.append(
+                {
+                    "command_vx": command,
+                    "robot": robot,
+                    "variant": variant,
+                    "multiplicative": mult[variant],
+                    "metric": metric,
+                    "mean": mean,
+                    "lo": lo,
+                    "hi": hi,
+                    "n": len([v for v in vals if v == v]),
+                    "n_fits": kept,
+                    "n_flagged": bad,
+                    "unit": unit,
+                }
+            )
     return out
 
 
 def _judge(effects: Sequence[stats.Effect]) -> tuple[list[float], list[str], str]:
     """Holm over a claim's effects (each claimed > 0): (adjusted p's, each comparison's verdict, the claim's)."""
     adjusted = stats.holm([e.p for e in effects])
-    outcomes = [int(stats.outcome(e.estimate, p)) if e.has_test else stats.NONE
-                for e, p in zip(effects, adjusted, strict=True)]
+    outcomes = [
+        int(stats.outcome(e.estimate, p)) if e.has_test else stats.NONE for e, p in zip(effects, adjusted, strict=True)
+    ]
     return [float(p) for p in adjusted], [_WORD[o] for o in outcomes], stats.decide(outcomes)
 
 
@@ -167,8 +187,9 @@ def actor_means(rows: Sequence[dict[str, Any]], metric: str, **match: Any) -> di
     return {a: sum(v) / len(v) for a, v in by.items()}
 
 
-def contrast_effect(rows: Sequence[dict[str, Any]], metric: str, side_a: Sequence[str], side_b: Sequence[str],
-                    **match: Any) -> stats.Effect:
+def contrast_effect(
+    rows: Sequence[dict[str, Any]], metric: str, side_a: Sequence[str], side_b: Sequence[str], **match: Any
+) -> stats.Effect:
     """Mean over ``side_a``'s variants - mean over ``side_b``'s, tested over the study's unit.
 
     Over actors (:data:`ACTOR`): paired by actor, each actor's difference of its variants' means (an actor that
@@ -182,8 +203,9 @@ def contrast_effect(rows: Sequence[dict[str, Any]], metric: str, side_a: Sequenc
         if not side_a or not side_b:
             return stats.Effect(math.nan, math.nan, math.nan, 0, 0, why="a side has no values")
         actors = [x for x in dict.fromkeys(r.get("actor") for r in rows) if all(x in per[v] for v in per)]
-        diffs = [sum(per[v][x] for v in side_a) / len(side_a) - sum(per[v][x] for v in side_b) / len(side_b)
-                 for x in actors]
+        diffs = [
+            sum(per[v][x] for v in side_a) / len(side_a) - sum(per[v][x] for v in side_b) / len(side_b) for x in actors
+        ]
         return stats.paired_effect(diffs)
     a = [_values(rows, metric, variant=v, **match) for v in side_a]
     b = [_values(rows, metric, variant=v, **match) for v in side_b]
@@ -194,8 +216,12 @@ def contrast_effect(rows: Sequence[dict[str, Any]], metric: str, side_a: Sequenc
 
 def group_means(rows: Sequence[dict[str, Any]], metric: str, variants: Sequence[str], **match: Any) -> float:
     """Mean over ``variants`` of each variant's mean over the units (the level a contrast's side sits at)."""
-    means = [m for v in variants if (vals := [x for x in _values(rows, metric, variant=v, **match) if x == x])
-             for m in [sum(vals) / len(vals)]]
+    means = [
+        m
+        for v in variants
+        if (vals := [x for x in _values(rows, metric, variant=v, **match) if x == x])
+        for m in [sum(vals) / len(vals)]
+    ]
     return sum(means) / len(means) if means else math.nan
 
 
@@ -260,25 +286,80 @@ def verdict_rows(claims: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
     for c in claims:
         for r in c["robots"]:
-            comparisons = ([("multiplicative - additive", "ev", r["effect"], r["p_holm"], r["verdict"])]
-                           if c["claim"] == "a" else
-                           [(f"{p['other']} - film" if m == "flip" else f"film - {p['other']}", m, p[m],
-                             p[f"{m}_p_holm"], p[f"{m}_verdict"]) for p in r["pairs"] for m in ("flip", "cos_grad")])
+            comparisons = (
+                [("multiplicative - additive", "ev", r["effect"], r["p_holm"], r["verdict"])]
+                if c["claim"] == "a"
+                else [
+                    (
+                        f"{p['other']} - film" if m == "flip" else f"film - {p['other']}",
+                        m,
+                        p[m],
+                        p[f"{m}_p_holm"],
+                        p[f"{m}_verdict"],
+                    )
+                    for p in r["pairs"]
+                    for m in ("flip", "cos_grad")
+                ]
+            )
             m = len(c["robots"]) if c["claim"] == "a" else sum(2 * len(x["pairs"]) for x in c["robots"])
             for what, metric, e, p_holm, verdict in comparisons:
                 need = stats.seeds_needed(e, alpha=stats.ALPHA / max(m, 1)) if verdict == stats.CANNOT else None
-                out.append({"claim": c["claim"], "command_vx": c["command_vx"], "unit": c.get("unit", ""),
-                            "robot": r["robot"],
-                            "comparison": what, "metric": metric, "effect": e.estimate, "lo": e.lo, "hi": e.hi,
-                            "p": e.p, "p_holm": p_holm, "n_a": e.n_a, "n_b": e.n_b, "verdict": verdict,
-                            "seeds_needed": need, "robot_verdict": r["verdict"], "claim_verdict": c["verdict"]})
+                out.append(
+                    {
+                        "claim": c["claim"],
+                        "command_vx": c["command_vx"],
+                        "unit": c.get("unit", ""),
+                        "robot": r["robot"],
+                        "comparison": what,
+                        "metric": metric,
+                        "effect": e.estimate,
+                        "lo": e.lo,
+                        "hi": e.hi,
+                        "p": e.p,
+                        "p_holm": p_holm,
+                        "n_a": e.n_a,
+                        "n_b": e.n_b,
+                        "verdict": verdict,
+                        "seeds_needed": need,
+                        "robot_verdict": r["verdict"],
+                        "claim_verdict": c["verdict"],
+                    }
+                )
     return out
 
 
-VERDICT_COLUMNS: tuple[str, ...] = ("claim", "command_vx", "unit", "robot", "comparison", "metric", "effect", "lo",
-                                    "hi", "p", "p_holm", "n_a", "n_b", "verdict", "seeds_needed", "robot_verdict",
-                                    "claim_verdict")
+VERDICT_COLUMNS: tuple[str, ...] = (
+    "claim",
+    "command_vx",
+    "unit",
+    "robot",
+    "comparison",
+    "metric",
+    "effect",
+    "lo",
+    "hi",
+    "p",
+    "p_holm",
+    "n_a",
+    "n_b",
+    "verdict",
+    "seeds_needed",
+    "robot_verdict",
+    "claim_verdict",
+)
 """Columns of ``verdicts.csv``."""
-SUMMARY_COLUMNS: tuple[str, ...] = ("command_vx", "robot", "variant", "multiplicative", "metric", "mean", "lo", "hi",
-                                    "n", "n_fits", "n_flagged", "unit")
+SUMMARY_COLUMNS: tuple[str, ...] = (
+    "command_vx",
+    "robot",
+    "variant",
+    "multiplicative",
+    "metric",
+    "mean",
+    "lo",
+    "hi",
+    "n",
+    "n_fits",
+    "n_flagged",
+    "unit",
+)
 """Columns of ``summary.csv``."""

@@ -47,8 +47,9 @@ def _log_uniform(k: int, bounds: tuple[float, float] | torch.Tensor, gen: torch.
     return torch.exp(log_lo + (log_hi - log_lo) * u)
 
 
-def scale_masses(descriptors: torch.Tensor, upper: torch.Tensor, cfg: ActuationRandCfg,
-                 gen: torch.Generator) -> torch.Tensor:
+def scale_masses(
+    descriptors: torch.Tensor, upper: torch.Tensor, cfg: ActuationRandCfg, gen: torch.Generator
+) -> torch.Tensor:
     """The descriptors with their five masses x s_m, s_m log-uniform in [cfg.mass_scale[0], upper] per env.
 
     Args:
@@ -67,8 +68,9 @@ def scale_masses(descriptors: torch.Tensor, upper: torch.Tensor, cfg: ActuationR
     return out
 
 
-def sample_actuation(total_mass: torch.Tensor, template: Actuation, template_mass: float, cfg: ActuationRandCfg,
-                     gen: torch.Generator) -> Actuation:
+def sample_actuation(
+    total_mass: torch.Tensor, template: Actuation, template_mass: float, cfg: ActuationRandCfg, gen: torch.Generator
+) -> Actuation:
     """Gains and torque limits of k envs of these total masses, by the mass rule with log-uniform jitter.
 
     Kp = Kp_t x (M / M_t)^g x f_kp, Kd = Kd_t x (M / M_t)^g x f_kd (g = 1 with ``gains_with_mass``, else 0),
@@ -86,7 +88,7 @@ def sample_actuation(total_mass: torch.Tensor, template: Actuation, template_mas
     gain = ratio if cfg.gains_with_mass else torch.ones_like(ratio)
     f_kp, f_kd = _log_uniform(k, cfg.kp_factor, gen), _log_uniform(k, cfg.kd_factor, gen)
     f_tau = _log_uniform(k, cfg.torque_factor, gen)
-    torque = template.torque_limit.double() * (ratio ** cfg.torque_mass_exponent * f_tau)[:, None]
+    torque = template.torque_limit.double() * (ratio**cfg.torque_mass_exponent * f_tau)[:, None]
     return Actuation(template.kp.double() * gain * f_kp, template.kd.double() * gain * f_kd, torque)
 
 
@@ -96,8 +98,11 @@ def matched_actuation(total_mass: torch.Tensor, template: Actuation, template_ma
     Shapes: (k,) -> an :class:`Actuation` of k rows.
     """
     ratio = total_mass.double() / template_mass
-    return Actuation(template.kp.double() * ratio, template.kd.double() * ratio,
-                     template.torque_limit.double() * (ratio ** MATCHED_TORQUE_EXPONENT)[:, None])
+    return Actuation(
+        template.kp.double() * ratio,
+        template.kd.double() * ratio,
+        template.torque_limit.double() * (ratio**MATCHED_TORQUE_EXPONENT)[:, None],
+    )
 
 
 def initial_upper(cfg: ActuationRandCfg) -> float:

@@ -51,8 +51,9 @@ def sample_commands(n: int, ranges: CommandRanges, cfg: CommandCfg, gen: torch.G
         return torch.tensor(cfg.fixed, dtype=torch.float32, device=dev).expand(n, 3).clone()
     u = torch.rand((n, 3), generator=gen, device=dev)
     vx = torch.as_tensor(ranges.vx, dtype=torch.float64, device=dev)
-    rest = torch.tensor([[ranges.vy[0], ranges.yaw_rate[0]], [ranges.vy[1], ranges.yaw_rate[1]]],
-                        dtype=torch.float64, device=dev)
+    rest = torch.tensor(
+        [[ranges.vy[0], ranges.yaw_rate[0]], [ranges.vy[1], ranges.yaw_rate[1]]], dtype=torch.float64, device=dev
+    )
     lo_hi = torch.cat([vx[:, None], rest], dim=1).float()  # float64 -> float32: the rounding of torch.tensor(floats)
     lo, hi = lo_hi[0], lo_hi[1]
     cmd = lo + (hi - lo) * u
@@ -76,8 +77,12 @@ def widen_vx(ranges: CommandRanges, mean_tracking: float | torch.Tensor, cfg: Co
     """
     if isinstance(ranges.vx, torch.Tensor):
         vx = ranges.vx
-        wider = torch.stack([(vx[0] - cfg.curriculum_step).clamp(min=cfg.vx_limit[0]),
-                             (vx[1] + cfg.curriculum_step).clamp(max=cfg.vx_limit[1])])
+        wider = torch.stack(
+            [
+                (vx[0] - cfg.curriculum_step).clamp(min=cfg.vx_limit[0]),
+                (vx[1] + cfg.curriculum_step).clamp(max=cfg.vx_limit[1]),
+            ]
+        )
         new = torch.where(torch.as_tensor(mean_tracking, device=vx.device) >= cfg.curriculum_threshold, wider, vx)
         changed = (new != vx).any()
         vx.copy_(new)

@@ -107,8 +107,10 @@ class LocomotionEnv(VecEnv):
             raise ValueError(f"unknown env mode '{mode}'; valid modes are: {', '.join(MODES)}.")
         per_env = None if isinstance(robot, str) else tuple(robot)
         if per_env is not None and (mode not in TEMPLATE_MODES or len(per_env) != cfg.num_envs):
-            raise ValueError(f"one robot per env needs descriptor mode and {cfg.num_envs} names, got mode '{mode}' "
-                             f"and {len(per_env)} names.")
+            raise ValueError(
+                f"one robot per env needs descriptor mode and {cfg.num_envs} names, got mode '{mode}' "
+                f"and {len(per_env)} names."
+            )
         self.cfg = cfg
         self.mode = mode
         self.target: RobotSpec = load_robot(robot if per_env is None else per_env[0])
@@ -132,12 +134,15 @@ class LocomotionEnv(VecEnv):
             self.backend.set_morphology(self._all_ids, desc.expand(self.num_envs, -1).clone())
         elif mode in TEMPLATE_MODES:
             specs = {name: load_robot(name) for name in dict.fromkeys(per_env)}
-            desc = torch.stack([torch.as_tensor(as_descriptor(specs[name].descriptor), dtype=torch.float64)
-                                for name in per_env])
+            desc = torch.stack(
+                [torch.as_tensor(as_descriptor(specs[name].descriptor), dtype=torch.float64) for name in per_env]
+            )
             self.backend.set_morphology(self._all_ids, desc)
         if mode == "actuation-matched":
-            self._set_actuation(self._all_ids, matched_actuation(self.backend.params().total_mass,
-                                                                 self._template_actuation, self._template_mass))
+            self._set_actuation(
+                self._all_ids,
+                matched_actuation(self.backend.params().total_mass, self._template_actuation, self._template_mass),
+            )
         self.params: SimParams = self.backend.params()
         self._reset_envs(self._all_ids)
         if self.body_tokens and mode != "train":
@@ -201,7 +206,8 @@ class LocomotionEnv(VecEnv):
         self._template_actuation = Actuation(
             torch.tensor([spec.kp], dtype=torch.float64, device=dev),
             torch.tensor([spec.kd], dtype=torch.float64, device=dev),
-            torch.as_tensor(spec.torque_limit, dtype=torch.float64, device=dev)[None])
+            torch.as_tensor(spec.torque_limit, dtype=torch.float64, device=dev)[None],
+        )
         self.kp = torch.full((n,), float(spec.kp), dtype=torch.float64, device=dev)
         """Each env's Kp (N m/rad). Shape: (N,)."""
         self.kd = torch.full((n,), float(spec.kd), dtype=torch.float64, device=dev)
@@ -272,8 +278,9 @@ class LocomotionEnv(VecEnv):
             observations, rewards (N,), dones (N,), extras with ``time_outs`` (N,) and ``log`` (name -> 0-d tensor
             on the env's device), all on the env's device.
         """
-        a = torch.clamp(actions.detach().to(device=self.device, dtype=torch.float32), -self.cfg.action_clip,
-                        self.cfg.action_clip)
+        a = torch.clamp(
+            actions.detach().to(device=self.device, dtype=torch.float32), -self.cfg.action_clip, self.cfg.action_clip
+        )
         self.action_prev = self.actions
         self.actions = a
         self.action_buffer = torch.cat([a[:, None], self.action_buffer[:, :-1]], dim=1)
@@ -328,9 +335,22 @@ class LocomotionEnv(VecEnv):
     # ------------------------------------------------------------------ internals
     def _state(self, frame: SimFrame) -> EnvState:
         p = self.params
-        f = {k: getattr(frame, k).float() for k in (
-            "base_pos_w", "base_quat_w", "base_lin_vel_b", "base_ang_vel_b", "joint_pos", "joint_vel",
-            "joint_torque", "foot_pos_w", "foot_vel_w", "foot_force_w", "body_contact_force")}
+        f = {
+            k: getattr(frame, k).float()
+            for k in (
+                "base_pos_w",
+                "base_quat_w",
+                "base_lin_vel_b",
+                "base_ang_vel_b",
+                "joint_pos",
+                "joint_vel",
+                "joint_torque",
+                "foot_pos_w",
+                "foot_vel_w",
+                "foot_force_w",
+                "body_contact_force",
+            )
+        }
         phases = foot_phases(self.gait_phase, self.cfg.gait)
         return EnvState(
             base_pos_w=f["base_pos_w"],
@@ -378,8 +398,16 @@ class LocomotionEnv(VecEnv):
         self.backend.set_dynamics(ids, dyn.friction, dyn.restitution, dyn.com_offset, dyn.joint_friction)
         self.params = self.backend.params()
         if self.actuation_rand:  # gains and torque limits follow the mass just drawn
-            self._set_actuation(ids, sample_actuation(self.params.total_mass[ids], self._template_actuation,
-                                                      self._template_mass, self.cfg.rand.actuation, self.gen))
+            self._set_actuation(
+                ids,
+                sample_actuation(
+                    self.params.total_mass[ids],
+                    self._template_actuation,
+                    self._template_mass,
+                    self.cfg.rand.actuation,
+                    self.gen,
+                ),
+            )
             self.params = self.backend.params()
         if self.body_tokens and self.mode == "train":  # a new morphology at every reset
             self._describe(ids)
@@ -394,8 +422,9 @@ class LocomotionEnv(VecEnv):
             base_pos[:, 2] = self._pool_init_height[self.geometry_ids[ids]]
         else:
             base_pos[:, 2] = self.spec.init_height
-        self.backend.reset_envs(ids, base_pos, yaw_quat(yaw), torch.zeros(k, 6, device=dev), q,
-                                torch.zeros(k, NUM_JOINTS, device=dev))
+        self.backend.reset_envs(
+            ids, base_pos, yaw_quat(yaw), torch.zeros(k, 6, device=dev), q, torch.zeros(k, NUM_JOINTS, device=dev)
+        )
         self.latency[ids] = sample_latency(k, self.cfg.rand, self.gen)
         self.action_buffer[ids] = 0.0
         self.actions[ids] = 0.0
@@ -426,11 +455,17 @@ class LocomotionEnv(VecEnv):
                 "history": self.history.clone(),
                 "critic": self.critic_history.clone(),
                 "privileged": O.privileged_obs(
-                    p.friction.float(), p.restitution.float(), p.base_mass.float(), p.com_offset.float(),
+                    p.friction.float(),
+                    p.restitution.float(),
+                    p.base_mass.float(),
+                    p.com_offset.float(),
                     p.joint_friction.float(),
                 ),
-                "morphology": (self._extended_obs() if self.cfg.obs.extended_morphology
-                               else O.morphology_obs(p.descriptor.float(), self._support_lo, self._support_hi)),
+                "morphology": (
+                    self._extended_obs()
+                    if self.cfg.obs.extended_morphology
+                    else O.morphology_obs(p.descriptor.float(), self._support_lo, self._support_hi)
+                ),
             },
             batch_size=[self.num_envs],
             device=self.device,
@@ -439,8 +474,17 @@ class LocomotionEnv(VecEnv):
     def extended_descriptor(self) -> torch.Tensor:
         """Each env's extended descriptor in raw units (:mod:`morfic_cli.morphology.extended`). Shape: (N, 28)."""
         p = self.params
-        return torch.cat([p.descriptor.double(), p.total_mass.double()[:, None], self.kp[:, None], self.kd[:, None],
-                          p.torque_limit.double()[:, :3], self.geometry_vec], dim=1)
+        return torch.cat(
+            [
+                p.descriptor.double(),
+                p.total_mass.double()[:, None],
+                self.kp[:, None],
+                self.kd[:, None],
+                p.torque_limit.double()[:, :3],
+                self.geometry_vec,
+            ],
+            dim=1,
+        )
 
     def _extended_obs(self) -> torch.Tensor:
         return O.extended_morphology_obs(self.extended_descriptor())
@@ -500,8 +544,9 @@ class LocomotionEnv(VecEnv):
         # the ones that survive, widen the range long before the policy walked.)
         # Decided once per max episode length (as legged_gym) on every episode that ended in that window.
         # float64 on the device: the same arithmetic as a Python float sum of the float32 episode sums
-        self._tracking_sum = (self._tracking_sum
-                              + self.episode_lin_tracking[ids].sum().double() / (4.0 * self.max_episode_length))
+        self._tracking_sum = self._tracking_sum + self.episode_lin_tracking[ids].sum().double() / (
+            4.0 * self.max_episode_length
+        )
         self._tracking_count += len(ids)
         return log
 
@@ -523,9 +568,21 @@ class LocomotionEnv(VecEnv):
 
     # ------------------------------------------------------------------ checkpoints
     _TENSORS = (
-        "episode_length_buf", "actions", "action_prev", "action_buffer", "latency", "commands", "gait_phase",
-        "gait_frequency", "joint_vel_prev", "foot_vel_prev", "history", "critic_history", "obs_buf",
-        "episode_lin_tracking", "nominal_foot_pos_b",
+        "episode_length_buf",
+        "actions",
+        "action_prev",
+        "action_buffer",
+        "latency",
+        "commands",
+        "gait_phase",
+        "gait_frequency",
+        "joint_vel_prev",
+        "foot_vel_prev",
+        "history",
+        "critic_history",
+        "obs_buf",
+        "episode_lin_tracking",
+        "nominal_foot_pos_b",
     )
 
     def state_dict(self) -> dict:
@@ -550,18 +607,36 @@ class LocomotionEnv(VecEnv):
             "command_vx": tuple(float(v) for v in self.command_ranges.vx),
             "generator": self.gen.get_state(),
             "params": {
-                "descriptor": p.descriptor.cpu().clone(), "friction": p.friction.cpu().clone(),
-                "restitution": p.restitution.cpu().clone(), "com_offset": p.com_offset.cpu().clone(),
+                "descriptor": p.descriptor.cpu().clone(),
+                "friction": p.friction.cpu().clone(),
+                "restitution": p.restitution.cpu().clone(),
+                "com_offset": p.com_offset.cpu().clone(),
                 "joint_friction": p.joint_friction.cpu().clone(),
             },
             "backend": self.backend.state_dict(),
             **({"geometry_ids": self.geometry_ids.cpu().clone()} if self.geometry_pool is not None else {}),
-            **({"actuation": {"kp": self.kp.cpu().clone(), "kd": self.kd.cpu().clone(),
-                              "torque_limit": p.torque_limit[:, :3].cpu().clone(),
-                              "mass_upper": float(self.mass_upper)}} if self.actuation_rand else {}),
-            **({"body_tokens": {"foot_touchdown_time": self.foot_touchdown_time.cpu().clone(),
-                                "foot_contact_prev": self.foot_contact_prev.cpu().clone()}}
-               if self.body_tokens else {}),
+            **(
+                {
+                    "actuation": {
+                        "kp": self.kp.cpu().clone(),
+                        "kd": self.kd.cpu().clone(),
+                        "torque_limit": p.torque_limit[:, :3].cpu().clone(),
+                        "mass_upper": float(self.mass_upper),
+                    }
+                }
+                if self.actuation_rand
+                else {}
+            ),
+            **(
+                {
+                    "body_tokens": {
+                        "foot_touchdown_time": self.foot_touchdown_time.cpu().clone(),
+                        "foot_contact_prev": self.foot_contact_prev.cpu().clone(),
+                    }
+                }
+                if self.body_tokens
+                else {}
+            ),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -601,8 +676,9 @@ class LocomotionEnv(VecEnv):
             getattr(self, k).copy_(state["tensors"][k])
         dev = self.device
         self.episode_sums = {k: v.to(dev).clone() for k, v in state["episode_sums"].items()}
-        self._obs = TensorDict({k: v.to(dev).clone() for k, v in state["obs"].items()}, batch_size=[self.num_envs],
-                               device=dev)
+        self._obs = TensorDict(
+            {k: v.to(dev).clone() for k, v in state["obs"].items()}, batch_size=[self.num_envs], device=dev
+        )
         c = state["counters"]
         self.common_step_counter = c["common_step_counter"]
         self._nonfinite = torch.tensor(int(c["nonfinite_resets"]), dtype=torch.long, device=dev)
@@ -647,4 +723,3 @@ def _restore_generator(gen: torch.Generator, saved: torch.Tensor) -> None:
             other = torch.Generator(device="cuda")
             other.set_state(saved)
         gen.manual_seed(int(torch.randint(0, 2**62, (1,), generator=other, device=other.device)))
-

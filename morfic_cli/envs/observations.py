@@ -45,10 +45,16 @@ POLICY_LAYOUT: tuple[tuple[str, int, int], ...] = (
 
 
 JOINT_DESCRIPTION_NORM: tuple[tuple[float, float], ...] = (
-    (0.0, 0.5), (0.0, 0.5), (0.0, 0.5),  # anchor (m)
-    (0.0, 1.0), (0.0, 1.0), (0.0, 1.0),  # axis
+    (0.0, 0.5),
+    (0.0, 0.5),
+    (0.0, 0.5),  # anchor (m)
+    (0.0, 1.0),
+    (0.0, 1.0),
+    (0.0, 1.0),  # axis
     (1.0, 1.0),  # direct child joints: 1 -> 0, 0 -> -1 (URMA's "children - 1")
-    (0.0, 4.6), (0.0, 4.6), (0.0, 4.6),  # q0, q_min, q_max (rad; URMA's / 4.6)
+    (0.0, 4.6),
+    (0.0, 4.6),
+    (0.0, 4.6),  # q0, q_min, q_max (rad; URMA's / 4.6)
     (75.0, 75.0),  # torque limit (N m): 0..150
     (25.0, 25.0),  # velocity limit (rad/s): 0..50
     (0.0, 1.0),  # damping (N m s/rad)
@@ -62,7 +68,9 @@ JOINT_DESCRIPTION_NORM: tuple[tuple[float, float], ...] = (
 the observation is (raw - centre) / half-width, about [-1, 1] over the seven robots (URMA's ranges are set for its
 sixteen robots, humanoids included; these for ours)."""
 FOOT_DESCRIPTION_NORM: tuple[tuple[float, float], ...] = (
-    (0.0, 0.5), (0.0, 0.5), (0.0, 0.5),  # foot position (m)
+    (0.0, 0.5),
+    (0.0, 0.5),
+    (0.0, 0.5),  # foot position (m)
     (0.025, 0.025),  # foot radius (m): 0..0.05
     (0.1, 0.1),  # foot mass (kg): 0..0.2
     (30.0, 30.0),  # total mass (kg)

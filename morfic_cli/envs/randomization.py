@@ -34,8 +34,12 @@ def _uniform(shape: tuple[int, ...], lo: float, hi: float, gen: torch.Generator)
 
 def nominal_dynamics(k: int, device: torch.device | str = "cpu") -> DynamicsSample:
     """No randomisation: friction 1, restitution 0, no COM offset, no joint friction (on ``device``)."""
-    return DynamicsSample(torch.ones(k, device=device), torch.zeros(k, device=device),
-                          torch.zeros(k, 3, device=device), torch.zeros(k, NUM_JOINTS, device=device))
+    return DynamicsSample(
+        torch.ones(k, device=device),
+        torch.zeros(k, device=device),
+        torch.zeros(k, 3, device=device),
+        torch.zeros(k, NUM_JOINTS, device=device),
+    )
 
 
 def sample_dynamics(k: int, cfg: DomainRandCfg, gen: torch.Generator) -> DynamicsSample:

@@ -110,17 +110,19 @@ def training_reference(rows: Sequence[dict[str, Any]], window: int = 50) -> Trai
     usable = [r for r in rows if _finite(r.get("episode_length_s"))]
     if not usable:
         raise ValueError("the training curve has no episode length (no episode ended during training)")
-    tail = usable[-max(1, window):]
+    tail = usable[-max(1, window) :]
     lengths = [float(r["episode_length_s"]) for r in tail]
     reach = [float(r["curriculum.vx_max"]) for r in tail if _finite(r.get("curriculum.vx_max"))]
     vx_max = statistics.mode(reach) if reach else None  # the range that held over most of the window
     sd = statistics.stdev(lengths) if len(lengths) > 1 else 0.0
-    return TrainingReference(statistics.fmean(lengths), sd, (int(tail[0]["iteration"]), int(tail[-1]["iteration"])),
-                             vx_max)
+    return TrainingReference(
+        statistics.fmean(lengths), sd, (int(tail[0]["iteration"]), int(tail[-1]["iteration"])), vx_max
+    )
 
 
-def curriculum_range(vx_max: float, vx_init: tuple[float, float], vx_limit: tuple[float, float],
-                     step: float) -> tuple[float, float]:
+def curriculum_range(
+    vx_max: float, vx_init: tuple[float, float], vx_limit: tuple[float, float], step: float
+) -> tuple[float, float]:
     """The vx command range of a curriculum whose upper end has reached ``vx_max``.
 
     The curriculum widens both ends by ``step`` per update, each clamped to ``vx_limit``

@@ -88,14 +88,24 @@ def verdict_line(outcomes: np.ndarray, verdict: str | None = None) -> tuple[str,
     if verdict is None:
         verdict = "ok" if 2 * ok >= len(outcomes) else max(FAILURES, key=lambda k: counts[k])
     detail = ", ".join(f"{k} {counts[k]}" for k in FAILURES if counts[k])
-    return (f"verdict: {verdict} \u2013 valid {ok}/{len(outcomes)}" + (f" ({detail})" if detail else ""),
-            verdict == "ok")
+    return (
+        f"verdict: {verdict} \u2013 valid {ok}/{len(outcomes)}" + (f" ({detail})" if detail else ""),
+        verdict == "ok",
+    )
 
 
-def rollout_figure(vx: np.ndarray, terminated: np.ndarray, dt: float, command_vx: float, title: str, *,
-                   foot_slip: np.ndarray | None = None, outcomes: np.ndarray | None = None,
-                   verdict: str | None = None, max_foot_slip: float = ValidityCfg.max_foot_slip
-                   ) -> tuple[bytes, bytes]:
+def rollout_figure(
+    vx: np.ndarray,
+    terminated: np.ndarray,
+    dt: float,
+    command_vx: float,
+    title: str,
+    *,
+    foot_slip: np.ndarray | None = None,
+    outcomes: np.ndarray | None = None,
+    verdict: str | None = None,
+    max_foot_slip: float = ValidityCfg.max_foot_slip,
+) -> tuple[bytes, bytes]:
     """Speed, foot slip, survival and the validity verdict of one rollout (module docstring).
 
     Args:
@@ -122,16 +132,27 @@ def rollout_figure(vx: np.ndarray, terminated: np.ndarray, dt: float, command_vx
     n = vx.shape[1]
     panels = 3 if foot_slip is not None else 2
     ratios = (2.2, 1.2, 1.0)[:panels] if panels == 3 else (2.2, 1.0)
-    fig, axes = plt.subplots(panels, 1, figsize=(6.4, 2.0 + 1.25 * panels), sharex=True, height_ratios=ratios,
-                             constrained_layout=True)
+    fig, axes = plt.subplots(
+        panels, 1, figsize=(6.4, 2.0 + 1.25 * panels), sharex=True, height_ratios=ratios, constrained_layout=True
+    )
     ax, ax_s = axes[0], axes[-1]
-    ax.fill_between(c["t"], c["low"], c["high"], color="C0", alpha=0.25, lw=0,
-                    label=f"{BAND[0]:g}\u2013{BAND[1]:g}th pct.")
+    ax.fill_between(
+        c["t"], c["low"], c["high"], color="C0", alpha=0.25, lw=0, label=f"{BAND[0]:g}\u2013{BAND[1]:g}th pct."
+    )
     ax.plot(c["t"], c["mean"], color="C0", lw=1.4, label=f"mean, alive of {n}")
     ax.axhline(command_vx, color="black", ls="--", lw=1.0, label=f"command {command_vx:g} m/s")
     if len(c["fall_t"]):
-        ax.plot(c["fall_t"], np.zeros_like(c["fall_t"]), "|", color="C3", ms=10, mew=1.5,
-                label=f"falls ({len(c['fall_t'])})", transform=ax.get_xaxis_transform(), clip_on=False)
+        ax.plot(
+            c["fall_t"],
+            np.zeros_like(c["fall_t"]),
+            "|",
+            color="C3",
+            ms=10,
+            mew=1.5,
+            label=f"falls ({len(c['fall_t'])})",
+            transform=ax.get_xaxis_transform(),
+            clip_on=False,
+        )
     top = np.nanmax([command_vx, *(c["high"][np.isfinite(c["high"])] if np.isfinite(c["high"]).any() else [0])])
     bottom = min(0.0, np.nanmin(c["low"]) if np.isfinite(c["low"]).any() else 0.0)
     ax.set_ylim(bottom - 0.1, 1.15 * top + 0.1)
@@ -150,16 +171,20 @@ def rollout_figure(vx: np.ndarray, terminated: np.ndarray, dt: float, command_vx
         run = speed_survival(running_mean(slip, alive_mask(terminated)), terminated, dt)
         ax_f.plot(now["t"], now["mean"], color="C1", lw=0.7, alpha=0.45, label="per step (mean)")
         ax_f.fill_between(run["t"], run["low"], run["high"], color="C1", alpha=0.25, lw=0)
-        ax_f.plot(run["t"], run["mean"], color="C1", lw=1.6,
-                  label=f"each env's mean so far\n(mean, {BAND[0]:g}\u2013{BAND[1]:g}th pct.)")
+        ax_f.plot(
+            run["t"],
+            run["mean"],
+            color="C1",
+            lw=1.6,
+            label=f"each env's mean so far\n(mean, {BAND[0]:g}\u2013{BAND[1]:g}th pct.)",
+        )
         ax_f.axhline(max_foot_slip, color="C3", ls=":", lw=1.2, label=f"drags feet above\n{max_foot_slip:g} m/s")
         tops = [2.0 * max_foot_slip, *(1.1 * np.nanmax(x) for x in (run["high"], now["mean"]) if np.isfinite(x).any())]
         ax_f.set_ylim(0.0, max(tops))
         ax_f.set_ylabel("foot slip\n(m/s)", fontsize=9)
         ax_f.grid(alpha=0.3)
         ax_f.tick_params(labelsize=8)
-        ax_f.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
-                    handlelength=1.2)
+        ax_f.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, handlelength=1.2)
     ax_s.plot(c["t"], 100.0 * c["survival"], color="C2", lw=1.4, drawstyle="steps-post")
     ax_s.set_ylim(-5, 105)
     ax_s.set_ylabel("alive (%)", fontsize=9)
@@ -227,8 +252,14 @@ def table_figure(row: dict[str, Any], title: str) -> tuple[bytes, bytes]:
     shares = [100.0 * _number(row, "survival"), 100.0 * valid]
     ax_s.bar([0, 1], [0.0 if np.isnan(v) else v for v in shares], color=["C2", "C4"], width=0.6)
     for k, v in enumerate(shares):
-        ax_s.annotate("n/a" if np.isnan(v) else f"{v:.0f} %", (k, 0.0 if np.isnan(v) else v), xytext=(0, 3),
-                      textcoords="offset points", ha="center", fontsize=8)
+        ax_s.annotate(
+            "n/a" if np.isnan(v) else f"{v:.0f} %",
+            (k, 0.0 if np.isnan(v) else v),
+            xytext=(0, 3),
+            textcoords="offset points",
+            ha="center",
+            fontsize=8,
+        )
     ax_s.set_xticks([0, 1], ["alive at the end (S)", "valid gait"], fontsize=8)
     ax_s.set_ylim(0, 112)
     ax_s.set_ylabel("envs (%)", fontsize=9)
@@ -236,10 +267,19 @@ def table_figure(row: dict[str, Any], title: str) -> tuple[bytes, bytes]:
     ax_s.tick_params(labelsize=8)
     verdict = str(row.get("verdict") or "n/a")
     counted = f"valid {round(valid * n)}/{int(n)}" if np.isfinite(valid) and np.isfinite(n) else "valid n/a"
-    fig.suptitle(f"verdict: {verdict} – {counted}", fontsize=9, fontweight="bold",
-                 color="C2" if verdict == "ok" else "C3")
-    fig.text(0.5, -0.02, "from the eval table: the time series was left out (a results-only bundle); import the "
-             "run's weights and `morfic eval` it to draw it", ha="center", va="top", fontsize=7, color="0.35")
+    fig.suptitle(
+        f"verdict: {verdict} – {counted}", fontsize=9, fontweight="bold", color="C2" if verdict == "ok" else "C3"
+    )
+    fig.text(
+        0.5,
+        -0.02,
+        "from the eval table: the time series was left out (a results-only bundle); import the "
+        "run's weights and `morfic eval` it to draw it",
+        ha="center",
+        va="top",
+        fontsize=7,
+        color="0.35",
+    )
     png, pdf = io.BytesIO(), io.BytesIO()
     fig.savefig(png, format="png", dpi=110, bbox_inches="tight")
     fig.savefig(pdf, format="pdf", metadata={"CreationDate": None}, bbox_inches="tight")
@@ -247,8 +287,9 @@ def table_figure(row: dict[str, Any], title: str) -> tuple[bytes, bytes]:
     return png.getvalue(), pdf.getvalue()
 
 
-def figure_or_table(store: Store, rollout_id: str, row: dict[str, Any] | None, title: str
-                    ) -> tuple[bytes, bytes] | None:
+def figure_or_table(
+    store: Store, rollout_id: str, row: dict[str, Any] | None, title: str
+) -> tuple[bytes, bytes] | None:
     """The ``(png, pdf)`` figure of rollout ``rollout_id``: the stored one, or :func:`table_figure` of ``row``.
 
     The stored ``speed.png`` / ``speed.pdf`` when the store holds them; drawn from the eval row when a
@@ -278,16 +319,18 @@ def write_figures(store: Store, eval_id: str, out: Path) -> list[Path]:
     rows = {}
     if "eval.csv" in manifest.files:
         text = store.read_file(eval_id, "eval.csv").decode()
-        rows = {rollout_role(r["robot"], r["mode"], float(r["command_vx"])): r
-                for r in csv.DictReader(io.StringIO(text))}
+        rows = {
+            rollout_role(r["robot"], r["mode"], float(r["command_vx"])): r for r in csv.DictReader(io.StringIO(text))
+        }
     run = manifest.meta.get("run", "")
     written = []
     for role, rid in manifest.inputs.items():
         if not role.startswith("rollout/"):
             continue
         row = rows.get(role)
-        title = (f"{run} on {row['robot']}, {row['mode']} mode, command {float(row['command_vx']):g} m/s"
-                 if row else role)
+        title = (
+            f"{run} on {row['robot']}, {row['mode']} mode, command {float(row['command_vx']):g} m/s" if row else role
+        )
         figure = figure_or_table(store, rid, row, title)
         if figure is None:
             continue

@@ -56,9 +56,15 @@ def video_frames(result: EvalResult, every: int = VIDEO_EVERY) -> int:
     return sum(math.ceil(r.arrays["done"].shape[0] / every) for r in result.rollouts.values() if r.models)
 
 
-def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: int = VIDEO_EVERY,
-                 on_video: Callable[[str], None] | None = None,
-                 on_frame: Callable[[], None] | None = None) -> list[Path | str]:
+def store_videos(
+    store: Store,
+    result: EvalResult,
+    out: Path | None,
+    *,
+    every: int = VIDEO_EVERY,
+    on_video: Callable[[str], None] | None = None,
+    on_frame: Callable[[], None] | None = None,
+) -> list[Path | str]:
     """Render every rollout of ``result`` that kept models, store each as a ``media`` manifest.
 
     Args:
@@ -91,10 +97,12 @@ def store_videos(store: Store, result: EvalResult, out: Path | None, *, every: i
         data, ext = encode_video(frames, fps)
         sheet = frame_grid_png(frames, n=6, fps=fps)
         mid = store.publish(
-            "media", config={"every": every, "fps": fps, "num_envs": len(models)},
+            "media",
+            config={"every": every, "fps": fps, "num_envs": len(models)},
             inputs={"rollout": inputs[role], "eval": result.id},
             files={f"video.{ext}": data, "frames.png": sheet},
-            meta={"robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx}).id
+            meta={"robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx},
+        ).id
         if out is None:
             written.append(mid)
             continue

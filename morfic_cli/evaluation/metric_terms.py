@@ -61,8 +61,15 @@ class RolloutData:
     def transfer(self) -> TransferMetrics:
         """The paper's metrics of this rollout (:func:`~morfic_cli.evaluation.metrics.transfer_metrics`)."""
         a = self.arrays
-        return transfer_metrics(a["base_lin_vel"][..., 0], self.terminated, self.command_vx, self.dt,
-                                tilt=a["tilt"], height_ratio=a["height_ratio"], foot_slip=a["foot_slip"])
+        return transfer_metrics(
+            a["base_lin_vel"][..., 0],
+            self.terminated,
+            self.command_vx,
+            self.dt,
+            tilt=a["tilt"],
+            height_ratio=a["height_ratio"],
+            foot_slip=a["foot_slip"],
+        )
 
 
 @dataclass(frozen=True)
@@ -138,35 +145,92 @@ def _cell_over_seeds(rows: Rows) -> str:
 
 
 METRICS: list[MetricTerm] = [
-    MetricTerm("vx_mean", _paper("vx_mean"), "m/s", "v_x: per env the mean forward velocity over its alive steps, "
-               "then the mean over envs", higher_is_better=True, seeds=(SeedColumn("vx", seed_mean("vx_mean")),)),
-    MetricTerm("vx_std", _paper("vx_std"), "m/s", "σ, the paper's ± term: std over every alive (env, step) sample",
-               seeds=(SeedColumn("vx_std", step_sigma),
-                      SeedColumn("vx_seed_std", seed_spread("vx_mean"), header="σ seeds"))),
+    MetricTerm(
+        "vx_mean",
+        _paper("vx_mean"),
+        "m/s",
+        "v_x: per env the mean forward velocity over its alive steps, then the mean over envs",
+        higher_is_better=True,
+        seeds=(SeedColumn("vx", seed_mean("vx_mean")),),
+    ),
+    MetricTerm(
+        "vx_std",
+        _paper("vx_std"),
+        "m/s",
+        "σ, the paper's ± term: std over every alive (env, step) sample",
+        seeds=(SeedColumn("vx_std", step_sigma), SeedColumn("vx_seed_std", seed_spread("vx_mean"), header="σ seeds")),
+    ),
     MetricTerm("vx_env_std", _paper("vx_env_std"), "m/s", "std over envs of the per-env means (not the paper's σ)"),
     MetricTerm("vx_step_mean", _paper("vx_step_mean"), "m/s", "mean over the alive (env, step) samples"),
     MetricTerm("n_alive", _paper("n_alive"), "count", "alive (env, step) samples behind σ"),
-    MetricTerm("vx_peak_1s_mean", _paper("vx_peak_1s_mean"), "m/s", "best 1 s moving average of v_x, mean over envs",
-               fmt=".2f", higher_is_better=True,
-               seeds=(SeedColumn("vx_peak_1s", seed_mean("vx_peak_1s_mean"), header="peak 1 s"),),
-               show=2, header="peak", legend="peak: best 1 s moving average (morfic's extra)", drop=3),
+    MetricTerm(
+        "vx_peak_1s_mean",
+        _paper("vx_peak_1s_mean"),
+        "m/s",
+        "best 1 s moving average of v_x, mean over envs",
+        fmt=".2f",
+        higher_is_better=True,
+        seeds=(SeedColumn("vx_peak_1s", seed_mean("vx_peak_1s_mean"), header="peak 1 s"),),
+        show=2,
+        header="peak",
+        legend="peak: best 1 s moving average (morfic's extra)",
+        drop=3,
+    ),
     MetricTerm("vx_peak_1s_std", _paper("vx_peak_1s_std"), "m/s", "std over envs of that peak"),
-    MetricTerm("survival", _paper("survival"), "1", "S: fraction of envs alive at the last step",
-               higher_is_better=True, seeds=(SeedColumn("survival", seed_mean("survival")),
-                                             SeedColumn("survival_seed_std", seed_spread("survival")))),
-    MetricTerm("tracking_ratio", _paper("tracking_ratio"), "1", "v_x / vx_cmd", fmt=".2f",
-               seeds=(SeedColumn("tracking_ratio", seed_mean("tracking_ratio")),), show=3, header="track",
-               legend="track: v_x / cmd", drop=2),
-    MetricTerm("valid", _paper("valid"), "bool", "at least half the envs survive with a valid gait",
-               higher_is_better=True),
-    MetricTerm("valid_fraction", _paper("valid_fraction"), "1", "fraction of envs that survive with a valid gait",
-               higher_is_better=True, seeds=(SeedColumn("valid_fraction", seed_mean("valid_fraction")),)),
-    MetricTerm("verdict", _paper("verdict"), "text", '"ok" or the most common failure', fmt=None, show=4,
-               header="validity", legend="validity: moving, upright, no dragging", align="left"),
-    MetricTerm("cell", lambda r: paper_cell(r.transfer), "text", "the paper's cell v_x ± σ / S", fmt=None,
-               seeds=(SeedColumn("cell", _cell_over_seeds),), show=1, header="v_x ± σ / S",
-               legend="v_x: mean forward velocity over alive steps (at 2.5 m/s also the paper's v_x^max); σ: std over "
-               "all alive (env, step) samples; S: survival"),
+    MetricTerm(
+        "survival",
+        _paper("survival"),
+        "1",
+        "S: fraction of envs alive at the last step",
+        higher_is_better=True,
+        seeds=(SeedColumn("survival", seed_mean("survival")), SeedColumn("survival_seed_std", seed_spread("survival"))),
+    ),
+    MetricTerm(
+        "tracking_ratio",
+        _paper("tracking_ratio"),
+        "1",
+        "v_x / vx_cmd",
+        fmt=".2f",
+        seeds=(SeedColumn("tracking_ratio", seed_mean("tracking_ratio")),),
+        show=3,
+        header="track",
+        legend="track: v_x / cmd",
+        drop=2,
+    ),
+    MetricTerm(
+        "valid", _paper("valid"), "bool", "at least half the envs survive with a valid gait", higher_is_better=True
+    ),
+    MetricTerm(
+        "valid_fraction",
+        _paper("valid_fraction"),
+        "1",
+        "fraction of envs that survive with a valid gait",
+        higher_is_better=True,
+        seeds=(SeedColumn("valid_fraction", seed_mean("valid_fraction")),),
+    ),
+    MetricTerm(
+        "verdict",
+        _paper("verdict"),
+        "text",
+        '"ok" or the most common failure',
+        fmt=None,
+        show=4,
+        header="validity",
+        legend="validity: moving, upright, no dragging",
+        align="left",
+    ),
+    MetricTerm(
+        "cell",
+        lambda r: paper_cell(r.transfer),
+        "text",
+        "the paper's cell v_x ± σ / S",
+        fmt=None,
+        seeds=(SeedColumn("cell", _cell_over_seeds),),
+        show=1,
+        header="v_x ± σ / S",
+        legend="v_x: mean forward velocity over alive steps (at 2.5 m/s also the paper's v_x^max); σ: std over "
+        "all alive (env, step) samples; S: survival",
+    ),
 ]
 """The eval metrics, in ``eval.csv``'s column order (append a new one at the end)."""
 

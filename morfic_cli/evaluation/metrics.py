@@ -193,8 +193,9 @@ def transfer_metrics(
     env_vx = per_env_mean(vx, alive)
     env_peak = per_env_max_moving_average(vx, alive, max(1, round(1.0 / dt)))
     survived = alive[-1]
-    outcomes = env_outcomes(vx, terminated, command_vx, tilt=tilt, height_ratio=height_ratio, foot_slip=foot_slip,
-                            cfg=cfg)
+    outcomes = env_outcomes(
+        vx, terminated, command_vx, tilt=tilt, height_ratio=height_ratio, foot_slip=foot_slip, cfg=cfg
+    )
     vx_mean, vx_env_std = mean_std(env_vx)
     step_mean, step_std, n_alive = alive_step_stats(vx, alive)
     peak_mean, peak_std = mean_std(env_peak)
@@ -202,11 +203,18 @@ def transfer_metrics(
     failures = {k: int((outcomes == k).sum()) for k in FAILURES}
     verdict = "ok" if valid_fraction >= 0.5 else max(failures, key=lambda k: failures[k])
     return TransferMetrics(
-        vx_mean=vx_mean, vx_std=step_std, vx_env_std=vx_env_std, vx_step_mean=step_mean, n_alive=n_alive,
-        vx_peak_1s_mean=peak_mean, vx_peak_1s_std=peak_std,
+        vx_mean=vx_mean,
+        vx_std=step_std,
+        vx_env_std=vx_env_std,
+        vx_step_mean=step_mean,
+        n_alive=n_alive,
+        vx_peak_1s_mean=peak_mean,
+        vx_peak_1s_std=peak_std,
         survival=float(survived.mean()),
         tracking_ratio=vx_mean / command_vx if command_vx else math.nan,
-        valid=valid_fraction >= 0.5, valid_fraction=valid_fraction, verdict=verdict,
+        valid=valid_fraction >= 0.5,
+        valid_fraction=valid_fraction,
+        verdict=verdict,
     )
 
 

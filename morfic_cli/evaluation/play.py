@@ -82,9 +82,14 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None] | None = None,
-         on_step: Callable[[int], None] | None = None,
-         on_behind: Callable[[float, float], None] | None = None) -> int:
+def play(
+    trained: TrainedModels,
+    cfg: PlayCfg,
+    *,
+    on_ready: Callable[[Any], None] | None = None,
+    on_step: Callable[[int], None] | None = None,
+    on_behind: Callable[[float, float], None] | None = None,
+) -> int:
     """Run the policy until ``cfg.steps`` steps or Ctrl-C.
 
     Ctrl-C (SIGINT) only asks the loop to stop after the current step, so the simulation, the server and the
@@ -113,8 +118,10 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
     from morfic_cli.recording.scene import RolloutScene
 
     if cfg.viewer and not has_display():
-        raise MorficError("--viewer opens MuJoCo's window and needs a display (DISPLAY is not set); without "
-                          "--viewer, `morfic play` serves the live view to Foxglove instead.")
+        raise MorficError(
+            "--viewer opens MuJoCo's window and needs a display (DISPLAY is not set); without "
+            "--viewer, `morfic play` serves the live view to Foxglove instead."
+        )
     env_cfg = rollout_env_cfg(trained.cfg.env, cfg.num_envs, 1, cfg.command_vx)
     env = LocomotionEnv(env_cfg, mode=cfg.mode, robot=cfg.robot, seed=cfg.seed)
     live = log = viewer = None
@@ -129,7 +136,7 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, on_sigint) if in_main else None
     try:
-        models, info = env.backend.models[:cfg.num_envs], env.backend.info
+        models, info = env.backend.models[: cfg.num_envs], env.backend.info
         scene = RolloutScene(models, range(len(models)), info.qpos_adr)
         nominal = env.params.nominal_height.float()
         obs = env.get_observations()
@@ -147,19 +154,27 @@ def play(trained: TrainedModels, cfg: PlayCfg, *, on_ready: Callable[[Any], None
                 data = {k: rec[k].detach().cpu().numpy() for k in ROLLOUT_FIELDS}
                 t_s = (steps_run + 1) * env.dt
                 if steps_run == 0:  # sinks open once the term names are known
-                    meta = {"run": trained.meta.get("run") or "", "checkpoint": trained.checkpoint_id,
-                            "robot": cfg.robot, "mode": cfg.mode, "command": [cfg.command_vx, 0.0, 0.0],
-                            "seed": cfg.seed, "source": "morfic play"}
+                    meta = {
+                        "run": trained.meta.get("run") or "",
+                        "checkpoint": trained.checkpoint_id,
+                        "robot": cfg.robot,
+                        "mode": cfg.mode,
+                        "command": [cfg.command_vx, 0.0, 0.0],
+                        "seed": cfg.seed,
+                        "source": "morfic play",
+                    }
                     if cfg.record is not None:
-                        log = RolloutLogWriter(cfg.record, num_envs=cfg.num_envs, term_names=term_names,
-                                               metadata=meta, scene=scene)
+                        log = RolloutLogWriter(
+                            cfg.record, num_envs=cfg.num_envs, term_names=term_names, metadata=meta, scene=scene
+                        )
                     if cfg.viewer:
                         viewer = _open_viewer(models[0])
                     else:
                         from morfic_cli.recording.live import LiveView
 
-                        live = LiveView(num_envs=cfg.num_envs, term_names=term_names, scene=scene, host=cfg.host,
-                                        port=cfg.port)
+                        live = LiveView(
+                            num_envs=cfg.num_envs, term_names=term_names, scene=scene, host=cfg.host, port=cfg.port
+                        )
                     if on_ready is not None:
                         on_ready(live)
                 if live is not None:

@@ -37,6 +37,7 @@ def eval_columns() -> tuple[str, ...]:
 
 EVALS_PREFIX = "evals/"
 
+
 @dataclass(frozen=True)
 class EvalCfg:
     """An evaluation (defaults: the paper's protocol, docs/eval.md)."""
@@ -86,9 +87,13 @@ class EvalResult:
 def metrics_row(rollout: Rollout, distance: float | None) -> dict[str, Any]:
     """One row of the eval table (:func:`eval_columns`): every registered metric of ``rollout``."""
     return {
-        "robot": rollout.robot, "mode": rollout.mode, "command_vx": rollout.command_vx, "d": distance,
+        "robot": rollout.robot,
+        "mode": rollout.mode,
+        "command_vx": rollout.command_vx,
+        "d": distance,
         **metric_values(RolloutData(rollout.arrays, rollout.command_vx, rollout.dt)),
-        "num_envs": int(rollout.arrays["done"].shape[1]), "steps": int(rollout.arrays["done"].shape[0]),
+        "num_envs": int(rollout.arrays["done"].shape[1]),
+        "steps": int(rollout.arrays["done"].shape[0]),
     }
 
 
@@ -100,11 +105,25 @@ def write_rollout_log(path: Path, rollout: Rollout, metadata: dict[str, Any], sc
     n = min(scene_envs, len(rollout.models))
     scene = RolloutScene(rollout.models[:n], range(n), rollout.qpos_adr) if n > 0 else None
     a = rollout.arrays
-    fields = ("base_pos", "base_quat", "base_lin_vel", "base_ang_vel", "command", "joint_pos", "joint_vel", "action",
-              "reward", "reward_terms", "value", "done", "time_out")
+    fields = (
+        "base_pos",
+        "base_quat",
+        "base_lin_vel",
+        "base_ang_vel",
+        "command",
+        "joint_pos",
+        "joint_vel",
+        "action",
+        "reward",
+        "reward_terms",
+        "value",
+        "done",
+        "time_out",
+    )
     num_steps, num_envs = a["done"].shape
-    with RolloutLogWriter(path, num_envs=num_envs, term_names=rollout.term_names, metadata=metadata,
-                          scene=scene) as log:
+    with RolloutLogWriter(
+        path, num_envs=num_envs, term_names=rollout.term_names, metadata=metadata, scene=scene
+    ) as log:
         for t in range(num_steps):
             log.write_step(t, (t + 1) * rollout.dt, {k: a[k][t] for k in fields})
 
@@ -146,16 +165,36 @@ def evaluate(
         if not batched(cfg, mode):
             if on_rollout_start is not None:
                 on_rollout_start(robot, mode, vx)
-            return run_rollout(trained.actor, trained.critic, trained.cfg.env, robot=robot, mode=mode, command_vx=vx,
-                               num_envs=cfg.num_envs, steps=cfg.steps, seed=cfg.seed, on_step=on_step,
-                               keep_models=keep)
+            return run_rollout(
+                trained.actor,
+                trained.critic,
+                trained.cfg.env,
+                robot=robot,
+                mode=mode,
+                command_vx=vx,
+                num_envs=cfg.num_envs,
+                steps=cfg.steps,
+                seed=cfg.seed,
+                on_step=on_step,
+                keep_models=keep,
+            )
         if (mode, vx) not in joint:
             if on_rollout_start is not None:
                 on_rollout_start("+".join(cfg.robots), mode, vx)
             each = None if on_step is None else (lambda t: [on_step(t) for _ in cfg.robots])
-            joint[(mode, vx)] = run_rollouts(trained.actor, trained.critic, trained.cfg.env, robots=cfg.robots,
-                                             mode=mode, command_vx=vx, num_envs=cfg.num_envs, steps=cfg.steps,
-                                             seed=cfg.seed, on_step=each, keep_models=keep)
+            joint[(mode, vx)] = run_rollouts(
+                trained.actor,
+                trained.critic,
+                trained.cfg.env,
+                robots=cfg.robots,
+                mode=mode,
+                command_vx=vx,
+                num_envs=cfg.num_envs,
+                steps=cfg.steps,
+                seed=cfg.seed,
+                on_step=each,
+                keep_models=keep,
+            )
         return joint[(mode, vx)].pop(robot)
 
     with tempfile.TemporaryDirectory(prefix="morfic-eval-") as tmp:
@@ -166,27 +205,54 @@ def evaluate(
                     role = rollout_role(robot, mode, vx)
                     rollouts[role] = rollout
                     rows.append(metrics_row(rollout, distances.get(robot)))
-                    meta = {"run": run_name, "checkpoint": trained.checkpoint_id, "robot": robot,
-                            "descriptor": [float(x) for x in rollout.descriptor], "mode": mode,
-                            "command": [vx, 0.0, 0.0], "seed": cfg.seed, "morfic_version": __version__,
-                            "term_names": rollout.term_names}
+                    meta = {
+                        "run": run_name,
+                        "checkpoint": trained.checkpoint_id,
+                        "robot": robot,
+                        "descriptor": [float(x) for x in rollout.descriptor],
+                        "mode": mode,
+                        "command": [vx, 0.0, 0.0],
+                        "seed": cfg.seed,
+                        "morfic_version": __version__,
+                        "term_names": rollout.term_names,
+                    }
                     path = Path(tmp) / f"{robot}-{mode}-vx{vx:g}.mcap"
                     write_rollout_log(path, rollout, meta, cfg.scene_envs)
-                    png, pdf = rollout_figure(rollout.arrays["base_lin_vel"][..., 0], rollout.terminated,
-                                              rollout.dt, vx, f"{robot}, {mode} mode, command {vx:g} m/s",
-                                              foot_slip=rollout.arrays["foot_slip"], outcomes=rollout.outcomes(),
-                                              verdict=rows[-1]["verdict"])
-                    config = {"robot": robot, "mode": mode, "command_vx": vx, "num_envs": cfg.num_envs,
-                              "steps": cfg.steps, "seed": cfg.seed}
+                    png, pdf = rollout_figure(
+                        rollout.arrays["base_lin_vel"][..., 0],
+                        rollout.terminated,
+                        rollout.dt,
+                        vx,
+                        f"{robot}, {mode} mode, command {vx:g} m/s",
+                        foot_slip=rollout.arrays["foot_slip"],
+                        outcomes=rollout.outcomes(),
+                        verdict=rows[-1]["verdict"],
+                    )
+                    config = {
+                        "robot": robot,
+                        "mode": mode,
+                        "command_vx": vx,
+                        "num_envs": cfg.num_envs,
+                        "steps": cfg.steps,
+                        "seed": cfg.seed,
+                    }
                     if batched(cfg, mode):
                         config["batch"] = list(cfg.robots)  # stepped as its slice of one env of these robots
                     inputs[role] = store.publish(
-                        "rollout", config=config, inputs={"checkpoint": trained.checkpoint_id},
+                        "rollout",
+                        config=config,
+                        inputs={"checkpoint": trained.checkpoint_id},
                         files={"rollout.mcap": path, FIGURE_PNG: png, FIGURE_PDF: pdf},
-                        meta={k: v for k, v in meta.items() if k != "term_names"}).id
-        pub = store.publish("eval", EVALS_PREFIX + run_name, config=eval_config(spec, cfg), inputs=inputs,
-                            files={"eval.csv": rows_to_csv(rows, eval_columns())},
-                            meta={"run": run_name, "iteration": trained.meta.get("iteration")})
+                        meta={k: v for k, v in meta.items() if k != "term_names"},
+                    ).id
+        pub = store.publish(
+            "eval",
+            EVALS_PREFIX + run_name,
+            config=eval_config(spec, cfg),
+            inputs=inputs,
+            files={"eval.csv": rows_to_csv(rows, eval_columns())},
+            meta={"run": run_name, "iteration": trained.meta.get("iteration")},
+        )
     return EvalResult(rows, pub.id, pub.ref, pub.version, rollouts)
 
 
@@ -196,4 +262,3 @@ def parse_commands(text: str) -> tuple[float, ...]:
     if not values:
         raise ValueError(text)
     return values
-

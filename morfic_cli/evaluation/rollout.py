@@ -21,9 +21,21 @@ from morfic_cli.evaluation.metrics import TransferMetrics, env_outcomes, transfe
 
 #: Arrays a rollout records per step for all envs, with their per-env shapes (K = reward terms).
 RECORDED: dict[str, tuple[int, ...]] = {
-    "base_pos": (3,), "base_quat": (4,), "base_lin_vel": (3,), "base_ang_vel": (3,), "command": (3,),
-    "joint_pos": (12,), "joint_vel": (12,), "action": (12,), "reward": (), "value": (), "done": (),
-    "time_out": (), "tilt": (), "height_ratio": (), "foot_slip": (),
+    "base_pos": (3,),
+    "base_quat": (4,),
+    "base_lin_vel": (3,),
+    "base_ang_vel": (3,),
+    "command": (3,),
+    "joint_pos": (12,),
+    "joint_vel": (12,),
+    "action": (12,),
+    "reward": (),
+    "value": (),
+    "done": (),
+    "time_out": (),
+    "tilt": (),
+    "height_ratio": (),
+    "foot_slip": (),
 }
 
 
@@ -76,18 +88,39 @@ class Rollout:
     def metrics(self) -> TransferMetrics:
         """The zero-shot metrics of this rollout (:func:`~morfic_cli.evaluation.metrics.transfer_metrics`)."""
         a = self.arrays
-        return transfer_metrics(a["base_lin_vel"][..., 0], self.terminated, self.command_vx, self.dt,
-                                tilt=a["tilt"], height_ratio=a["height_ratio"], foot_slip=a["foot_slip"])
+        return transfer_metrics(
+            a["base_lin_vel"][..., 0],
+            self.terminated,
+            self.command_vx,
+            self.dt,
+            tilt=a["tilt"],
+            height_ratio=a["height_ratio"],
+            foot_slip=a["foot_slip"],
+        )
 
     def outcomes(self) -> np.ndarray:
         """Each env's validity, ``"ok"`` or its failure (:func:`~morfic_cli.evaluation.metrics.env_outcomes`)."""
         a = self.arrays
-        return env_outcomes(a["base_lin_vel"][..., 0], self.terminated, self.command_vx, tilt=a["tilt"],
-                            height_ratio=a["height_ratio"], foot_slip=a["foot_slip"])
+        return env_outcomes(
+            a["base_lin_vel"][..., 0],
+            self.terminated,
+            self.command_vx,
+            tilt=a["tilt"],
+            height_ratio=a["height_ratio"],
+            foot_slip=a["foot_slip"],
+        )
 
 
-def step_record(env, action: torch.Tensor, value: torch.Tensor, reward: torch.Tensor, done: torch.Tensor,
-                extras: dict, nominal: torch.Tensor, term_names: list[str]) -> dict[str, torch.Tensor]:
+def step_record(
+    env,
+    action: torch.Tensor,
+    value: torch.Tensor,
+    reward: torch.Tensor,
+    done: torch.Tensor,
+    extras: dict,
+    nominal: torch.Tensor,
+    term_names: list[str],
+) -> dict[str, torch.Tensor]:
     """What a rollout records of one ``env.step``: :data:`RECORDED` plus ``reward_terms``, each (N, ...).
 
     Args:
@@ -107,12 +140,21 @@ def step_record(env, action: torch.Tensor, value: torch.Tensor, reward: torch.Te
     speed = torch.linalg.norm(s.foot_vel_w[..., :2], dim=-1)  # (N, 4)
     slip = (contact * speed).sum(1) / contact.sum(1).clamp(min=1.0)
     return {
-        "base_pos": s.base_pos_w, "base_quat": s.base_quat_w, "base_lin_vel": s.base_lin_vel_b,
-        "base_ang_vel": s.base_ang_vel_b, "command": s.command.clone(), "joint_pos": s.joint_pos,
-        "joint_vel": s.joint_vel, "action": action, "reward": reward, "value": value,
-        "done": done.bool(), "time_out": extras["time_outs"].bool(),
+        "base_pos": s.base_pos_w,
+        "base_quat": s.base_quat_w,
+        "base_lin_vel": s.base_lin_vel_b,
+        "base_ang_vel": s.base_ang_vel_b,
+        "command": s.command.clone(),
+        "joint_pos": s.joint_pos,
+        "joint_vel": s.joint_vel,
+        "action": action,
+        "reward": reward,
+        "value": value,
+        "done": done.bool(),
+        "time_out": extras["time_outs"].bool(),
         "tilt": torch.arccos((-s.projected_gravity_b[:, 2]).clamp(-1.0, 1.0)),
-        "height_ratio": s.base_pos_w[:, 2] / nominal, "foot_slip": slip,
+        "height_ratio": s.base_pos_w[:, 2] / nominal,
+        "foot_slip": slip,
         "reward_terms": torch.stack([terms[k] * env.dt for k in term_names], dim=1),
     }
 
@@ -165,9 +207,21 @@ def run_rollout(
         sample_actions: Act with a ~ N(mean, std) of the actor's Gaussian instead of its mean (a PPO behaviour
             policy, as the critic diagnostics need), drawn from a generator seeded with ``seed``.
     """
-    return run_rollouts(actor, critic, train_env, robots=(robot,), mode=mode, command_vx=command_vx,
-                        num_envs=num_envs, steps=steps, seed=seed, on_step=on_step, keep_models=keep_models,
-                        keep_obs=keep_obs, sample_actions=sample_actions)[robot]
+    return run_rollouts(
+        actor,
+        critic,
+        train_env,
+        robots=(robot,),
+        mode=mode,
+        command_vx=command_vx,
+        num_envs=num_envs,
+        steps=steps,
+        seed=seed,
+        on_step=on_step,
+        keep_models=keep_models,
+        keep_obs=keep_obs,
+        sample_actions=sample_actions,
+    )[robot]
 
 
 def run_rollouts(
@@ -255,8 +309,10 @@ def run_rollouts(
         descriptors = env.params.descriptor.double().cpu().numpy()
         dt = env.dt
         all_models = list(getattr(env.backend, "models", []))
-        models = [[copy.copy(m) for m in all_models[k * num_envs:k * num_envs + min(keep_models, num_envs)]]
-                  for k in range(len(robots))]
+        models = [
+            [copy.copy(m) for m in all_models[k * num_envs : k * num_envs + min(keep_models, num_envs)]]
+            for k in range(len(robots))
+        ]
         info = getattr(env.backend, "info", None)
         qpos_adr = None if info is None else np.asarray(info.qpos_adr)
     finally:
@@ -266,9 +322,19 @@ def run_rollouts(
     for k, robot in enumerate(robots):
         envs = slice(k * num_envs, (k + 1) * num_envs)
         pick = (lambda a: a) if len(robots) == 1 else (lambda a, envs=envs: a[:, envs])  # views, no copies
-        out[robot] = Rollout(robot, mode, float(command_vx), seed, dt, term_names or [], descriptors[envs.start],
-                             {key: pick(a) for key, a in arrays.items()}, models[k], qpos_adr,
-                             {g: pick(a) for g, a in kept_obs.items()})
+        out[robot] = Rollout(
+            robot,
+            mode,
+            float(command_vx),
+            seed,
+            dt,
+            term_names or [],
+            descriptors[envs.start],
+            {key: pick(a) for key, a in arrays.items()},
+            models[k],
+            qpos_adr,
+            {g: pick(a) for g, a in kept_obs.items()},
+        )
     return out
 
 

@@ -43,8 +43,23 @@ CHECK_REF_PREFIX = "checks/training-conditions/"
 
 #: Columns of ``training_check.csv``, in order.
 CHECK_COLUMNS: tuple[str, ...] = (
-    "conditions", "change", "length_s", "length_se_s", "train_length_s", "train_sd_s", "agrees", "time_out_fraction",
-    "fall_fraction", "survival_5s", "n", "steps", "morphology", "randomisation", "latency", "actions", "dropout",
+    "conditions",
+    "change",
+    "length_s",
+    "length_se_s",
+    "train_length_s",
+    "train_sd_s",
+    "agrees",
+    "time_out_fraction",
+    "fall_fraction",
+    "survival_5s",
+    "n",
+    "steps",
+    "morphology",
+    "randomisation",
+    "latency",
+    "actions",
+    "dropout",
     "command",
 )
 
@@ -82,12 +97,24 @@ def ladder(robot: str, command_vx: float) -> list[Conditions]:
         Conditions("no dropout", "actor in eval mode (latent dropout off)", dropout=False),
         Conditions("mean actions", "the actor's mean action, not a sample", sampled_actions=False),
         Conditions("no latency", "action latency 0", latency=False),
-        Conditions("no randomisation", "no friction/restitution/COM/joint-friction draws, pushes, noise (nor latency)",
-                   randomisation=False, latency=False),
+        Conditions(
+            "no randomisation",
+            "no friction/restitution/COM/joint-friction draws, pushes, noise (nor latency)",
+            randomisation=False,
+            latency=False,
+        ),
         Conditions(f"{robot} template", f"every env {robot}'s descriptor on the Go2 template", train_morphology=False),
         Conditions(f"command {command_vx:g}", f"command fixed to ({command_vx:g}, 0, 0)", curriculum_commands=False),
-        Conditions("eval protocol", "all of the above (morfic eval's conditions)", train_morphology=False,
-                   randomisation=False, latency=False, sampled_actions=False, dropout=False, curriculum_commands=False),
+        Conditions(
+            "eval protocol",
+            "all of the above (morfic eval's conditions)",
+            train_morphology=False,
+            randomisation=False,
+            latency=False,
+            sampled_actions=False,
+            dropout=False,
+            curriculum_commands=False,
+        ),
     ]
 
 
@@ -112,8 +139,9 @@ class CheckCfg:
     full_ladder: bool = True
 
 
-def check_env_cfg(train_env: EnvCfg, cond: Conditions, num_envs: int, vx_range: tuple[float, float],
-                  command_vx: float) -> EnvCfg:
+def check_env_cfg(
+    train_env: EnvCfg, cond: Conditions, num_envs: int, vx_range: tuple[float, float], command_vx: float
+) -> EnvCfg:
     """The env config of one row: the run's training env with the row's changes, on the CPU backend."""
     rand, obs, commands = train_env.rand, train_env.obs, train_env.commands
     if cond.curriculum_commands:  # start at the run's range and stay there (no widening during the check)
@@ -125,12 +153,23 @@ def check_env_cfg(train_env: EnvCfg, cond: Conditions, num_envs: int, vx_range: 
         obs = dataclasses.replace(obs, noise=False)
     if not cond.latency:
         rand = dataclasses.replace(rand, max_latency_steps=0)
-    return dataclasses.replace(train_env, num_envs=num_envs, rand=rand, obs=obs, commands=commands,
-                               sim=dataclasses.replace(train_env.sim, backend="cpu", device="cpu"))
+    return dataclasses.replace(
+        train_env,
+        num_envs=num_envs,
+        rand=rand,
+        obs=obs,
+        commands=commands,
+        sim=dataclasses.replace(train_env.sim, backend="cpu", device="cpu"),
+    )
 
 
-def run_conditions(trained: TrainedModels, cond: Conditions, cfg: CheckCfg, vx_range: tuple[float, float],
-                   on_step: Callable[[int], None] | None = None) -> tuple[EpisodeStats, int]:
+def run_conditions(
+    trained: TrainedModels,
+    cond: Conditions,
+    cfg: CheckCfg,
+    vx_range: tuple[float, float],
+    on_step: Callable[[int], None] | None = None,
+) -> tuple[EpisodeStats, int]:
     """Roll the checkpoint out under ``cond`` for one episode length; its first-episode stats and the steps run."""
     from morfic_cli.envs.locomotion import LocomotionEnv
 
@@ -178,9 +217,15 @@ def check_rows(cfg: CheckCfg) -> list[Conditions]:
     return rows if cfg.full_ladder else rows[:1]
 
 
-def training_check(store: Store, spec: str, cfg: CheckCfg, *, trained: TrainedModels | None = None,
-                   on_row_start: Callable[[str], None] | None = None,
-                   on_step: Callable[[int], None] | None = None) -> CheckResult:
+def training_check(
+    store: Store,
+    spec: str,
+    cfg: CheckCfg,
+    *,
+    trained: TrainedModels | None = None,
+    on_row_start: Callable[[str], None] | None = None,
+    on_step: Callable[[int], None] | None = None,
+) -> CheckResult:
     """Run the check on checkpoint ``spec`` and store it (see the module docstring).
 
     Raises:
@@ -206,25 +251,46 @@ def training_check(store: Store, spec: str, cfg: CheckCfg, *, trained: TrainedMo
         if on_row_start is not None:
             on_row_start(cond.name)
         stats, steps = run_conditions(trained, cond, cfg, vx_range, on_step)
-        rows.append({
-            "conditions": cond.name, "change": cond.change, "length_s": stats.length_s,
-            "length_se_s": stats.length_se_s, "train_length_s": ref.length_s, "train_sd_s": ref.sd_s,
-            "agrees": agrees(stats.length_s, stats.length_se_s, ref.length_s, ref.sd_s),
-            "time_out_fraction": stats.time_out_fraction, "fall_fraction": stats.fall_fraction,
-            "survival_5s": stats.survival_5s, "n": stats.n, "steps": steps,
-            "morphology": "train support" if cond.train_morphology else f"{cfg.robot} descriptor",
-            "randomisation": cond.randomisation, "latency": cond.latency,
-            "actions": "sampled" if cond.sampled_actions else "mean", "dropout": cond.dropout,
-            "command": f"vx in [{vx_range[0]:g}, {vx_range[1]:g}]" if cond.curriculum_commands
-            else f"({cfg.command_vx:g}, 0, 0)",
-        })
+        rows.append(
+            {
+                "conditions": cond.name,
+                "change": cond.change,
+                "length_s": stats.length_s,
+                "length_se_s": stats.length_se_s,
+                "train_length_s": ref.length_s,
+                "train_sd_s": ref.sd_s,
+                "agrees": agrees(stats.length_s, stats.length_se_s, ref.length_s, ref.sd_s),
+                "time_out_fraction": stats.time_out_fraction,
+                "fall_fraction": stats.fall_fraction,
+                "survival_5s": stats.survival_5s,
+                "n": stats.n,
+                "steps": steps,
+                "morphology": "train support" if cond.train_morphology else f"{cfg.robot} descriptor",
+                "randomisation": cond.randomisation,
+                "latency": cond.latency,
+                "actions": "sampled" if cond.sampled_actions else "mean",
+                "dropout": cond.dropout,
+                "command": f"vx in [{vx_range[0]:g}, {vx_range[1]:g}]"
+                if cond.curriculum_commands
+                else f"({cfg.command_vx:g}, 0, 0)",
+            }
+        )
     run_name = trained.meta.get("run") or spec.split("@")[0].removeprefix("runs/")
     config = {"check": "training-conditions", "spec": spec, **dataclasses.asdict(cfg)}
-    meta = {"run": run_name, "iteration": trained.meta.get("iteration"),
-            "train_iterations": list(ref.iterations), "vx_range": list(vx_range)}
+    meta = {
+        "run": run_name,
+        "iteration": trained.meta.get("iteration"),
+        "train_iterations": list(ref.iterations),
+        "vx_range": list(vx_range),
+    }
     with store.writing():
-        mid = store.put_manifest("table", config=config, inputs={"checkpoint": trained.checkpoint_id},
-                                 files={"training_check.csv": rows_to_csv(rows, CHECK_COLUMNS)}, meta=meta)
+        mid = store.put_manifest(
+            "table",
+            config=config,
+            inputs={"checkpoint": trained.checkpoint_id},
+            files={"training_check.csv": rows_to_csv(rows, CHECK_COLUMNS)},
+            meta=meta,
+        )
         name = CHECK_REF_PREFIX + run_name
         version = store.set_ref(name, mid)
     return CheckResult(rows, ref, vx_range, mid, name, version)

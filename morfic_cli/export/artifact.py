@@ -154,9 +154,11 @@ def plan_export(trained: TrainedModels, robot: str | None, targets: bool) -> tup
     actor = trained.actor
     env = trained.cfg.env
     if env.obs.extended_morphology and actor.morphology_encoder is not None:
-        raise MorficError(f"run '{trained.meta.get('run')}' reads the extended descriptor "
-                          "(env.obs.extended_morphology, variant film-act); export bakes the 11-D one only, so it "
-                          "is not supported yet. Evaluate it with `morfic eval` instead.")
+        raise MorficError(
+            f"run '{trained.meta.get('run')}' reads the extended descriptor "
+            "(env.obs.extended_morphology, variant film-act); export bakes the 11-D one only, so it "
+            "is not supported yet. Evaluate it with `morfic eval` instead."
+        )
     morphology_input = actor.morphology_encoder is not None and robot is None
     robots = {robot: load_robot(robot)} if robot else {name: load_robot(name) for name in list_robots()}
     source = {
@@ -203,7 +205,11 @@ def runtime_name(fmt: str) -> str:
 
 
 def export_policy(
-    store: Store, spec: str, cfg: ExportCfg, out: Path | None = None, trained: TrainedModels | None = None,
+    store: Store,
+    spec: str,
+    cfg: ExportCfg,
+    out: Path | None = None,
+    trained: TrainedModels | None = None,
     on_phase: Callable[[str], None] | None = None,
 ) -> ExportResult:
     """Export checkpoint ``spec``'s deployed actor path, verify it, store it, and optionally write it to ``out``.
@@ -251,9 +257,21 @@ def export_policy(
     run = run_of(spec, meta)
     ref = export_ref(run, cfg.robot, cfg.fmt)
     config = {"spec": spec, **dataclasses.asdict(cfg)}
-    pub = store.publish("export", ref, config=config, inputs={"checkpoint": trained.checkpoint_id}, files=files,
-                        meta={"run": run, "robot": cfg.robot, "format": cfg.fmt, "targets": cfg.targets,
-                              "model_sha256": meta["model_sha256"], "verification": verification.to_dict()})
+    pub = store.publish(
+        "export",
+        ref,
+        config=config,
+        inputs={"checkpoint": trained.checkpoint_id},
+        files=files,
+        meta={
+            "run": run,
+            "robot": cfg.robot,
+            "format": cfg.fmt,
+            "targets": cfg.targets,
+            "model_sha256": meta["model_sha256"],
+            "verification": verification.to_dict(),
+        },
+    )
     result = ExportResult(pub.id, f"{ref}@{pub.version}", files, meta, verification)
     if out is not None:
         result.written = write_files(out, files)
@@ -301,9 +319,15 @@ def export_rsl_rl(store: Store, spec: str, out: Path | None = None) -> RslRlExpo
     run = run_of(spec, trained.meta)
     ref = export_ref(run, None, "rsl-rl")
     optimizer = infos["optimizer"]
-    pub = store.publish("export", ref, config={"to": "rsl-rl"}, inputs={"checkpoint": trained.checkpoint_id},
-                        files=files, meta={"run": run, "format": "rsl-rl", "model_file": name, "optimizer": optimizer},
-                        reuse=True)
+    pub = store.publish(
+        "export",
+        ref,
+        config={"to": "rsl-rl"},
+        inputs={"checkpoint": trained.checkpoint_id},
+        files=files,
+        meta={"run": run, "format": "rsl-rl", "model_file": name, "optimizer": optimizer},
+        reuse=True,
+    )
     result = RslRlExport(pub.id, f"{ref}@{pub.version}", files, trained.checkpoint_id, optimizer, pub.reused)
     if out is not None:
         result.written = write_files(out, files)
@@ -390,8 +414,10 @@ def read_export(store: Store, source: str) -> tuple[dict[str, Any], bytes]:
         return meta, model
     manifest = store.read_manifest(source)
     if manifest.kind == "export" and METADATA_FILE not in manifest.files:
-        raise MorficError(f"'{source}' is an rsl-rl checkpoint export; --check verifies ONNX and TorchScript "
-                          "exports (load it with rsl-rl's OnPolicyRunner.load, docs/deploy.md).")
+        raise MorficError(
+            f"'{source}' is an rsl-rl checkpoint export; --check verifies ONNX and TorchScript "
+            "exports (load it with rsl-rl's OnPolicyRunner.load, docs/deploy.md)."
+        )
     if manifest.kind != "export":
         raise MorficError(
             f"'{source}' is a {manifest.kind} artifact; --check takes an export (an exports/... ref "

@@ -117,9 +117,11 @@ def observation_section(env: EnvCfg) -> dict[str, Any]:
     return {
         "size": O.POLICY_DIM,
         "history_len": O.history_frames(env.obs),
-        "history_order": ("oldest first, newest last: history[:, -1] is o_t and history[:, :-1] the paper's "
-                          "h_t = o_{t-15..t-1}" if not env.obs.history_includes_current
-                          else "oldest first, newest last: history[:, -1] is o_t (o_{t-14..t})"),
+        "history_order": (
+            "oldest first, newest last: history[:, -1] is o_t and history[:, :-1] the paper's h_t = o_{t-15..t-1}"
+            if not env.obs.history_includes_current
+            else "oldest first, newest last: history[:, -1] is o_t (o_{t-14..t})"
+        ),
         "history_reset": "at start (and after a reset) every slot holds the first observation",
         "clip": env.obs.clip,
         "formula": "o_t = clip(raw * scale, -clip, clip), raw terms concatenated in this order",

@@ -47,9 +47,11 @@ def _trained_optimizer(store: Store, checkpoint_id: str) -> dict[str, Any] | Non
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
     if state_id is None or store.is_omitted(state_id):  # an older policy bundle, or a weights-only one
         return None
-    state = trainer_state.decode(store.read_file(state_id, trainer_state.JSON_FILE),
-                                 store.read_file(state_id, trainer_state.TENSORS_FILE),
-                                 f"checkpoint {checkpoint_id[:12]}")
+    state = trainer_state.decode(
+        store.read_file(state_id, trainer_state.JSON_FILE),
+        store.read_file(state_id, trainer_state.TENSORS_FILE),
+        f"checkpoint {checkpoint_id[:12]}",
+    )
     alg = state.get("alg") if isinstance(state, dict) else None
     return alg if isinstance(alg, dict) and "optimizer_state_dict" in alg else None
 
@@ -59,7 +61,8 @@ def _fresh_optimizer(trained: TrainedModels, agent: dict[str, Any]) -> dict[str,
     from rsl_rl.utils import resolve_optimizer
 
     optimizer = resolve_optimizer(agent["algorithm"].get("optimizer", "adam"))(
-        chain(trained.actor.parameters(), trained.critic.parameters()), lr=agent["algorithm"]["learning_rate"])
+        chain(trained.actor.parameters(), trained.critic.parameters()), lr=agent["algorithm"]["learning_rate"]
+    )
     return optimizer.state_dict()
 
 
@@ -77,8 +80,12 @@ def rsl_rl_checkpoint(store: Store, trained: TrainedModels) -> dict[str, Any]:
     else:
         out["optimizer_state_dict"] = _fresh_optimizer(trained, agent)
     out["iter"] = iteration
-    out["infos"] = {"morfic_checkpoint": trained.checkpoint_id, "run": trained.meta.get("run"),
-                    "variant": trained.cfg.variant, "optimizer": "trained" if saved is not None else "fresh"}
+    out["infos"] = {
+        "morfic_checkpoint": trained.checkpoint_id,
+        "run": trained.meta.get("run"),
+        "variant": trained.cfg.variant,
+        "optimizer": "trained" if saved is not None else "fresh",
+    }
     return out
 
 
@@ -93,4 +100,3 @@ def rsl_rl_files(store: Store, trained: TrainedModels) -> tuple[dict[str, bytes]
         AGENT_FILE: (json.dumps(agent, indent=2, sort_keys=True) + "\n").encode(),
         TRAIN_FILE: (json.dumps(train_cfg_to_dict(trained.cfg), indent=2, sort_keys=True) + "\n").encode(),
     }, ckpt["infos"]
-

@@ -159,8 +159,9 @@ def descriptor_fields(descriptors: np.ndarray, base: TemplateInfo) -> Descriptor
     return DescriptorFields(mass, base.body_inertia[None] * scale[..., None], jnt_range, ctrlrange)
 
 
-def apply_descriptor(model: mujoco.MjModel, data: mujoco.MjData, descriptor: np.ndarray,
-                     base: TemplateInfo) -> np.ndarray:
+def apply_descriptor(
+    model: mujoco.MjModel, data: mujoco.MjData, descriptor: np.ndarray, base: TemplateInfo
+) -> np.ndarray:
     """Apply an 11-D descriptor to ``model`` in place, starting from the nominal template.
 
     Args:
@@ -203,8 +204,9 @@ def model_joint_ranges(model: mujoco.MjModel, base: TemplateInfo) -> np.ndarray:
     return model.jnt_range[base.joint_ids.reshape(-1)].copy()
 
 
-def standing_height(model: mujoco.MjModel, data: mujoco.MjData, base: TemplateInfo, joint_pos: np.ndarray,
-                    foot_radius: float) -> float:
+def standing_height(
+    model: mujoco.MjModel, data: mujoco.MjData, base: TemplateInfo, joint_pos: np.ndarray, foot_radius: float
+) -> float:
     """Base height above the lowest foot bottom with the base upright at the origin.
 
     Same definition as :func:`morfic_cli.morphology.builder.nominal_height`, on a given model.
@@ -244,8 +246,9 @@ class MorphologySummary:
     base_mass: float
 
 
-def summarize(model: mujoco.MjModel, data: mujoco.MjData, base: TemplateInfo, default_joint_pos: np.ndarray,
-              foot_radius: float) -> MorphologySummary:
+def summarize(
+    model: mujoco.MjModel, data: mujoco.MjData, base: TemplateInfo, default_joint_pos: np.ndarray, foot_radius: float
+) -> MorphologySummary:
     """Default pose, nominal height and masses of a model (after :func:`apply_descriptor`).
 
     Args:

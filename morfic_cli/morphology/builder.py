@@ -45,8 +45,11 @@ from morfic_cli.morphology.robots import JOINTS, LEGS, RobotSpec
 TIMESTEP = 0.005
 """Physics time step, s (docs/concepts.md)."""
 
-JOINT_AXES: dict[str, tuple[float, float, float]] = {"hip": (1.0, 0.0, 0.0), "thigh": (0.0, 1.0, 0.0),
-                                                     "calf": (0.0, 1.0, 0.0)}
+JOINT_AXES: dict[str, tuple[float, float, float]] = {
+    "hip": (1.0, 0.0, 0.0),
+    "thigh": (0.0, 1.0, 0.0),
+    "calf": (0.0, 1.0, 0.0),
+}
 """Joint axes of the library's convention, in the (aligned) joint frames."""
 
 IMPRATIO = 100.0
@@ -166,11 +169,16 @@ def _add_defaults(spec: mujoco.MjSpec) -> None:
 
 def _add_floor(spec: mujoco.MjSpec) -> None:
     spec.worldbody.add_geom(
-        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 0.05], rgba=[0.8, 0.8, 0.8, 1.0],
-        contype=WORLD_CONTYPE, conaffinity=WORLD_CONAFFINITY,
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0.0, 0.0, 0.05],
+        rgba=[0.8, 0.8, 0.8, 1.0],
+        contype=WORLD_CONTYPE,
+        conaffinity=WORLD_CONAFFINITY,
     )
-    spec.worldbody.add_light(name="sun", pos=[0.0, 0.0, 3.0], dir=[0.0, 0.0, -1.0],
-                              type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    spec.worldbody.add_light(
+        name="sun", pos=[0.0, 0.0, 3.0], dir=[0.0, 0.0, -1.0], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
+    )
 
 
 def _inertial(body: mujoco.MjsBody, mass: float, com: np.ndarray, full_inertia: np.ndarray) -> None:
@@ -194,8 +202,12 @@ def _add_base(spec: mujoco.MjSpec, robot: RobotSpec) -> mujoco.MjsBody:
     base = spec.worldbody.add_body(name="base", pos=[0.0, 0.0, robot.init_height])
     base.add_freejoint(name="base_freejoint")
     _inertial(base, robot.base_mass, robot.base_com, np.concatenate([robot.base_inertia, np.zeros(3)]))
-    base.add_geom(name="base_collision", default=spec.find_default("body_contact"),
-                  type=mujoco.mjtGeom.mjGEOM_BOX, size=robot.base_size / 2)
+    base.add_geom(
+        name="base_collision",
+        default=spec.find_default("body_contact"),
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=robot.base_size / 2,
+    )
     base.add_site(name="imu", pos=[0.0, 0.0, 0.0], size=[0.01, 0.01, 0.01])
     return base
 
@@ -210,24 +222,33 @@ def _add_rotor(parent: mujoco.MjsBody, name: str, pos: np.ndarray, mass: float, 
 def _add_joint(body: mujoco.MjsBody, robot: RobotSpec, li: int, ji: int, leg: str) -> None:
     joint = JOINTS[ji]
     body.add_joint(
-        name=f"{leg}_{joint}_joint", type=mujoco.mjtJoint.mjJNT_HINGE, axis=JOINT_AXES[joint],
-        range=robot.joint_range[li, ji], limited=mujoco.mjtLimited.mjLIMITED_TRUE,
-        armature=float(robot.armature[ji]), damping=float(robot.damping[ji]),
+        name=f"{leg}_{joint}_joint",
+        type=mujoco.mjtJoint.mjJNT_HINGE,
+        axis=JOINT_AXES[joint],
+        range=robot.joint_range[li, ji],
+        limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+        armature=float(robot.armature[ji]),
+        damping=float(robot.damping[ji]),
     )
 
 
-def _link_body(parent: mujoco.MjsBody, robot: RobotSpec, li: int, leg: str, link: str,
-               pos: np.ndarray) -> mujoco.MjsBody:
+def _link_body(
+    parent: mujoco.MjsBody, robot: RobotSpec, li: int, leg: str, link: str, pos: np.ndarray
+) -> mujoco.MjsBody:
     body = parent.add_body(name=f"{leg}_{link}", pos=np.asarray(pos, dtype=float))
     inertial = robot.links[link]
     _inertial(body, inertial.mass, inertial.com[li], inertial.inertia[li])
     return body
 
 
-def _capsule(spec: mujoco.MjSpec, body: mujoco.MjsBody, name: str, cls: str, end: np.ndarray,
-             radius: float) -> None:
-    body.add_geom(name=name, default=spec.find_default(cls), type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                  fromto=[0.0, 0.0, 0.0, *np.asarray(end, dtype=float)], size=[radius, 0.0, 0.0])
+def _capsule(spec: mujoco.MjSpec, body: mujoco.MjsBody, name: str, cls: str, end: np.ndarray, radius: float) -> None:
+    body.add_geom(
+        name=name,
+        default=spec.find_default(cls),
+        type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+        fromto=[0.0, 0.0, 0.0, *np.asarray(end, dtype=float)],
+        size=[radius, 0.0, 0.0],
+    )
 
 
 def _add_leg(spec: mujoco.MjSpec, base: mujoco.MjsBody, robot: RobotSpec, li: int, leg: str) -> None:
@@ -250,10 +271,18 @@ def _add_leg(spec: mujoco.MjSpec, base: mujoco.MjsBody, robot: RobotSpec, li: in
     _capsule(spec, calf, f"{leg}_calf_geom", "limb", robot.foot_offset[li], robot.link_radius[2])
 
     foot = _link_body(calf, robot, li, leg, "foot", robot.foot_offset[li])
-    foot.add_geom(name=f"{leg}_foot_geom", default=spec.find_default("foot"), type=mujoco.mjtGeom.mjGEOM_SPHERE,
-                  size=[robot.foot_radius, 0.0, 0.0])
-    foot.add_site(name=f"{leg}_foot_site", type=mujoco.mjtGeom.mjGEOM_SPHERE,
-                  size=[robot.foot_radius * TOUCH_SITE_SCALE, 0.0, 0.0], rgba=[1.0, 0.3, 0.3, 0.0])
+    foot.add_geom(
+        name=f"{leg}_foot_geom",
+        default=spec.find_default("foot"),
+        type=mujoco.mjtGeom.mjGEOM_SPHERE,
+        size=[robot.foot_radius, 0.0, 0.0],
+    )
+    foot.add_site(
+        name=f"{leg}_foot_site",
+        type=mujoco.mjtGeom.mjGEOM_SPHERE,
+        size=[robot.foot_radius * TOUCH_SITE_SCALE, 0.0, 0.0],
+        rgba=[1.0, 0.3, 0.3, 0.0],
+    )
 
 
 def _add_actuators(spec: mujoco.MjSpec, robot: RobotSpec) -> None:
@@ -300,15 +329,25 @@ def _contact_sensor(spec: mujoco.MjSpec, name: str, reftype: mujoco.mjtObj, refn
     MuJoCo reports the force geom1 (the floor) exerts on geom2 (the robot part): +z when the floor
     pushes the robot up.
     """
-    spec.add_sensor(name=name, type=mujoco.mjtSensor.mjSENS_CONTACT, objtype=mujoco.mjtObj.mjOBJ_GEOM,
-                    objname="floor", reftype=reftype, refname=refname,
-                    intprm=[CONTACT_DATA_FORCE, CONTACT_REDUCE_NETFORCE, 1])
+    spec.add_sensor(
+        name=name,
+        type=mujoco.mjtSensor.mjSENS_CONTACT,
+        objtype=mujoco.mjtObj.mjOBJ_GEOM,
+        objname="floor",
+        reftype=reftype,
+        refname=refname,
+        intprm=[CONTACT_DATA_FORCE, CONTACT_REDUCE_NETFORCE, 1],
+    )
 
 
 def _add_sim_sensors(spec: mujoco.MjSpec, *, floor: bool) -> None:
     for name in joint_names():
-        spec.add_sensor(name=name.removesuffix("_joint") + "_torque", type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
-                        objtype=mujoco.mjtObj.mjOBJ_ACTUATOR, objname=name)
+        spec.add_sensor(
+            name=name.removesuffix("_joint") + "_torque",
+            type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
+            objtype=mujoco.mjtObj.mjOBJ_ACTUATOR,
+            objname=name,
+        )
     if not floor:
         return
     for leg in LEGS:

@@ -26,8 +26,24 @@ from morfic_cli.morphology.apply import TemplateInfo
 from morfic_cli.morphology.robots import JOINTS, LEGS
 
 JOINT_FIELDS: tuple[str, ...] = (
-    "anchor_x", "anchor_y", "anchor_z", "axis_x", "axis_y", "axis_z", "child_joints", "q0", "q_min", "q_max",
-    "torque_limit", "velocity_limit", "damping", "armature", "kp", "kd", "link_mass", "total_mass",
+    "anchor_x",
+    "anchor_y",
+    "anchor_z",
+    "axis_x",
+    "axis_y",
+    "axis_z",
+    "child_joints",
+    "q0",
+    "q_min",
+    "q_max",
+    "torque_limit",
+    "velocity_limit",
+    "damping",
+    "armature",
+    "kp",
+    "kd",
+    "link_mass",
+    "total_mass",
 )
 """The raw joint description's entries, in order (18)."""
 FOOT_FIELDS: tuple[str, ...] = ("foot_x", "foot_y", "foot_z", "foot_radius", "foot_mass", "total_mass")
@@ -36,8 +52,13 @@ CHILD_JOINTS: tuple[int, ...] = (1, 1, 0)
 """Direct child joints of the hip, thigh and calf joints."""
 
 
-def body_description(model: mujoco.MjModel, data: mujoco.MjData, info: TemplateInfo, default_joint_pos: np.ndarray,
-                     velocity_limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def body_description(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    info: TemplateInfo,
+    default_joint_pos: np.ndarray,
+    velocity_limit: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """The raw joint and foot descriptions of one model (module docstring).
 
     Args:
@@ -63,29 +84,34 @@ def body_description(model: mujoco.MjModel, data: mujoco.MjData, info: TemplateI
     act = info.actuator_ids
     kp = model.actuator_gainprm[act, 0]
     kd = -model.actuator_biasprm[act, 2]
-    vel = np.broadcast_to(np.tile(velocity_limit, len(LEGS)) if len(velocity_limit) == len(JOINTS)
-                          else velocity_limit, (len(joint_ids),))
-    joints = np.column_stack([
-        data.xanchor[joint_ids] - base,
-        data.xaxis[joint_ids],
-        np.tile(CHILD_JOINTS, len(LEGS)),
-        default_joint_pos,
-        model.jnt_range[joint_ids],
-        model.actuator_forcerange[act, 1],
-        vel,
-        model.dof_damping[info.dof_adr],
-        model.dof_armature[info.dof_adr],
-        kp,
-        kd,
-        model.body_mass[links[:, :3].reshape(-1)],
-        np.full(len(joint_ids), total_mass),
-    ])
+    vel = np.broadcast_to(
+        np.tile(velocity_limit, len(LEGS)) if len(velocity_limit) == len(JOINTS) else velocity_limit, (len(joint_ids),)
+    )
+    joints = np.column_stack(
+        [
+            data.xanchor[joint_ids] - base,
+            data.xaxis[joint_ids],
+            np.tile(CHILD_JOINTS, len(LEGS)),
+            default_joint_pos,
+            model.jnt_range[joint_ids],
+            model.actuator_forcerange[act, 1],
+            vel,
+            model.dof_damping[info.dof_adr],
+            model.dof_armature[info.dof_adr],
+            kp,
+            kd,
+            model.body_mass[links[:, :3].reshape(-1)],
+            np.full(len(joint_ids), total_mass),
+        ]
+    )
     foot_bodies = links[:, 3]
     radius = model.geom_size[model.body_geomadr[foot_bodies], 0]
-    feet = np.column_stack([
-        data.site_xpos[info.foot_sites] - base,
-        radius,
-        model.body_mass[foot_bodies],
-        np.full(len(LEGS), total_mass),
-    ])
+    feet = np.column_stack(
+        [
+            data.site_xpos[info.foot_sites] - base,
+            radius,
+            model.body_mass[foot_bodies],
+            np.full(len(LEGS), total_mass),
+        ]
+    )
     return joints.astype(np.float64), feet.astype(np.float64)

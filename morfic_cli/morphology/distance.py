@@ -78,4 +78,3 @@ def distance_table(names: Sequence[str], reference: str = "go2", normalize: str 
 def robot_file_digests(names: Sequence[str]) -> dict[str, str]:
     """sha256 of each robot's TOML file, recorded in table manifests as provenance."""
     return {n: hashlib.sha256(load_robot(n).source_path.read_bytes()).hexdigest() for n in names}
-

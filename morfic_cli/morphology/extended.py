@@ -46,19 +46,37 @@ import numpy as np
 from morfic_cli.morphology.descriptor import DESCRIPTOR_NAMES, TRAIN_MAX, TRAIN_MIN
 from morfic_cli.morphology.robots import RobotSpec
 
-ACTUATION_NAMES: tuple[str, ...] = ("total_mass", "kp", "kd", "torque_limit_hip", "torque_limit_thigh",
-                                    "torque_limit_calf")
+ACTUATION_NAMES: tuple[str, ...] = (
+    "total_mass",
+    "kp",
+    "kd",
+    "torque_limit_hip",
+    "torque_limit_thigh",
+    "torque_limit_calf",
+)
 """Entries 11-16 of the extended vector."""
 
-GEOMETRY_NAMES: tuple[str, ...] = ("base_length", "base_width", "base_height", "hip_x", "hip_y", "thigh_offset",
-                                   "thigh_length", "calf_length", "thigh_radius", "calf_radius", "foot_radius")
+GEOMETRY_NAMES: tuple[str, ...] = (
+    "base_length",
+    "base_width",
+    "base_height",
+    "hip_x",
+    "hip_y",
+    "thigh_offset",
+    "thigh_length",
+    "calf_length",
+    "thigh_radius",
+    "calf_radius",
+    "foot_radius",
+)
 """Entries 17-27 of the extended vector (m)."""
 
 EXTENDED_NAMES: tuple[str, ...] = (*DESCRIPTOR_NAMES, *ACTUATION_NAMES, *GEOMETRY_NAMES)
 """The extended vector's entries, in order."""
 
-EXTENDED_UNITS: tuple[str, ...] = (("kg",) * 5 + ("rad",) * 6 + ("kg", "N m/rad", "N m s/rad") + ("N m",) * 3
-                                   + ("m",) * len(GEOMETRY_NAMES))
+EXTENDED_UNITS: tuple[str, ...] = (
+    ("kg",) * 5 + ("rad",) * 6 + ("kg", "N m/rad", "N m s/rad") + ("N m",) * 3 + ("m",) * len(GEOMETRY_NAMES)
+)
 """Unit of each entry."""
 
 EXTENDED_DIM = len(EXTENDED_NAMES)
@@ -85,11 +103,20 @@ BOUND = 3.0
 
 def geometry_vector(robot: RobotSpec) -> np.ndarray:
     """Entries 17-27 of a robot (front-left leg; every leg mirrors it). Shape: (11,), m."""
-    return np.array([
-        *robot.base_size, abs(robot.hip_pos[0, 0]), abs(robot.hip_pos[0, 1]), abs(robot.thigh_offset[0, 1]),
-        float(np.linalg.norm(robot.calf_offset[0])), float(np.linalg.norm(robot.foot_offset[0])),
-        robot.link_radius[1], robot.link_radius[2], robot.foot_radius,
-    ], dtype=np.float64)
+    return np.array(
+        [
+            *robot.base_size,
+            abs(robot.hip_pos[0, 0]),
+            abs(robot.hip_pos[0, 1]),
+            abs(robot.thigh_offset[0, 1]),
+            float(np.linalg.norm(robot.calf_offset[0])),
+            float(np.linalg.norm(robot.foot_offset[0])),
+            robot.link_radius[1],
+            robot.link_radius[2],
+            robot.foot_radius,
+        ],
+        dtype=np.float64,
+    )
 
 
 def actuation_vector(total_mass: float, kp: float, kd: float, torque_limit: np.ndarray) -> np.ndarray:
@@ -105,9 +132,13 @@ def extended_descriptor(robot: RobotSpec, descriptor: np.ndarray | None = None) 
         descriptor: The 11-D descriptor to put first (default the robot's own).
     """
     desc = robot.descriptor if descriptor is None else descriptor
-    return np.concatenate([np.asarray(desc, dtype=np.float64),
-                           actuation_vector(robot.total_mass, robot.kp, robot.kd, robot.torque_limit),
-                           geometry_vector(robot)])
+    return np.concatenate(
+        [
+            np.asarray(desc, dtype=np.float64),
+            actuation_vector(robot.total_mass, robot.kp, robot.kd, robot.torque_limit),
+            geometry_vector(robot),
+        ]
+    )
 
 
 @lru_cache(maxsize=1)
@@ -154,8 +185,9 @@ def encode(x: np.ndarray) -> np.ndarray:
     return BOUND * np.tanh(z / BOUND)
 
 
-def mass_ratio_gains(kp: float, kd: float, torque_limit: np.ndarray, ratio: float,
-                     torque_exponent: float) -> tuple[float, float, np.ndarray]:
+def mass_ratio_gains(
+    kp: float, kd: float, torque_limit: np.ndarray, ratio: float, torque_exponent: float
+) -> tuple[float, float, np.ndarray]:
     """A deployer's rule: Kp, Kd x ratio, torque limits x ratio^torque_exponent (ratio = M / M_template).
 
     Returns:

@@ -52,8 +52,21 @@ MAX_REDRAWS = 1000
 """Draws per robot before :func:`sample_geometry` gives up on ``min_base_clearance`` (a config that cannot be met)."""
 
 FACTOR_NAMES: tuple[str, ...] = (
-    "scale", "base_size_x", "base_size_y", "base_size_z", "base_density", "hip_pos_x", "hip_pos_y", "thigh_offset",
-    "calf_length", "thigh_ratio", "calf_radius", "thigh_radius_ratio", "hip_mass", "thigh_mass", "calf_mass",
+    "scale",
+    "base_size_x",
+    "base_size_y",
+    "base_size_z",
+    "base_density",
+    "hip_pos_x",
+    "hip_pos_y",
+    "thigh_offset",
+    "calf_length",
+    "thigh_ratio",
+    "calf_radius",
+    "thigh_radius_ratio",
+    "hip_mass",
+    "thigh_mass",
+    "calf_mass",
     "foot_mass",
 )
 """Names of :meth:`GeometrySample.vector`'s entries (the mass entries are factors before scale^3)."""
@@ -89,9 +102,16 @@ class GeometrySample:
 
     def vector(self) -> np.ndarray:
         """The factors in :data:`FACTOR_NAMES` order (e.g. an extended descriptor's input). Shape: (16,)."""
-        return np.concatenate([[self.scale], self.base_size, [self.base_density], self.hip_pos,
-                               [self.thigh_offset, self.calf_length, self.thigh_ratio, self.calf_radius,
-                                self.thigh_radius_ratio], self.link_mass]).astype(np.float64)
+        return np.concatenate(
+            [
+                [self.scale],
+                self.base_size,
+                [self.base_density],
+                self.hip_pos,
+                [self.thigh_offset, self.calf_length, self.thigh_ratio, self.calf_radius, self.thigh_radius_ratio],
+                self.link_mass,
+            ]
+        ).astype(np.float64)
 
     @classmethod
     def nominal(cls) -> GeometrySample:
@@ -101,8 +121,12 @@ class GeometrySample:
     def length_factors(self) -> dict[str, float]:
         """The factor of each link's length (hip: s x thigh offset, thigh, calf, foot: its radius)."""
         calf = self.calf_length * self.scale
-        return {"hip": self.scale * self.thigh_offset, "thigh": calf * self.thigh_ratio, "calf": calf,
-                "foot": self.calf_radius * self.scale}
+        return {
+            "hip": self.scale * self.thigh_offset,
+            "thigh": calf * self.thigh_ratio,
+            "calf": calf,
+            "foot": self.calf_radius * self.scale,
+        }
 
 
 def _u(rng: np.random.Generator, bounds: tuple[float, float], size: int | None = None) -> np.ndarray | float:
@@ -113,10 +137,16 @@ def _u(rng: np.random.Generator, bounds: tuple[float, float], size: int | None =
 
 def _draw(rng: np.random.Generator, cfg: GeometryRandCfg) -> GeometrySample:
     return GeometrySample(
-        scale=_u(rng, cfg.scale), base_size=_u(rng, cfg.base_size, 3), base_density=_u(rng, cfg.base_density),
-        hip_pos=_u(rng, cfg.hip_pos, 2), thigh_offset=_u(rng, cfg.hip_pos), calf_length=_u(rng, cfg.link_length),
-        thigh_ratio=_u(rng, cfg.thigh_length_ratio), calf_radius=_u(rng, cfg.link_radius),
-        thigh_radius_ratio=_u(rng, cfg.thigh_radius_ratio), link_mass=_u(rng, cfg.link_mass, 4),
+        scale=_u(rng, cfg.scale),
+        base_size=_u(rng, cfg.base_size, 3),
+        base_density=_u(rng, cfg.base_density),
+        hip_pos=_u(rng, cfg.hip_pos, 2),
+        thigh_offset=_u(rng, cfg.hip_pos),
+        calf_length=_u(rng, cfg.link_length),
+        thigh_ratio=_u(rng, cfg.thigh_length_ratio),
+        calf_radius=_u(rng, cfg.link_radius),
+        thigh_radius_ratio=_u(rng, cfg.thigh_radius_ratio),
+        link_mass=_u(rng, cfg.link_mass, 4),
     )
 
 
@@ -125,8 +155,9 @@ def base_clearance(robot: RobotSpec, height: float) -> float:
     return height - float(robot.base_size[2]) / 2
 
 
-def sample_geometry(rng: np.random.Generator, cfg: GeometryRandCfg, template: RobotSpec,
-                    name: str | None = None) -> tuple[GeometrySample, RobotSpec]:
+def sample_geometry(
+    rng: np.random.Generator, cfg: GeometryRandCfg, template: RobotSpec, name: str | None = None
+) -> tuple[GeometrySample, RobotSpec]:
     """Draw one robot, again until its base clears the ground by ``cfg.min_base_clearance`` at the default pose.
 
     Returns:
@@ -142,8 +173,10 @@ def sample_geometry(rng: np.random.Generator, cfg: GeometryRandCfg, template: Ro
         standing = robot.init_height - (template.init_height - template_height)
         if base_clearance(robot, standing) >= cfg.min_base_clearance:
             return sample, robot
-    raise ValueError(f"no generated robot in {MAX_REDRAWS} draws has its base {cfg.min_base_clearance} m above "
-                     "the ground; widen env.rand.geometry's ranges or lower min_base_clearance.")
+    raise ValueError(
+        f"no generated robot in {MAX_REDRAWS} draws has its base {cfg.min_base_clearance} m above "
+        "the ground; widen env.rand.geometry's ranges or lower min_base_clearance."
+    )
 
 
 def stretch_inertia(inertia: np.ndarray, mass_ratio: float, axis_factor: np.ndarray) -> np.ndarray:
@@ -167,8 +200,14 @@ def stretch_inertia(inertia: np.ndarray, mass_ratio: float, axis_factor: np.ndar
     return np.array([second[1] + second[2], second[0] + second[2], second[0] + second[1]])
 
 
-def generate_robot(template: RobotSpec, sample: GeometrySample, cfg: GeometryRandCfg, name: str | None = None, *,
-                   template_height: float | None = None) -> RobotSpec:
+def generate_robot(
+    template: RobotSpec,
+    sample: GeometrySample,
+    cfg: GeometryRandCfg,
+    name: str | None = None,
+    *,
+    template_height: float | None = None,
+) -> RobotSpec:
     """The template with one sample's geometry, masses and gains (module docstring); a pure function.
 
     Args:
@@ -193,8 +232,9 @@ def generate_robot(template: RobotSpec, sample: GeometrySample, cfg: GeometryRan
         nominal = template.links[link]
         mass = nominal.mass * sample.link_mass[i] * s**3
         ratio = mass / nominal.mass if nominal.mass > 0 else 0.0
-        links[link] = LinkInertial(mass=mass, com=nominal.com * lengths[link],
-                                   inertia=nominal.inertia * ratio * lengths[link] ** 2)
+        links[link] = LinkInertial(
+            mass=mass, com=nominal.com * lengths[link], inertia=nominal.inertia * ratio * lengths[link] ** 2
+        )
     calf_r = sample.calf_radius * s
     link_radius = template.link_radius * np.array([s, calf_r * sample.thigh_radius_ratio, calf_r])
     rotor_mass = template.rotor_mass * s**3
@@ -203,19 +243,39 @@ def generate_robot(template: RobotSpec, sample: GeometrySample, cfg: GeometryRan
     gain = mass_ratio if cfg.gains_with_mass else 1.0
     torque = mass_ratio if cfg.torque_with_mass else 1.0
     descriptor = template.descriptor.copy()
-    descriptor[[0, 1, 2, 3, 4]] = [links["thigh"].mass, links["calf"].mass, links["hip"].mass, links["foot"].mass,
-                                   base_mass]
+    descriptor[[0, 1, 2, 3, 4]] = [
+        links["thigh"].mass,
+        links["calf"].mass,
+        links["hip"].mass,
+        links["foot"].mass,
+        base_mass,
+    ]
     robot = dataclasses.replace(
-        template, name=name or f"{template.name}_generated", display_name=f"{template.display_name} (generated)",
-        is_template=False, descriptor=as_descriptor(descriptor, "generated descriptor"),
+        template,
+        name=name or f"{template.name}_generated",
+        display_name=f"{template.display_name} (generated)",
+        is_template=False,
+        descriptor=as_descriptor(descriptor, "generated descriptor"),
         descriptor_source="generated (morfic_cli/morphology/procedural.py)",
-        base_size=base_size, base_mass=base_mass, base_com=template.base_com * size_f, base_inertia=base_inertia,
-        hip_pos=template.hip_pos * hip_f, thigh_offset=template.thigh_offset * lengths["hip"],
-        calf_offset=template.calf_offset * lengths["thigh"], foot_offset=template.foot_offset * lengths["calf"],
-        foot_radius=template.foot_radius * calf_r, link_radius=link_radius, links=links,
-        rotor_mass=rotor_mass, rotor_radius=template.rotor_radius * s,
-        torque_limit=template.torque_limit * torque, kp=template.kp * gain, kd=template.kd * gain,
-        public_total_mass=total, conflicts=(), facts=(),
+        base_size=base_size,
+        base_mass=base_mass,
+        base_com=template.base_com * size_f,
+        base_inertia=base_inertia,
+        hip_pos=template.hip_pos * hip_f,
+        thigh_offset=template.thigh_offset * lengths["hip"],
+        calf_offset=template.calf_offset * lengths["thigh"],
+        foot_offset=template.foot_offset * lengths["calf"],
+        foot_radius=template.foot_radius * calf_r,
+        link_radius=link_radius,
+        links=links,
+        rotor_mass=rotor_mass,
+        rotor_radius=template.rotor_radius * s,
+        torque_limit=template.torque_limit * torque,
+        kp=template.kp * gain,
+        kd=template.kd * gain,
+        public_total_mass=total,
+        conflicts=(),
+        facts=(),
     )
     template_height = nominal_height(template) if template_height is None else template_height
     clearance = template.init_height - template_height
@@ -244,10 +304,13 @@ class GeometryPool:
     @classmethod
     def of(cls, robots: Sequence[RobotSpec], samples: Sequence[GeometrySample]) -> GeometryPool:
         """A pool of these robots and samples (same length)."""
-        return cls(robots=tuple(robots), samples=tuple(samples),
-                   descriptors=np.stack([r.descriptor for r in robots]),
-                   init_height=np.array([r.init_height for r in robots]),
-                   nominal_foot_pos_b=np.stack([r.hip_pos[:, :2] + r.thigh_offset[:, :2] for r in robots]))
+        return cls(
+            robots=tuple(robots),
+            samples=tuple(samples),
+            descriptors=np.stack([r.descriptor for r in robots]),
+            init_height=np.array([r.init_height for r in robots]),
+            nominal_foot_pos_b=np.stack([r.hip_pos[:, :2] + r.thigh_offset[:, :2] for r in robots]),
+        )
 
 
 def generate_pool(template: RobotSpec, cfg: GeometryRandCfg, seed: int) -> GeometryPool:

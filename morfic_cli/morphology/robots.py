@@ -266,8 +266,9 @@ def robots_dir() -> Path:
     if env:
         path = Path(env).expanduser()
         if not path.is_dir():
-            raise RobotSpecError(f"{ROBOTS_DIR_ENV}={env} is not a directory; point it at a folder of robot TOMLs "
-                                 "or unset it.")
+            raise RobotSpecError(
+                f"{ROBOTS_DIR_ENV}={env} is not a directory; point it at a folder of robot TOMLs or unset it."
+            )
         return path
     packaged = resources.files("morfic_cli") / "robots"
     if packaged.is_dir():
@@ -275,8 +276,9 @@ def robots_dir() -> Path:
     checkout = Path(__file__).resolve().parents[2] / "robots"
     if checkout.is_dir():
         return checkout
-    raise RobotSpecError(f"no robot library found (looked in {packaged} and {checkout}); reinstall morfic or "
-                         f"set {ROBOTS_DIR_ENV}.")
+    raise RobotSpecError(
+        f"no robot library found (looked in {packaged} and {checkout}); reinstall morfic or set {ROBOTS_DIR_ENV}."
+    )
 
 
 def list_robots() -> list[str]:
@@ -303,8 +305,10 @@ def load_robot(name: str) -> RobotSpec:
         raise UnknownNameError("robot", name, names)
     spec = load_robot_file(robots_dir() / f"{name}.toml")
     if spec.name != name:
-        raise RobotSpecError(f"{spec.source_path}: name: '{spec.name}' does not match the file name '{name}.toml'; "
-                             "rename the file or fix the name.")
+        raise RobotSpecError(
+            f"{spec.source_path}: name: '{spec.name}' does not match the file name '{name}.toml'; "
+            "rename the file or fix the name."
+        )
     return spec
 
 
@@ -371,8 +375,9 @@ class _Reader:
         unknown = [k for k in data if k not in known]
         if unknown:
             full = f"{where}.{unknown[0]}" if where else unknown[0]
-            raise self.fail(full, f"unknown key '{unknown[0]}' in [{where or 'top level'}]; "
-                                  f"known keys are: {', '.join(known)}.")
+            raise self.fail(
+                full, f"unknown key '{unknown[0]}' in [{where or 'top level'}]; known keys are: {', '.join(known)}."
+            )
 
     def string(self, data: Mapping[str, Any], key: str, where: str) -> str:
         value = self.require(data, key, where)
@@ -394,21 +399,31 @@ class _Reader:
             raise self.fail(where, f"expected a list of {shape[0]} numbers, got {value!r}.")
         return np.array([self.number(v, f"{where}[{i}]") for i, v in enumerate(value)])
 
-    def quantity(self, data: Mapping[str, Any], key: str, where: str, unit: str,
-                 shape: tuple[int, ...] = (), per_leg: bool = False) -> np.ndarray:
+    def quantity(
+        self,
+        data: Mapping[str, Any],
+        key: str,
+        where: str,
+        unit: str,
+        shape: tuple[int, ...] = (),
+        per_leg: bool = False,
+    ) -> np.ndarray:
         """Read ``{ value|front,rear|left,right, unit, source }``; per-leg values come back (4, *shape)."""
         full = f"{where}.{key}" if where else key
         fact = self.require(data, key, where)
         if not isinstance(fact, dict):
-            raise self.fail(full, f"expected an inline table {{ value = ..., unit = \"{unit}\", source = \"...\" }}, "
-                                  f"got {fact!r}.")
+            raise self.fail(
+                full, f'expected an inline table {{ value = ..., unit = "{unit}", source = "..." }}, got {fact!r}.'
+            )
         sides = next((pair for pair in _SIDE_KEYS if pair[0] in fact or pair[1] in fact), None)
         value_keys: tuple[str, ...] = sides if (per_leg and sides) else ("value",)
         self.no_unknown(fact, (*value_keys, "unit", "source", "note"), full)
         got_unit = self.require(fact, "unit", full)
         if got_unit != unit:
-            raise self.fail(full, f"wrong unit '{got_unit}'; this field is in '{unit}' (convert the value and write "
-                                  f"unit = \"{unit}\").")
+            raise self.fail(
+                full,
+                f"wrong unit '{got_unit}'; this field is in '{unit}' (convert the value and write unit = \"{unit}\").",
+            )
         source = self.string(fact, "source", full)
         if value_keys == ("value",):
             arr = self.numbers(self.require(fact, "value", full), shape, f"{full}.value")
@@ -437,13 +452,31 @@ def _positive(r: _Reader, arr: np.ndarray, where: str, what: str, allow_zero: bo
     bad = arr < 0 if allow_zero else arr <= 0
     if np.any(bad):
         bound = ">= 0" if allow_zero else "> 0"
-        raise r.fail(where, f"{what} must be {bound}, got {np.asarray(arr).tolist()}; a physical {what} cannot be "
-                            f"{'negative' if allow_zero else 'zero or negative'}.")
+        raise r.fail(
+            where,
+            f"{what} must be {bound}, got {np.asarray(arr).tolist()}; a physical {what} cannot be "
+            f"{'negative' if allow_zero else 'zero or negative'}.",
+        )
 
 
-_TOP_KEYS = ("schema_version", "name", "display_name", "template", "public_total_mass", "descriptor_source",
-             "notes", "base", "leg", "links", "rotors", "joint_limits", "actuators", "default_pose", "descriptor",
-             "conflicts")
+_TOP_KEYS = (
+    "schema_version",
+    "name",
+    "display_name",
+    "template",
+    "public_total_mass",
+    "descriptor_source",
+    "notes",
+    "base",
+    "leg",
+    "links",
+    "rotors",
+    "joint_limits",
+    "actuators",
+    "default_pose",
+    "descriptor",
+    "conflicts",
+)
 
 
 def _parse(data: dict[str, Any], r: _Reader) -> RobotSpec:
@@ -524,8 +557,11 @@ def _check_inertia(r: _Reader, diag: np.ndarray, where: str) -> None:
     _positive(r, diag, where, "moment of inertia")
     a, b, c = diag
     if a + b < c or b + c < a or a + c < b:
-        raise r.fail(where, f"{diag.tolist()} breaks the triangle inequality (each moment must be at most the sum "
-                            "of the other two); check for a typo such as a misplaced decimal point.")
+        raise r.fail(
+            where,
+            f"{diag.tolist()} breaks the triangle inequality (each moment must be at most the sum "
+            "of the other two); check for a typo such as a misplaced decimal point.",
+        )
 
 
 def _parse_leg(data: Mapping[str, Any], r: _Reader) -> dict[str, Any]:
@@ -536,16 +572,22 @@ def _parse_leg(data: Mapping[str, Any], r: _Reader) -> dict[str, Any]:
     radius = r.quantity(t, "foot_radius", "leg", U_LEN)
     link_radius = r.quantity(t, "link_radius", "leg", U_LEN, (3,))
     if fl["hip_pos"][0] <= 0 or fl["hip_pos"][1] <= 0:
-        raise r.fail("leg.hip_pos", f"{fl['hip_pos'].tolist()}: give the front-left hip, with x > 0 and y > 0; "
-                                    "the other legs are mirrored from it.")
+        raise r.fail(
+            "leg.hip_pos",
+            f"{fl['hip_pos'].tolist()}: give the front-left hip, with x > 0 and y > 0; "
+            "the other legs are mirrored from it.",
+        )
     for k in ("calf_offset", "foot_offset"):
         if np.linalg.norm(fl[k]) <= 0:
             raise r.fail(f"leg.{k}", "a link length must be > 0, got a zero offset.")
     _positive(r, radius, "leg.foot_radius", "length")
     _positive(r, link_radius, "leg.link_radius", "length")
     if link_radius[2] > radius:
-        raise r.fail("leg.link_radius", f"calf capsule radius {link_radius[2]:g} m is larger than the foot radius "
-                                        f"{float(radius):g} m; the foot must touch the ground first.")
+        raise r.fail(
+            "leg.link_radius",
+            f"calf capsule radius {link_radius[2]:g} m is larger than the foot radius "
+            f"{float(radius):g} m; the foot must touch the ground first.",
+        )
     out: dict[str, Any] = {k: _mirror(v) for k, v in fl.items()}
     out["foot_radius"] = radius
     out["link_radius"] = link_radius
@@ -616,8 +658,11 @@ def _parse_limits(data: Mapping[str, Any], r: _Reader) -> np.ndarray:
         for ji, joint in enumerate(JOINTS):
             lo, hi = ranges[li, ji]
             if lo >= hi:
-                raise r.fail(f"joint_limits.{joint}", f"{leg} min limit {lo:g} rad is not below the max limit "
-                                                      f"{hi:g} rad; write [min, max] with min < max.")
+                raise r.fail(
+                    f"joint_limits.{joint}",
+                    f"{leg} min limit {lo:g} rad is not below the max limit "
+                    f"{hi:g} rad; write [min, max] with min < max.",
+                )
     return ranges
 
 
@@ -645,8 +690,11 @@ def _parse_pose(data: Mapping[str, Any], r: _Reader, joint_range: np.ndarray) ->
         for ji, joint in enumerate(JOINTS):
             lo, hi = joint_range[li, ji]
             if not lo <= pose[li, ji] <= hi:
-                raise r.fail(f"default_pose.{joint}", f"{leg} default {pose[li, ji]:g} rad is outside the joint "
-                                                      f"limits [{lo:g}, {hi:g}] rad; fix the pose or the limits.")
+                raise r.fail(
+                    f"default_pose.{joint}",
+                    f"{leg} default {pose[li, ji]:g} rad is outside the joint "
+                    f"limits [{lo:g}, {hi:g}] rad; fix the pose or the limits.",
+                )
     height = r.quantity(t, "init_height", "default_pose", U_LEN)
     _positive(r, height, "default_pose.init_height", "length")
     return pose, float(height)
@@ -660,8 +708,9 @@ def _parse_descriptor(data: Mapping[str, Any], r: _Reader) -> np.ndarray:
     try:
         return as_descriptor(t, what=f"{r.path}: [descriptor]")
     except DescriptorError as exc:
-        raise RobotSpecError(f"{exc} Fix field 'descriptor' (keys {', '.join(DESCRIPTOR_NAMES)}, in kg and rad).") \
-            from exc
+        raise RobotSpecError(
+            f"{exc} Fix field 'descriptor' (keys {', '.join(DESCRIPTOR_NAMES)}, in kg and rad)."
+        ) from exc
 
 
 def _parse_conflicts(data: Mapping[str, Any], r: _Reader) -> tuple[Conflict, ...]:
@@ -675,13 +724,15 @@ def _parse_conflicts(data: Mapping[str, Any], r: _Reader) -> tuple[Conflict, ...
         if not isinstance(item, dict):
             raise r.fail(where, "expected a table with keys field, paper, public, source, note.")
         r.no_unknown(item, keys, where)
-        out.append(Conflict(
-            field=r.string(item, "field", where),
-            paper=r.require(item, "paper", where),
-            public=r.require(item, "public", where),
-            source=r.string(item, "source", where),
-            note=r.string(item, "note", where),
-        ))
+        out.append(
+            Conflict(
+                field=r.string(item, "field", where),
+                paper=r.require(item, "paper", where),
+                public=r.require(item, "public", where),
+                source=r.string(item, "source", where),
+                note=r.string(item, "note", where),
+            )
+        )
     return tuple(out)
 
 
@@ -705,10 +756,18 @@ def descriptor_rows(spec: RobotSpec) -> list[dict[str, Any]]:
     """
     flags = spec.support_flags()
     return [
-        {"name": n, "unit": u, "value": float(v), "train_min": float(lo), "train_max": float(hi),
-         "support": int(f), "mark": SUPPORT_MARKS[int(f)]}
-        for n, u, v, lo, hi, f in zip(DESCRIPTOR_NAMES, DESCRIPTOR_UNITS, spec.descriptor, TRAIN_MIN, TRAIN_MAX,
-                                      flags, strict=True)
+        {
+            "name": n,
+            "unit": u,
+            "value": float(v),
+            "train_min": float(lo),
+            "train_max": float(hi),
+            "support": int(f),
+            "mark": SUPPORT_MARKS[int(f)],
+        }
+        for n, u, v, lo, hi, f in zip(
+            DESCRIPTOR_NAMES, DESCRIPTOR_UNITS, spec.descriptor, TRAIN_MIN, TRAIN_MAX, flags, strict=True
+        )
     ]
 
 
@@ -735,8 +794,10 @@ def fact_rows(spec: RobotSpec, raw: bool = False) -> list[dict[str, Any]]:
 def conflict_rows(spec: RobotSpec, raw: bool = False) -> list[dict[str, Any]]:
     """The spec's conflicts with public sources as rows (field, paper, public, source, note); ``raw`` as above."""
     fmt = (lambda v: v) if raw else _format_value
-    return [{"field": c.field, "paper": fmt(c.paper), "public": fmt(c.public),
-             "source": c.source, "note": c.note} for c in spec.conflicts]
+    return [
+        {"field": c.field, "paper": fmt(c.paper), "public": fmt(c.public), "source": c.source, "note": c.note}
+        for c in spec.conflicts
+    ]
 
 
 def iter_robots() -> Iterator[RobotSpec]:

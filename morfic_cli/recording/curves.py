@@ -8,9 +8,25 @@ from collections.abc import Sequence
 
 #: Columns that always come first, in this order; the rest (reward terms, terminations, ...) follow sorted.
 CURVE_COLUMNS: tuple[str, ...] = (
-    "iteration", "env_steps", "wall_time_s", "steps_per_s", "collect_s", "learn_s", "mean_reward",
-    "episode_length_s", "explained_variance", "value_loss", "surrogate", "entropy", "kl", "clip_fraction",
-    "adaptation_error", "learning_rate", "action_std", "tracking.vx_error", "curriculum.vx_max",
+    "iteration",
+    "env_steps",
+    "wall_time_s",
+    "steps_per_s",
+    "collect_s",
+    "learn_s",
+    "mean_reward",
+    "episode_length_s",
+    "explained_variance",
+    "value_loss",
+    "surrogate",
+    "entropy",
+    "kl",
+    "clip_fraction",
+    "adaptation_error",
+    "learning_rate",
+    "action_std",
+    "tracking.vx_error",
+    "curriculum.vx_max",
 )
 
 
@@ -36,8 +52,10 @@ def read_curve_csv(data: bytes) -> list[dict[str, float]]:
         return []
     df = pd.read_csv(io.BytesIO(data))
     ints = ("iteration", "env_steps")
-    return [{k: int(v) if k in ints else float(v) for k, v in rec.items()
-             if not (isinstance(v, float) and math.isnan(v))} for rec in df.to_dict("records")]
+    return [
+        {k: int(v) if k in ints else float(v) for k, v in rec.items() if not (isinstance(v, float) and math.isnan(v))}
+        for rec in df.to_dict("records")
+    ]
 
 
 def _has_values(values: Sequence[float]) -> bool:
@@ -71,14 +89,14 @@ def curve_png(rows: Sequence[dict], title: str = "") -> bytes:
         (["value_loss"], "value loss"),
     ]
     panels = [(keys, label) for keys, label in panels if any(_has_values(series(k)) for k in keys)]
-    terms = sorted(k for k in {k for r in rows for k in r if k.startswith("episode_reward.")}
-                   if _has_values(series(k)))
+    terms = sorted(k for k in {k for r in rows for k in r if k.startswith("episode_reward.")} if _has_values(series(k)))
     ncols = 6
     term_rows = math.ceil(len(terms) / ncols)
     main_rows = max(1, math.ceil(len(panels) / 3))
     fig = plt.figure(figsize=(14, 3.2 * main_rows + 1.9 * term_rows + (0.5 if title else 0)), constrained_layout=True)
-    top, bottom = fig.subfigures(2, 1, height_ratios=[3.2 * main_rows, max(1.9 * term_rows, 0.01)]) if terms \
-        else (fig, None)
+    top, bottom = (
+        fig.subfigures(2, 1, height_ratios=[3.2 * main_rows, max(1.9 * term_rows, 0.01)]) if terms else (fig, None)
+    )
     axes = top.subplots(main_rows, 3, squeeze=False).ravel()
     for ax, (keys, label) in zip(axes, panels, strict=False):
         for key in keys:
@@ -88,7 +106,7 @@ def curve_png(rows: Sequence[dict], title: str = "") -> bytes:
         ax.set_xlabel("iteration", fontsize=8)
         if len(keys) > 1:
             ax.legend(fontsize=8)
-    for ax in axes[len(panels):]:
+    for ax in axes[len(panels) :]:
         ax.set_visible(False)
     if bottom is not None:
         bottom.suptitle("reward terms (per second of episode; each panel its own scale)", fontsize=10)
@@ -98,7 +116,7 @@ def curve_png(rows: Sequence[dict], title: str = "") -> bytes:
             ax.set_title(key.removeprefix("episode_reward."), fontsize=9)
             ax.tick_params(labelsize=7)
             ax.grid(alpha=0.3)
-        for ax in taxes[len(terms):]:
+        for ax in taxes[len(terms) :]:
             ax.set_visible(False)
     if title:
         fig.suptitle(title)

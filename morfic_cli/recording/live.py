@@ -67,8 +67,9 @@ class LiveView:
         OSError: ``host:port`` cannot be bound (e.g. the port is taken).
     """
 
-    def __init__(self, *, num_envs: int, term_names: Sequence[str], scene: RolloutScene | None, host: str,
-                 port: int) -> None:
+    def __init__(
+        self, *, num_envs: int, term_names: Sequence[str], scene: RolloutScene | None, host: str, port: int
+    ) -> None:
         import foxglove
         from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
         from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
@@ -81,8 +82,9 @@ class LiveView:
         self._listener = _Resend()
         from morfic_cli.recording.ws_relay import SubprotocolRelay
 
-        self.server = foxglove.start_server(name="morfic play", host="127.0.0.1", port=0,
-                                            server_listener=self._listener)
+        self.server = foxglove.start_server(
+            name="morfic play", host="127.0.0.1", port=0, server_listener=self._listener
+        )
         try:
             self.relay = SubprotocolRelay(self.server.port, host=host, port=port)
         except BaseException:
@@ -91,14 +93,16 @@ class LiveView:
         self.host = host
 
         def channel(topic: str, name: str, data: bytes) -> foxglove.Channel:
-            return foxglove.Channel(topic, schema=foxglove.Schema(name=name, encoding="protobuf", data=data),
-                                    message_encoding="protobuf")
+            return foxglove.Channel(
+                topic, schema=foxglove.Schema(name=name, encoding="protobuf", data=data), message_encoding="protobuf"
+            )
 
         self._steps = channel(ROLLOUT_TOPIC, ROLLOUT_SCHEMA_NAME, self._codec.schema_data)
         self._scene = self._tf = self._tf_static = None
         if scene is not None:
-            self._scene = channel(SCENE_TOPIC, "foxglove.SceneUpdate",
-                                  build_file_descriptor_set(SceneUpdate).SerializeToString())
+            self._scene = channel(
+                SCENE_TOPIC, "foxglove.SceneUpdate", build_file_descriptor_set(SceneUpdate).SerializeToString()
+            )
             tf_schema = build_file_descriptor_set(FrameTransforms).SerializeToString()
             self._tf = channel(TF_TOPIC, "foxglove.FrameTransforms", tf_schema)
             self._tf_static = channel(TF_STATIC_TOPIC, "foxglove.FrameTransforms", tf_schema)

@@ -98,8 +98,10 @@ ROLLOUT_FIELDS: dict[str, RolloutField] = {
     "action": RolloutField((12,), "", f"Policy action a_t, PD target q0 + action_scale * a ({_JOINTS})"),
     "reward": RolloutField((), "", "Total reward of the step, as the env returns it (dt-scaled)"),
     "reward_terms": RolloutField(
-        (NUM_TERMS,), "", "Per-term reward contributions (sign x weight x term x dt), summing to reward; "
-        "keyed by term name in messages, columns in term_names order in arrays"
+        (NUM_TERMS,),
+        "",
+        "Per-term reward contributions (sign x weight x term x dt), summing to reward; "
+        "keyed by term name in messages, columns in term_names order in arrays",
     ),
     "value": RolloutField((), "", "Critic value V(s_t) of the state the action was taken in"),
     "done": RolloutField(
@@ -167,8 +169,9 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def encode_metadata(metadata: Mapping[str, Any], term_names: Sequence[str], num_envs: int,
-                    scene_envs: Sequence[int] = ()) -> dict[str, str]:
+def encode_metadata(
+    metadata: Mapping[str, Any], term_names: Sequence[str], num_envs: int, scene_envs: Sequence[int] = ()
+) -> dict[str, str]:
     """The str -> str map of the metadata record.
 
     Strings are stored as they are; every other value as JSON, its key listed in the JSON list ``json_keys``
@@ -186,8 +189,12 @@ def encode_metadata(metadata: Mapping[str, Any], term_names: Sequence[str], num_
         if key in ("format", "json_keys", "scene_envs"):
             raise ValueError(f"rollout metadata: key {key!r} is reserved")
         values[key] = value
-    own = {"format": ROLLOUT_FORMAT, "num_envs": num_envs, "term_names": list(term_names),
-           "scene_envs": [int(i) for i in scene_envs]}
+    own = {
+        "format": ROLLOUT_FORMAT,
+        "num_envs": num_envs,
+        "term_names": list(term_names),
+        "scene_envs": [int(i) for i in scene_envs],
+    }
     for key in ("num_envs", "term_names"):
         if key in values and json.dumps(values[key], default=_json_default) != json.dumps(own[key]):
             raise ValueError(f"rollout metadata: {key}={values[key]!r} disagrees with the writer's {own[key]!r}")
@@ -216,8 +223,10 @@ def decode_metadata(record: Mapping[str, str]) -> dict[str, Any]:
 def step_codec(term_names: Sequence[str]) -> StepCodec:
     """The protobuf codec of :data:`ROLLOUT_FIELDS` with these reward terms."""
     k = len(term_names)
-    fields = {name: (tuple(k if d == NUM_TERMS else int(d) for d in spec.shape), spec.dtype)
-              for name, spec in ROLLOUT_FIELDS.items()}
+    fields = {
+        name: (tuple(k if d == NUM_TERMS else int(d) for d in spec.shape), spec.dtype)
+        for name, spec in ROLLOUT_FIELDS.items()
+    }
     return StepCodec.build(fields, term_names)
 
 
@@ -429,10 +438,15 @@ def read_rollout(path: Path) -> RolloutLog:
     num_envs = int(metadata["num_envs"])
     if fmt == "morfic.rollout/1":
         messages = [json.loads(p) for p in payloads]
-        return RolloutLog(metadata, term_names, _arrays_from_json(messages, term_names, num_envs),
-                          np.array([m["step"] for m in messages], dtype=np.int64),
-                          np.array([m["time_s"] for m in messages], dtype=np.float64))
-    codec = step_codec(term_names) if schema is None else StepCodec.from_schema(step_codec(term_names).fields,
-                                                                                  schema.data)
+        return RolloutLog(
+            metadata,
+            term_names,
+            _arrays_from_json(messages, term_names, num_envs),
+            np.array([m["step"] for m in messages], dtype=np.int64),
+            np.array([m["time_s"] for m in messages], dtype=np.float64),
+        )
+    codec = (
+        step_codec(term_names) if schema is None else StepCodec.from_schema(step_codec(term_names).fields, schema.data)
+    )
     steps, times, arrays = codec.decode(payloads, num_envs)
     return RolloutLog(metadata=metadata, term_names=term_names, arrays=arrays, steps=steps, time_s=times)

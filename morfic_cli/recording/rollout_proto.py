@@ -41,8 +41,9 @@ _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _F = descriptor_pb2.FieldDescriptorProto
 
 
-def _file_proto(fields: Mapping[str, tuple[tuple[int | str, ...], str]], term_names: Sequence[str],
-                wire_twin: bool = False):
+def _file_proto(
+    fields: Mapping[str, tuple[tuple[int | str, ...], str]], term_names: Sequence[str], wire_twin: bool = False
+):
     """The FileDescriptorProto of the three messages for these fields ({name: (shape, dtype)}) and terms.
 
     ``wire_twin``: vector fields as ``bytes`` (the same wire format as packed ``repeated float``).
@@ -54,8 +55,13 @@ def _file_proto(fields: Mapping[str, tuple[tuple[int | str, ...], str]], term_na
     env = fdp.message_type.add(name="EnvStep")
     for i, (name, (shape, dtype)) in enumerate(fields.items()):
         if name == "reward_terms":
-            env.field.add(name=name, number=i + 1, type=_F.TYPE_MESSAGE, type_name=f".{PACKAGE}.RewardTerms",
-                          label=_F.LABEL_OPTIONAL)
+            env.field.add(
+                name=name,
+                number=i + 1,
+                type=_F.TYPE_MESSAGE,
+                type_name=f".{PACKAGE}.RewardTerms",
+                label=_F.LABEL_OPTIONAL,
+            )
         elif dtype == "bool":
             env.field.add(name=name, number=i + 1, type=_F.TYPE_BOOL, label=_F.LABEL_OPTIONAL)
         elif shape == ():
@@ -67,8 +73,9 @@ def _file_proto(fields: Mapping[str, tuple[tuple[int | str, ...], str]], term_na
     step = fdp.message_type.add(name="RolloutStep")
     step.field.add(name="step", number=1, type=_F.TYPE_UINT32, label=_F.LABEL_OPTIONAL)
     step.field.add(name="time_s", number=2, type=_F.TYPE_DOUBLE, label=_F.LABEL_OPTIONAL)
-    step.field.add(name="envs", number=3, type=_F.TYPE_MESSAGE, type_name=f".{PACKAGE}.EnvStep",
-                   label=_F.LABEL_REPEATED)
+    step.field.add(
+        name="envs", number=3, type=_F.TYPE_MESSAGE, type_name=f".{PACKAGE}.EnvStep", label=_F.LABEL_REPEATED
+    )
     return fdp
 
 
@@ -173,6 +180,7 @@ class StepCodec:
         for k, name in enumerate(scalars):
             out[name] = sc[..., k].astype(bool if self.fields[name][1] == "bool" else np.float32)
         k = len(self.term_names)
-        out["reward_terms"] = np.fromiter(itertools.chain.from_iterable(rows_t), np.float32,
-                                          count=t * num_envs * k).reshape(t, num_envs, k)
+        out["reward_terms"] = np.fromiter(
+            itertools.chain.from_iterable(rows_t), np.float32, count=t * num_envs * k
+        ).reshape(t, num_envs, k)
         return np.array(steps, dtype=np.int64), np.array(times, dtype=np.float64), {n: out[n] for n in self.fields}

@@ -57,9 +57,12 @@ FLOOR_ORIGIN_X_M = 90.0
 """Floor centre along x, m: it starts 10 m behind the start line."""
 
 GEOM_TYPES = {
-    mujoco.mjtGeom.mjGEOM_PLANE: "plane", mujoco.mjtGeom.mjGEOM_SPHERE: "sphere",
-    mujoco.mjtGeom.mjGEOM_CAPSULE: "capsule", mujoco.mjtGeom.mjGEOM_ELLIPSOID: "ellipsoid",
-    mujoco.mjtGeom.mjGEOM_CYLINDER: "cylinder", mujoco.mjtGeom.mjGEOM_BOX: "box",
+    mujoco.mjtGeom.mjGEOM_PLANE: "plane",
+    mujoco.mjtGeom.mjGEOM_SPHERE: "sphere",
+    mujoco.mjtGeom.mjGEOM_CAPSULE: "capsule",
+    mujoco.mjtGeom.mjGEOM_ELLIPSOID: "ellipsoid",
+    mujoco.mjtGeom.mjGEOM_CYLINDER: "cylinder",
+    mujoco.mjtGeom.mjGEOM_BOX: "box",
 }
 """MuJoCo geom types drawn, by the name used in entity metadata."""
 
@@ -153,23 +156,41 @@ class RolloutScene:
         rel_quat = quat_conj_mul(xquat[:, p], xquat[:, bodies])  # (E, B, 4)
         key = tuple(bodies.tolist())
         if key not in self._names:  # (parent, child) frame ids per env
-            self._names[key] = [[(env_frame(env, self.body_names[pk]), env_frame(env, self.body_names[b]))
-                                 for pk, b in zip(p.tolist(), key, strict=True)] for env in self.env_ids]
+            self._names[key] = [
+                [
+                    (env_frame(env, self.body_names[pk]), env_frame(env, self.body_names[b]))
+                    for pk, b in zip(p.tolist(), key, strict=True)
+                ]
+                for env in self.env_ids
+            ]
         names = self._names[key]
         out = []
         for env_names, ts, qs in zip(names, rel_pos.tolist(), rel_quat.tolist(), strict=True):
-            out += [FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
-                                   translation={"x": t[0], "y": t[1], "z": t[2]},
-                                   rotation={"w": q[0], "x": q[1], "y": q[2], "z": q[3]})
-                    for (parent, child), t, q in zip(env_names, ts, qs, strict=True)]
+            out += [
+                FrameTransform(
+                    timestamp=stamp,
+                    parent_frame_id=parent,
+                    child_frame_id=child,
+                    translation={"x": t[0], "y": t[1], "z": t[2]},
+                    rotation={"w": q[0], "x": q[1], "y": q[2], "z": q[3]},
+                )
+                for (parent, child), t, q in zip(env_names, ts, qs, strict=True)
+            ]
         return out
 
     def static_transforms(self, log_time_ns: int) -> FrameTransforms:
         """The fixed frames: each env's origin in ``world`` and every body without a joint in its parent."""
         stamp = timestamp(log_time_ns)
-        out = [FrameTransform(timestamp=stamp, parent_frame_id=ROOT_FRAME, child_frame_id=env_frame(env, "world"),
-                              translation=Vector3(x=o[0], y=o[1], z=o[2]), rotation=Quaternion(w=1.0))
-               for env, o in ((env, self.offset(env)) for env in self.env_ids)]
+        out = [
+            FrameTransform(
+                timestamp=stamp,
+                parent_frame_id=ROOT_FRAME,
+                child_frame_id=env_frame(env, "world"),
+                translation=Vector3(x=o[0], y=o[1], z=o[2]),
+                rotation=Quaternion(w=1.0),
+            )
+            for env, o in ((env, self.offset(env)) for env in self.env_ids)
+        ]
         if len(self.fixed):
             xpos, xquat = self.body_poses(np.stack([m.qpos0 for m in self.models]))
             out += self._transforms(self.fixed, xpos, xquat, stamp)
@@ -191,52 +212,75 @@ class RolloutScene:
                     continue
                 name = _name(model, mujoco.mjtObj.mjOBJ_GEOM, g, "geom")
                 size = np.asarray(model.geom_size[g], dtype=float)
-                meta = [KeyValuePair(key="geom", value=name), KeyValuePair(key="type", value=kind),
-                        KeyValuePair(key="size", value=" ".join(repr(float(s)) for s in size))]
+                meta = [
+                    KeyValuePair(key="geom", value=name),
+                    KeyValuePair(key="type", value=kind),
+                    KeyValuePair(key="size", value=" ".join(repr(float(s)) for s in size)),
+                ]
                 rgba = model.geom_rgba[g]
                 color = Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
                 if kind == "plane":
                     if floor is None:
                         floor = SceneEntity(
-                            timestamp=stamp, frame_id=ROOT_FRAME, id="floor", frame_locked=True, metadata=meta,
-                            cubes=[CubePrimitive(pose=Pose(position=Vector3(x=FLOOR_ORIGIN_X_M, y=0.0,
-                                                                            z=-FLOOR_SIZE_M[2] / 2),
-                                                           orientation=Quaternion(w=1.0)),
-                                                 size=Vector3(x=FLOOR_SIZE_M[0], y=FLOOR_SIZE_M[1],
-                                                              z=FLOOR_SIZE_M[2]), color=color)])
+                            timestamp=stamp,
+                            frame_id=ROOT_FRAME,
+                            id="floor",
+                            frame_locked=True,
+                            metadata=meta,
+                            cubes=[
+                                CubePrimitive(
+                                    pose=Pose(
+                                        position=Vector3(x=FLOOR_ORIGIN_X_M, y=0.0, z=-FLOOR_SIZE_M[2] / 2),
+                                        orientation=Quaternion(w=1.0),
+                                    ),
+                                    size=Vector3(x=FLOOR_SIZE_M[0], y=FLOOR_SIZE_M[1], z=FLOOR_SIZE_M[2]),
+                                    color=color,
+                                )
+                            ],
+                        )
                     continue
-                entity = SceneEntity(timestamp=stamp, frame_id=env_frame(env, self.body_names[model.geom_bodyid[g]]),
-                                     id=env_frame(env, name), frame_locked=True, metadata=meta)
+                entity = SceneEntity(
+                    timestamp=stamp,
+                    frame_id=env_frame(env, self.body_names[model.geom_bodyid[g]]),
+                    id=env_frame(env, name),
+                    frame_locked=True,
+                    metadata=meta,
+                )
                 _add_primitives(entity, kind, model.geom_pos[g], model.geom_quat[g], size, color)
                 entities.append(entity)
         return SceneUpdate(entities=([floor] if floor is not None else []) + entities)
 
 
 def _pose(pos: np.ndarray, quat: np.ndarray) -> Pose:
-    return Pose(position=Vector3(x=pos[0], y=pos[1], z=pos[2]),
-                orientation=Quaternion(w=quat[0], x=quat[1], y=quat[2], z=quat[3]))
+    return Pose(
+        position=Vector3(x=pos[0], y=pos[1], z=pos[2]),
+        orientation=Quaternion(w=quat[0], x=quat[1], y=quat[2], z=quat[3]),
+    )
 
 
-def _add_primitives(entity: SceneEntity, kind: str, pos: np.ndarray, quat: np.ndarray, size: np.ndarray,
-                    color: Color) -> None:
+def _add_primitives(
+    entity: SceneEntity, kind: str, pos: np.ndarray, quat: np.ndarray, size: np.ndarray, color: Color
+) -> None:
     """The Foxglove primitives of one geom (module docstring), in the geom's pose within its body."""
     pose = _pose(pos, quat)
     if kind == "box":
-        entity.cubes.append(CubePrimitive(pose=pose, size=Vector3(x=2 * size[0], y=2 * size[1], z=2 * size[2]),
-                                          color=color))
+        entity.cubes.append(
+            CubePrimitive(pose=pose, size=Vector3(x=2 * size[0], y=2 * size[1], z=2 * size[2]), color=color)
+        )
     elif kind in ("sphere", "ellipsoid"):
         r = size if kind == "ellipsoid" else np.full(3, size[0])
-        entity.spheres.append(SpherePrimitive(pose=pose, size=Vector3(x=2 * r[0], y=2 * r[1], z=2 * r[2]),
-                                              color=color))
+        entity.spheres.append(SpherePrimitive(pose=pose, size=Vector3(x=2 * r[0], y=2 * r[1], z=2 * r[2]), color=color))
     else:  # cylinder or capsule: radius size[0], half-length size[1] along the geom's z
         d, h = 2 * size[0], 2 * size[1]
-        entity.cylinders.append(CylinderPrimitive(pose=pose, size=Vector3(x=d, y=d, z=h), bottom_scale=1.0,
-                                                  top_scale=1.0, color=color))
+        entity.cylinders.append(
+            CylinderPrimitive(pose=pose, size=Vector3(x=d, y=d, z=h), bottom_scale=1.0, top_scale=1.0, color=color)
+        )
         if kind == "capsule":
             axis = _rotate(quat, np.array([0.0, 0.0, size[1]]))
             for sign in (1.0, -1.0):
-                entity.spheres.append(SpherePrimitive(pose=_pose(pos + sign * axis, quat),
-                                                      size=Vector3(x=d, y=d, z=d), color=color))
+                entity.spheres.append(
+                    SpherePrimitive(pose=_pose(pos + sign * axis, quat), size=Vector3(x=d, y=d, z=d), color=color)
+                )
 
 
 def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:

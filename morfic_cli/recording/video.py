@@ -189,14 +189,40 @@ def _asset_key(model: mujoco.MjModel) -> tuple[Any, ...]:
     ``mjv_updateScene``, so models that differ only there (e.g. a descriptor's link lengths) share.
     """
     digest = hashlib.sha1()
-    for arr in (model.mesh_vert, model.mesh_face, model.tex_data, model.hfield_data, model.mat_texid,
-                model.skin_vert, model.flex_vert):
+    for arr in (
+        model.mesh_vert,
+        model.mesh_face,
+        model.tex_data,
+        model.hfield_data,
+        model.mat_texid,
+        model.skin_vert,
+        model.flex_vert,
+    ):
         digest.update(np.ascontiguousarray(arr).tobytes())
-    counts = (model.nbody, model.ngeom, model.nsite, model.nmesh, model.ntex, model.nmat, model.nhfield,
-              model.nskin, model.nflex, model.nlight, model.ncam)
+    counts = (
+        model.nbody,
+        model.ngeom,
+        model.nsite,
+        model.nmesh,
+        model.ntex,
+        model.nmat,
+        model.nhfield,
+        model.nskin,
+        model.nflex,
+        model.nlight,
+        model.ncam,
+    )
     vis = model.vis
-    settings = (float(model.stat.extent), vis.map.shadowclip, vis.map.shadowscale, vis.map.fogstart,
-                vis.map.fogend, tuple(vis.rgba.fog), vis.quality.shadowsize, vis.quality.offsamples)
+    settings = (
+        float(model.stat.extent),
+        vis.map.shadowclip,
+        vis.map.shadowscale,
+        vis.map.fogstart,
+        vis.map.fogend,
+        tuple(vis.rgba.fog),
+        vis.quality.shadowsize,
+        vis.quality.offsamples,
+    )
     return counts, settings, digest.hexdigest()
 
 
@@ -237,8 +263,13 @@ def _add_floor_grid(scene: mujoco.MjvScene, center: np.ndarray, line_width: floa
             return
         geom = scene.geoms[scene.ngeom]
         mujoco.mjv_initGeom(geom, mujoco.mjtGeom.mjGEOM_LINE, np.zeros(3), np.zeros(3), np.eye(3).ravel(), rgba)
-        mujoco.mjv_connector(geom, mujoco.mjtGeom.mjGEOM_LINE, line_width, np.asarray(start, dtype=np.float64),
-                             np.asarray(end, dtype=np.float64))
+        mujoco.mjv_connector(
+            geom,
+            mujoco.mjtGeom.mjGEOM_LINE,
+            line_width,
+            np.asarray(start, dtype=np.float64),
+            np.asarray(end, dtype=np.float64),
+        )
         scene.ngeom += 1
 
 
@@ -262,9 +293,17 @@ def _follow_lights(scene: mujoco.MjvScene, center: np.ndarray) -> None:
             light.pos[:2] += center[:2]
 
 
-def render_frames(models: Sequence[mujoco.MjModel], qpos: np.ndarray, *, every: int = 2, width: int = 320,
-                  height: int = 240, track_body: str | int = 1, shadows: bool = True,
-                  on_frame: Callable[[], None] | None = None) -> np.ndarray:
+def render_frames(
+    models: Sequence[mujoco.MjModel],
+    qpos: np.ndarray,
+    *,
+    every: int = 2,
+    width: int = 320,
+    height: int = 240,
+    track_body: str | int = 1,
+    shadows: bool = True,
+    on_frame: Callable[[], None] | None = None,
+) -> np.ndarray:
     """Render recorded trajectories of E envs offscreen and tile them into one image per kept time step.
 
     Each env has its own model (morphologies may differ) but all share the joint layout (a common ``nq``). For
@@ -348,7 +387,7 @@ def render_frames(models: Sequence[mujoco.MjModel], qpos: np.ndarray, *, every: 
                 _follow_lights(scene, d.xpos[bodies[e]])
                 _add_floor_grid(scene, d.xpos[bodies[e]], line_width, shadows)
                 r, c = divmod(e, cols)
-                renderer.render(out=frames[f, r * height:(r + 1) * height, c * width:(c + 1) * width])
+                renderer.render(out=frames[f, r * height : (r + 1) * height, c * width : (c + 1) * width])
             if on_frame is not None:
                 on_frame()
     finally:
@@ -358,9 +397,9 @@ def render_frames(models: Sequence[mujoco.MjModel], qpos: np.ndarray, *, every: 
             m.vis.map.zfar = saved
     sep = max(1, width // 320)  # white separators between tiles (drawn over the tiles' edges)
     for c in range(1, cols):
-        frames[:, :, c * width - sep:c * width + sep] = 255
+        frames[:, :, c * width - sep : c * width + sep] = 255
     for r in range(1, rows):
-        frames[:, r * height - sep:r * height + sep] = 255
+        frames[:, r * height - sep : r * height + sep] = 255
     return frames
 
 
@@ -404,9 +443,17 @@ def _encode_mp4(frames: np.ndarray, fps: float) -> bytes:
     with tempfile.TemporaryDirectory(prefix="morfic-video-") as tmp:
         out = os.path.join(tmp, "video.mp4")
         writer = imageio_ffmpeg.write_frames(
-            out, (w + w % 2, h + h % 2), pix_fmt_in="rgb24", pix_fmt_out="yuv420p", fps=fps, codec="libx264",
-            quality=None, macro_block_size=1, ffmpeg_log_level="error",
-            output_params=["-crf", "23", "-preset", "medium", "-movflags", "+faststart", "-an"])
+            out,
+            (w + w % 2, h + h % 2),
+            pix_fmt_in="rgb24",
+            pix_fmt_out="yuv420p",
+            fps=fps,
+            codec="libx264",
+            quality=None,
+            macro_block_size=1,
+            ffmpeg_log_level="error",
+            output_params=["-crf", "23", "-preset", "medium", "-movflags", "+faststart", "-an"],
+        )
         writer.send(None)  # start ffmpeg
         try:
             for frame in frames:
@@ -438,8 +485,16 @@ def _encode_gif(frames: np.ndarray, fps: float) -> bytes:
     palette = mosaic.quantize(colors=GIF_COLORS, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
     indexed = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
     buf = io.BytesIO()
-    indexed[0].save(buf, format="GIF", save_all=True, append_images=indexed[1:], duration=duration_ms, loop=0,
-                    optimize=False, disposal=1)
+    indexed[0].save(
+        buf,
+        format="GIF",
+        save_all=True,
+        append_images=indexed[1:],
+        duration=duration_ms,
+        loop=0,
+        optimize=False,
+        disposal=1,
+    )
     return buf.getvalue()
 
 

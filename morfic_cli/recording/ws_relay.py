@@ -39,12 +39,27 @@ LEGACY_SUBPROTOCOL = "foxglove.websocket.v1"
 SUBPROTOCOLS = (SDK_SUBPROTOCOL, LEGACY_SUBPROTOCOL)
 """What the relay accepts, in order of preference."""
 
-CLIENT_OPS = frozenset({"subscribe", "unsubscribe", "advertise", "unadvertise", "getParameters", "setParameters",
-                        "subscribeParameterUpdates", "unsubscribeParameterUpdates", "subscribeConnectionGraph",
-                        "unsubscribeConnectionGraph", "fetchAsset"})
+CLIENT_OPS = frozenset(
+    {
+        "subscribe",
+        "unsubscribe",
+        "advertise",
+        "unadvertise",
+        "getParameters",
+        "setParameters",
+        "subscribeParameterUpdates",
+        "unsubscribeParameterUpdates",
+        "subscribeConnectionGraph",
+        "unsubscribeConnectionGraph",
+        "fetchAsset",
+    }
+)
 """The JSON operations a client may send (those ``foxglove-sdk``'s server parses)."""
-CLIENT_BINARY_OPCODES = {1: ("message data", "clientPublish"), 2: ("service call request", "services"),
-                         3: ("playback control request", "playbackControl")}
+CLIENT_BINARY_OPCODES = {
+    1: ("message data", "clientPublish"),
+    2: ("service call request", "services"),
+    3: ("playback control request", "playbackControl"),
+}
 """The first byte of a client's binary frame: the operation, and the server capability it needs."""
 MESSAGE_DATA = 1
 """Opcode of the server's binary message-data frames (the only frames a slow client loses)."""
@@ -75,12 +90,16 @@ def refusal_message(offered: list[str]) -> str:
         One line naming what was offered and what is accepted.
     """
     got = ", ".join(offered) if offered else "none"
-    return (f"morfic play speaks the Foxglove WebSocket protocol: offer the subprotocol {SDK_SUBPROTOCOL} or "
-            f"{LEGACY_SUBPROTOCOL} (this client offered: {got})")
+    return (
+        f"morfic play speaks the Foxglove WebSocket protocol: offer the subprotocol {SDK_SUBPROTOCOL} or "
+        f"{LEGACY_SUBPROTOCOL} (this client offered: {got})"
+    )
 
 
-UPGRADE_MESSAGE = ("this is the live view of morfic play, a Foxglove WebSocket server: open ws://<this host:port> "
-                   "in Foxglove (Open connection -> Foxglove WebSocket)")
+UPGRADE_MESSAGE = (
+    "this is the live view of morfic play, a Foxglove WebSocket server: open ws://<this host:port> "
+    "in Foxglove (Open connection -> Foxglove WebSocket)"
+)
 """The body of the HTTP 426 a plain HTTP request (no WebSocket upgrade) gets."""
 
 
@@ -98,17 +117,19 @@ def is_loopback(host: str) -> bool:
 def one_line(text: object, limit: int = 160) -> str:
     """``text`` as one printable line of at most ``limit`` characters (control characters escaped)."""
     s = "".join(c if c.isprintable() else f"\\x{ord(c):02x}" for c in str(text))
-    return s if len(s) <= limit else s[:limit - 3] + "..."
+    return s if len(s) <= limit else s[: limit - 3] + "..."
 
 
 def _ids(items: object, keys: tuple[str, ...]) -> bool:
     """Whether ``items`` is a list of objects whose ``keys`` are all integers."""
     return isinstance(items, list) and all(
-        isinstance(item, dict) and all(type(item.get(k)) is int for k in keys) for item in items)
+        isinstance(item, dict) and all(type(item.get(k)) is int for k in keys) for item in items
+    )
 
 
-def client_frame_error(frame: str | bytes, *, capabilities: Collection[str] = (),
-                       channels: Collection[int] | None = None) -> str | None:
+def client_frame_error(
+    frame: str | bytes, *, capabilities: Collection[str] = (), channels: Collection[int] | None = None
+) -> str | None:
     """What is wrong with one frame from a client, or None when it is a message the protocol defines.
 
     A text frame must be a JSON object whose ``op`` is one of :data:`CLIENT_OPS`; ``subscribe`` must carry
@@ -146,12 +167,14 @@ def client_frame_error(frame: str | bytes, *, capabilities: Collection[str] = ()
     if op == "subscribe":
         if not _ids(msg.get("subscriptions"), ("id", "channelId")):
             return "sent a subscribe without subscriptions: [{id, channelId}]"
-        unknown = [s["channelId"] for s in msg["subscriptions"] if channels is not None and
-                   s["channelId"] not in channels]
+        unknown = [
+            s["channelId"] for s in msg["subscriptions"] if channels is not None and s["channelId"] not in channels
+        ]
         if unknown:
             return f"subscribed to channel {unknown[0]}, which the server never advertised"
-    if op == "unsubscribe" and not (isinstance(msg.get("subscriptionIds"), list)
-                                    and all(type(i) is int for i in msg["subscriptionIds"])):
+    if op == "unsubscribe" and not (
+        isinstance(msg.get("subscriptionIds"), list) and all(type(i) is int for i in msg["subscriptionIds"])
+    ):
         return "sent an unsubscribe without subscriptionIds: [int]"
     return None
 
@@ -218,8 +241,10 @@ class Outbox:
         self.peak = max(self.peak, self.bytes)
         self._ready.set()
         if self.control_bytes - (0 if self.droppable(frame) else n) > self.limit:  # the newest aside, as above
-            raise TooSlow(f"read too slowly: {self.control_bytes} bytes of control messages waiting, over the "
-                          f"{self.limit} bytes bound")
+            raise TooSlow(
+                f"read too slowly: {self.control_bytes} bytes of control messages waiting, over the "
+                f"{self.limit} bytes bound"
+            )
 
     async def get(self) -> str | bytes:
         """The oldest queued frame, once there is one."""
@@ -244,8 +269,9 @@ class _BadClient(Exception):
 
 def _offered(request) -> list[str]:
     """The subprotocols of a handshake request's ``Sec-WebSocket-Protocol`` headers, in order."""
-    return [p.strip() for value in request.headers.get_all("Sec-WebSocket-Protocol")
-            for p in value.split(",") if p.strip()]
+    return [
+        p.strip() for value in request.headers.get_all("Sec-WebSocket-Protocol") for p in value.split(",") if p.strip()
+    ]
 
 
 def _peer(connection) -> str:
@@ -273,8 +299,7 @@ def _handshake_failure(exc: BaseException | None) -> str:
     return f"sent a bad WebSocket handshake ({one_line(exc, 100)})"
 
 
-_PROTOCOL_CLOSES = {1002: "broke the WebSocket framing", 1007: "sent invalid frame data",
-                    1009: "sent a frame too long"}
+_PROTOCOL_CLOSES = {1002: "broke the WebSocket framing", 1007: "sent invalid frame data", 1009: "sent a frame too long"}
 """Close codes the relay's WebSocket layer sends on a client's fault, and what the client did."""
 
 
@@ -324,12 +349,23 @@ class SubprotocolRelay:
         OSError: ``host:port`` cannot be bound.
     """
 
-    def __init__(self, upstream_port: int, *, host: str, port: int, max_frame_bytes: int = MAX_FRAME_BYTES,
-                 backlog_bytes: int = BACKLOG_BYTES, handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
-                 ping_interval_s: float | None = PING_INTERVAL_S, close_timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+    def __init__(
+        self,
+        upstream_port: int,
+        *,
+        host: str,
+        port: int,
+        max_frame_bytes: int = MAX_FRAME_BYTES,
+        backlog_bytes: int = BACKLOG_BYTES,
+        handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
+        ping_interval_s: float | None = PING_INTERVAL_S,
+        close_timeout_s: float = CLOSE_TIMEOUT_S,
+    ) -> None:
         if not isinstance(host, str) or not host.strip():
-            raise ValueError("the live view's host must be an address or a name (127.0.0.1: this machine only; "
-                             "0.0.0.0: every interface), not empty")
+            raise ValueError(
+                "the live view's host must be an address or a name (127.0.0.1: this machine only; "
+                "0.0.0.0: every interface), not empty"
+            )
         self.upstream = f"ws://127.0.0.1:{int(upstream_port)}"
         self.max_frame_bytes = int(max_frame_bytes)
         self.backlog_bytes = int(backlog_bytes)
@@ -370,8 +406,9 @@ class SubprotocolRelay:
         if getattr(connection, "reported", False) or not self._server.is_serving():
             return
         connection.reported = True
-        log.warning("live view: %s client %s: %s", "refused" if refused else "closed", _peer(connection),
-                    one_line(reason, 240))
+        log.warning(
+            "live view: %s client %s: %s", "refused" if refused else "closed", _peer(connection), one_line(reason, 240)
+        )
 
     async def _serve(self, host: str, port: int):
         from websockets.asyncio.server import ServerConnection, serve
@@ -399,15 +436,19 @@ class SubprotocolRelay:
                     try:
                         await asyncio.wait_for(super().handshake(*args, **kwargs), relay.handshake_timeout_s)
                     except asyncio.TimeoutError:
-                        relay.report(self, "sent no complete WebSocket handshake within "
-                                           f"{relay.handshake_timeout_s:g} s", refused=True)
+                        relay.report(
+                            self,
+                            f"sent no complete WebSocket handshake within {relay.handshake_timeout_s:g} s",
+                            refused=True,
+                        )
                         raise
                     except Exception as exc:
                         relay.report(self, _handshake_failure(exc), refused=True)
                         raise
                     if self.protocol.state is not State.OPEN:
-                        relay.report(self, self.refusal or _handshake_failure(self.protocol.handshake_exc),
-                                     refused=True)
+                        relay.report(
+                            self, self.refusal or _handshake_failure(self.protocol.handshake_exc), refused=True
+                        )
                 finally:  # reported first: busy reaching 0 means every report is out
                     if self.protocol.state is not State.OPEN:
                         relay._busy -= 1
@@ -417,21 +458,34 @@ class SubprotocolRelay:
 
         def check(connection, request):
             if "websocket" not in request.headers.get("Upgrade", "").lower():
-                connection.refusal = (f"sent an HTTP request without a WebSocket upgrade "
-                                      f"({one_line(request.path, 60)}) -> HTTP 426")
+                connection.refusal = (
+                    f"sent an HTTP request without a WebSocket upgrade ({one_line(request.path, 60)}) -> HTTP 426"
+                )
                 return connection.respond(426, UPGRADE_MESSAGE + "\n")
             offered = _offered(request)
             if not any(p in offered for p in SUBPROTOCOLS):
-                connection.refusal = (f"offered no Foxglove subprotocol (offered: "
-                                      f"{one_line(', '.join(offered) or 'none', 80)}) -> HTTP 400")
+                connection.refusal = (
+                    f"offered no Foxglove subprotocol (offered: "
+                    f"{one_line(', '.join(offered) or 'none', 80)}) -> HTTP 400"
+                )
                 return connection.respond(400, refusal_message(offered) + "\n")
             return None
 
-        return await serve(self._relay, host, port, subprotocols=list(SUBPROTOCOLS), select_subprotocol=select,
-                           process_request=check, compression=None, max_size=self.max_frame_bytes,
-                           open_timeout=None, ping_interval=self.ping_interval_s,
-                           ping_timeout=self.ping_interval_s, close_timeout=self.close_timeout_s,
-                           create_connection=Connection)
+        return await serve(
+            self._relay,
+            host,
+            port,
+            subprotocols=list(SUBPROTOCOLS),
+            select_subprotocol=select,
+            process_request=check,
+            compression=None,
+            max_size=self.max_frame_bytes,
+            open_timeout=None,
+            ping_interval=self.ping_interval_s,
+            ping_timeout=self.ping_interval_s,
+            close_timeout=self.close_timeout_s,
+            create_connection=Connection,
+        )
 
     async def _relay(self, client) -> None:
         try:
@@ -450,9 +504,16 @@ class SubprotocolRelay:
         state = _Client(_peer(client), Outbox(self.backlog_bytes))
         self.clients.add(state)
         try:
-            upstream = await connect(self.upstream, subprotocols=[SDK_SUBPROTOCOL], compression=None,
-                                     max_size=None, ping_interval=None, close_timeout=self.close_timeout_s)
+            upstream = await connect(
+                self.upstream,
+                subprotocols=[SDK_SUBPROTOCOL],
+                compression=None,
+                max_size=None,
+                ping_interval=None,
+                close_timeout=self.close_timeout_s,
+            )
             try:
+
                 async def inbound() -> None:  # client -> server, checked
                     async for frame in client:
                         reason = state.check(frame)

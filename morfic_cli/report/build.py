@@ -42,24 +42,26 @@ REPORTS_PREFIX = "reports/"
 
 FIGURES: dict[str, str] = {
     "ev": "Explained variance of the critic of each of the paper's variants per robot (higher is better, 1 = "
-          "perfect); the axis is logarithmic below -1, so no bar is cut.",
+    "perfect); the axis is logarithmic below -1, so no bar is cut.",
     "ev-external": "Explained variance of the external baselines' critics and MorFiC-F's per robot, as trained here "
-                   "(the paper's Fig. \"Critic calibration under morphology shift\", right).",
+    '(the paper\'s Fig. "Critic calibration under morphology shift", right).',
     "distance": "Forward velocity at 2.0 m/s (error bars: std over envs) against the normalised morphology "
-                "distance to Go2, one point per robot.",
+    "distance to Go2, one point per robot.",
     "compute": "Training device-hours normalised to 400M transitions, per run (and the paper's methods).",
     "curves": "Training curves: mean episode return and the critic's explained variance.",
 }
 
 #: The text above the claims (docs/results.md reads them with the reasons behind each).
-CLAIMS_INTRO = ("Each of the paper's five claims checked against the results below (morfic_cli/report/claims.py), "
-                "at 2.0 m/s and, where the store has evaluations there, at 1.0 m/s. Each claim names its primary "
-                "comparisons; each is tested over training seeds (Welch's t, a t-contrast, an equivalence test or "
-                "Spearman's rho over the robots), the p-values are Holm-corrected together, and the verdict counts "
-                "the significant ones: holds (all in the claimed direction), holds partly (some, none against), "
-                "mixed, partly reversed, does not hold (all against), or cannot tell (none significant; one seed "
-                "per variant gives no test). Under each comparison that is not significant: the seeds per side "
-                "that would detect its effect with 80 % power (docs/report.md \"How a verdict is read\").")
+CLAIMS_INTRO = (
+    "Each of the paper's five claims checked against the results below (morfic_cli/report/claims.py), "
+    "at 2.0 m/s and, where the store has evaluations there, at 1.0 m/s. Each claim names its primary "
+    "comparisons; each is tested over training seeds (Welch's t, a t-contrast, an equivalence test or "
+    "Spearman's rho over the robots), the p-values are Holm-corrected together, and the verdict counts "
+    "the significant ones: holds (all in the claimed direction), holds partly (some, none against), "
+    "mixed, partly reversed, does not hold (all against), or cannot tell (none significant; one seed "
+    "per variant gives no test). Under each comparison that is not significant: the seeds per side "
+    'that would detect its effect with 80 % power (docs/report.md "How a verdict is read").'
+)
 
 SPEED_PREFIX = "speed-"
 """Figure names ``speed-<run>-<robot>``: the eval figure of that run on that robot (descriptor mode, 2.0 m/s)."""
@@ -67,11 +69,13 @@ SPEED_PREFIX = "speed-"
 SPEED_PER_FIGURE = 6
 """Eval figures per LaTeX figure (three rows of two fit a page at a legible size)."""
 
-SPEED_CAPTION = ("Forward speed over time of {run} on each robot at a commanded 2.0 m/s (descriptor mode), as "
-                 "`morfic eval` drew it: the mean over alive envs, the 10-90th percentile band, the command dashed "
-                 "and falls as red ticks (their count in the legend); below, the percentage of envs alive. A run "
-                 "imported from a results-only bundle, which leaves the time series out, has each drawn from its "
-                 "eval table instead: v_x and its best 1 s (mean and std), S and the share of valid envs.")
+SPEED_CAPTION = (
+    "Forward speed over time of {run} on each robot at a commanded 2.0 m/s (descriptor mode), as "
+    "`morfic eval` drew it: the mean over alive envs, the 10-90th percentile band, the command dashed "
+    "and falls as red ticks (their count in the legend); below, the percentage of envs alive. A run "
+    "imported from a results-only bundle, which leaves the time series out, has each drawn from its "
+    "eval table instead: v_x and its best 1 s (mean and std), S and the share of valid envs."
+)
 
 
 def ev_external_figure(calibration: list[dict[str, Any]]) -> dict[str, tuple[bytes, bytes]]:
@@ -98,8 +102,10 @@ def eval_figures(store: Store, evals: list[dict[str, Any]]) -> dict[str, tuple[b
     from morfic_cli.evaluation.names import rollout_role
 
     out: dict[str, tuple[bytes, bytes]] = {}
-    for row in sorted(evals, key=lambda r: (r["run"], paper.ROBOTS.index(r["robot"])
-                                            if r["robot"] in paper.ROBOTS else len(paper.ROBOTS))):
+    for row in sorted(
+        evals,
+        key=lambda r: (r["run"], paper.ROBOTS.index(r["robot"]) if r["robot"] in paper.ROBOTS else len(paper.ROBOTS)),
+    ):
         if row["mode"] != "descriptor" or abs(float(row["command_vx"]) - 2.0) > 1e-9:
             continue
         rid = store.read_manifest(row["artifact"]).inputs.get(rollout_role(row["robot"], "descriptor", 2.0))
@@ -174,56 +180,127 @@ class _Section:
     claims: list[Claim] = field(default_factory=list)
 
 
-def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support: list[dict[str, Any]],
-              with_paper: bool) -> list[_Section]:
+def _sections(
+    data: StoreData, tables: dict[str, list[dict[str, Any]]], support: list[dict[str, Any]], with_paper: bool
+) -> list[_Section]:
     transfer, calib = tables.get("transfer", []), tables.get("calibration", [])
     fixed, compute = tables.get("fixed_rollout", []), tables.get("compute", [])
     P = (lambda *ts: [T.paper_table(t) for t in ts]) if with_paper else (lambda *ts: [])  # noqa: E731
-    out: list[_Section] = [_Section(
-        "The paper's claims", text=CLAIMS_INTRO, claims=check_claims(*claim_rows(data)))]
+    out: list[_Section] = [_Section("The paper's claims", text=CLAIMS_INTRO, claims=check_claims(*claim_rows(data)))]
 
-    main = T.transfer_table(transfer, key="zero_shot_transfer", title="Zero-shot cross-morphology transfer",
-                            command_vx=2.0, mode="descriptor", variants=T.MAIN_VARIANTS)
+    main = T.transfer_table(
+        transfer,
+        key="zero_shot_transfer",
+        title="Zero-shot cross-morphology transfer",
+        command_vx=2.0,
+        mode="descriptor",
+        variants=T.MAIN_VARIANTS,
+    )
     # The paper splits its variants over two tables (main, ablation); with runs outside the main table's four, one
     # more table puts every variant side by side, in our order.
-    every = T.transfer_table(transfer, key="zero_shot_transfer_every", title="Zero-shot transfer, every variant",
-                             command_vx=2.0, mode="descriptor", min_columns=2) \
-        if any(r["variant"] not in T.MAIN_VARIANTS for r in transfer) else None
+    every = (
+        T.transfer_table(
+            transfer,
+            key="zero_shot_transfer_every",
+            title="Zero-shot transfer, every variant",
+            command_vx=2.0,
+            mode="descriptor",
+            min_columns=2,
+        )
+        if any(r["variant"] not in T.MAIN_VARIANTS for r in transfer)
+        else None
+    )
     sec = _Section("Zero-shot transfer", [t for t in [main, every] if t] + P(paper.ZERO_SHOT_TRANSFER))
     if not main:
-        sec.text = ("No descriptor-mode evaluation at 2.0 m/s of ppo / actor-only / concat / film runs in the store "
-                    "(`morfic eval RUN --command-vx 2.0`).")
+        sec.text = (
+            "No descriptor-mode evaluation at 2.0 m/s of ppo / actor-only / concat / film runs in the store "
+            "(`morfic eval RUN --command-vx 2.0`)."
+        )
     out.append(sec)
 
     has_ablation = any(r["variant"] in T.ABLATION_VARIANTS[1:] for r in transfer)
-    abl = T.transfer_table(transfer, key="critic_conditioning_ablation", title="Ablation: multiplicative critics",
-                           command_vx=2.0, mode="descriptor", variants=T.ABLATION_VARIANTS) if has_ablation else None
-    sec = _Section("Ablation", [t for t in [abl] if t] + P(paper.CRITIC_CONDITIONING_ABLATION,
-                                                            paper.FILM_MORPH_RANGE_ABLATION))
+    abl = (
+        T.transfer_table(
+            transfer,
+            key="critic_conditioning_ablation",
+            title="Ablation: multiplicative critics",
+            command_vx=2.0,
+            mode="descriptor",
+            variants=T.ABLATION_VARIANTS,
+        )
+        if has_ablation
+        else None
+    )
+    sec = _Section(
+        "Ablation", [t for t in [abl] if t] + P(paper.CRITIC_CONDITIONING_ABLATION, paper.FILM_MORPH_RANGE_ABLATION)
+    )
     if not abl:
         sec.text = f"No evaluated {' / '.join(T.ABLATION_VARIANTS[1:])} runs in the store."
     out.append(sec)
 
-    fast = T.transfer_table(transfer, key="transfer_25", title="Transfer at a higher commanded speed",
-                            command_vx=2.5, mode="descriptor", use_max=True)
-    out.append(_Section("Transfer at 2.5 m/s", [t for t in [fast] if t],
-                        "" if fast else "No descriptor-mode evaluation at 2.5 m/s in the store."))
+    fast = T.transfer_table(
+        transfer,
+        key="transfer_25",
+        title="Transfer at a higher commanded speed",
+        command_vx=2.5,
+        mode="descriptor",
+        use_max=True,
+    )
+    out.append(
+        _Section(
+            "Transfer at 2.5 m/s",
+            [t for t in [fast] if t],
+            "" if fast else "No descriptor-mode evaluation at 2.5 m/s in the store.",
+        )
+    )
 
-    full = [t for t in (T.transfer_table(transfer, key=f"transfer_full_{v:g}".replace(".", "_"),
-                                         title=f"Transfer with the targets' own models at {v:g} m/s", command_vx=v,
-                                         mode="full") for v in (2.0, 2.5)) if t]
+    full = [
+        t
+        for t in (
+            T.transfer_table(
+                transfer,
+                key=f"transfer_full_{v:g}".replace(".", "_"),
+                title=f"Transfer with the targets' own models at {v:g} m/s",
+                command_vx=v,
+                mode="full",
+            )
+            for v in (2.0, 2.5)
+        )
+        if t
+    ]
     if full:
-        out.append(_Section("Transfer with the targets' own models (morfic extension)", full,
-                            "The paper applies each target's 11-D descriptor to the Go2 template (descriptor mode); "
-                            "here the policy runs on the target's own MJCF model (full mode)."))
+        out.append(
+            _Section(
+                "Transfer with the targets' own models (morfic extension)",
+                full,
+                "The paper applies each target's 11-D descriptor to the Go2 template (descriptor mode); "
+                "here the policy runs on the target's own MJCF model (full mode).",
+            )
+        )
 
-    matched = [t for t in (T.transfer_table(transfer, key=f"transfer_matched_{v:g}".replace(".", "_"),
-                                            title=f"Transfer with actuation matched to mass at {v:g} m/s",
-                                            command_vx=v, mode="actuation-matched") for v in (2.0, 2.5)) if t]
+    matched = [
+        t
+        for t in (
+            T.transfer_table(
+                transfer,
+                key=f"transfer_matched_{v:g}".replace(".", "_"),
+                title=f"Transfer with actuation matched to mass at {v:g} m/s",
+                command_vx=v,
+                mode="actuation-matched",
+            )
+            for v in (2.0, 2.5)
+        )
+        if t
+    ]
     if matched:
-        out.append(_Section("Transfer with actuation matched to mass (morfic extension)", matched,
-                            "Descriptor mode with the target's Kp, Kd and torque limits set as a deployer sets them "
-                            "for its mass: Go2's x the target's total mass / Go2's (docs/eval.md)."))
+        out.append(
+            _Section(
+                "Transfer with actuation matched to mass (morfic extension)",
+                matched,
+                "Descriptor mode with the target's Kp, Kd and torque limits set as a deployer sets them "
+                "for its mass: Go2's x the target's total mass / Go2's (docs/eval.md).",
+            )
+        )
 
     out.append(_external_section(tables, with_paper))
 
@@ -231,35 +308,62 @@ def _sections(data: StoreData, tables: dict[str, list[dict[str, Any]]], support:
     # are separate rows, never two seeds of one); the external baselines' are in their own section
     calib = without_external(calib)
     crit = [t for t in (T.ev_table(calib), T.critic_table(calib)) if t]
-    crit_other = [t for c in _other_commands(calib)
-                  for t in (T.ev_table(calib, command_vx=c), T.critic_table(calib, command_vx=c)) if t]
-    out.append(_Section("Critic diagnostics", crit + P(paper.CRITIC_METRICS_VARIANTS) + crit_other,
-                        "" if crit or crit_other else "No calibration diagnoses of these runs in the store "
-                                                      "(`morfic diagnose`)."))
+    crit_other = [
+        t
+        for c in _other_commands(calib)
+        for t in (T.ev_table(calib, command_vx=c), T.critic_table(calib, command_vx=c))
+        if t
+    ]
+    out.append(
+        _Section(
+            "Critic diagnostics",
+            crit + P(paper.CRITIC_METRICS_VARIANTS) + crit_other,
+            "" if crit or crit_other else "No calibration diagnoses of these runs in the store (`morfic diagnose`).",
+        )
+    )
     fx = [t for t in [T.fixed_rollout_table(fixed)] if t]
     fx_other = [t for t in (T.fixed_rollout_table(fixed, command_vx=c) for c in _other_commands(fixed)) if t]
-    out.append(_Section("Fixed-rollout diagnostic", fx + P(paper.CAUSAL_ADV_ALL) + fx_other,
-                        "" if fx or fx_other else "No fixed-rollout diagnoses with these runs' critics in the store "
-                                                  "(`morfic diagnose --fixed-rollout aliengo`)."))
+    out.append(
+        _Section(
+            "Fixed-rollout diagnostic",
+            fx + P(paper.CAUSAL_ADV_ALL) + fx_other,
+            ""
+            if fx or fx_other
+            else "No fixed-rollout diagnoses with these runs' critics in the store "
+            "(`morfic diagnose --fixed-rollout aliengo`).",
+        )
+    )
     if data.study:
         from morfic_cli.report.study import study_tables, study_text
 
-        out.append(_Section("Critic study: the conditioning alone, the actor fixed", study_tables(data.study),
-                            study_text(data.study, str(data.study_meta.get("actor", "?")), data.study[0]["artifact"],
-                                       data.study_meta.get("seconds", {}))))
+        out.append(
+            _Section(
+                "Critic study: the conditioning alone, the actor fixed",
+                study_tables(data.study),
+                study_text(
+                    data.study,
+                    str(data.study_meta.get("actor", "?")),
+                    data.study[0]["artifact"],
+                    data.study_meta.get("seconds", {}),
+                ),
+            )
+        )
     comp = T.compute_table(compute)
-    out.append(_Section("Training compute", [t for t in [comp] if t] + ([T.paper_compute_table()] if with_paper
-                                                                        else [])))
+    out.append(
+        _Section("Training compute", [t for t in [comp] if t] + ([T.paper_compute_table()] if with_paper else []))
+    )
     sup = T.support_table(support)
     out.append(_Section("Morphology support", [t for t in [sup] if t] + P(paper.MORPHOLOGY_SUPPORT)))
     return out
 
 
-EXTERNAL_TEXT = ("The paper compares MorFiC with four cross-morphology methods using their released weights in "
-                 "their own simulators (its rows below, marked paper). Ours re-implement BodyTransformer (bot), URMA "
-                 "(urma) and GenLoco (genloco) in morfic's pipeline and train them on the Go2 template with "
-                 "MorFiC-F's rewards, curriculum and budget (docs/training.md, \"External baselines\"); GenLoco's "
-                 "motion-imitation reward is not reproduced. They are evaluated and diagnosed as every variant.")
+EXTERNAL_TEXT = (
+    "The paper compares MorFiC with four cross-morphology methods using their released weights in "
+    "their own simulators (its rows below, marked paper). Ours re-implement BodyTransformer (bot), URMA "
+    "(urma) and GenLoco (genloco) in morfic's pipeline and train them on the Go2 template with "
+    "MorFiC-F's rewards, curriculum and budget (docs/training.md, \"External baselines\"); GenLoco's "
+    "motion-imitation reward is not reproduced. They are evaluated and diagnosed as every variant."
+)
 
 
 def _external_section(tables: dict[str, list[dict[str, Any]]], with_paper: bool) -> _Section:
@@ -273,13 +377,12 @@ def _external_section(tables: dict[str, list[dict[str, Any]]], with_paper: bool)
     calib = calib if any(r["variant"] != "film" for r in calib) else []
     found = [T.external_table(ext, c) for c in (2.0, 2.5)]
     found += [T.external_table(ext, c, mode="full") for c in (2.0, 2.5)]
-    found += [T.ev_table(calib, key="critic_ev_external", title="Explained variance of the external baselines' "
-                         "critics"),
-              T.critic_table(calib, key="critic_metrics_external", title="Critic calibration of the external "
-                             "baselines")]
+    found += [
+        T.ev_table(calib, key="critic_ev_external", title="Explained variance of the external baselines' critics"),
+        T.critic_table(calib, key="critic_metrics_external", title="Critic calibration of the external baselines"),
+    ]
     found += [T.paper_table(paper.CRITIC_METRICS_EXTERNAL)] if with_paper else []
-    return _Section("External baselines", [t for t in found if t] + [T.external_compute_table(compute)],
-                    EXTERNAL_TEXT)
+    return _Section("External baselines", [t for t in found if t] + [T.external_compute_table(compute)], EXTERNAL_TEXT)
 
 
 def seeds_note(data: StoreData) -> str:
@@ -293,14 +396,20 @@ def seeds_note(data: StoreData) -> str:
     single = sorted(v for v, s in seeds.items() if len(s) < 2)
     if not single:
         return ""
-    how = ("The experiment's answer (the README's findings: 3 seeds a variant) is in the shipped results bundles: "
-           "`morfic store import --append artifacts/bundles/results/*.tar`, then `morfic report` "
-           "(docs/reproducing.md).")
+    how = (
+        "The experiment's answer (the README's findings: 3 seeds a variant) is in the shipped results bundles: "
+        "`morfic store import --append artifacts/bundles/results/*.tar`, then `morfic report` "
+        "(docs/reproducing.md)."
+    )
     if len(single) == len(seeds):
-        return ("Read this first: this store has one training seed per variant, so no claim can be tested here "
-                "(a test compares seeds): every verdict below reads \"cannot tell\", which is not a finding. " + how)
-    return (f"Read this first: {', '.join(single)} {'has' if len(single) == 1 else 'have'} one training seed here, "
-            "so the comparisons that need them cannot be tested (\"cannot tell\" is then not a finding). " + how)
+        return (
+            "Read this first: this store has one training seed per variant, so no claim can be tested here "
+            '(a test compares seeds): every verdict below reads "cannot tell", which is not a finding. ' + how
+        )
+    return (
+        f"Read this first: {', '.join(single)} {'has' if len(single) == 1 else 'have'} one training seed here, "
+        'so the comparisons that need them cannot be tested ("cannot tell" is then not a finding). ' + how
+    )
 
 
 def _intro(data: StoreData, with_paper: bool) -> str:
@@ -311,9 +420,11 @@ def _intro(data: StoreData, with_paper: bool) -> str:
         f"Built by morfic {__version__} from {len(data.runs)} training run(s) ({', '.join(presets)} preset) and "
         f"the results stored for them; every number traces to an artifact id listed under Provenance "
         f"(`morfic store show ID`). Variant names follow the paper: "
-        + ", ".join(f"{v.label} = {name}" for name, v in STOCK.items()) + ".")
+        + ", ".join(f"{v.label} = {name}" for name, v in STOCK.items())
+        + "."
+    )
     if "smoke" in presets:
-        text += (" The smoke preset trains for seconds to exercise the pipeline: its numbers are not results.")
+        text += " The smoke preset trains for seconds to exercise the pipeline: its numbers are not results."
     if unfinished:
         text += f" Runs not trained to the end: {', '.join(unfinished)}."
     if with_paper:
@@ -331,18 +442,35 @@ def _paper_title(t: Table) -> Table:
     return replace(t, title=f"{t.title} (paper)") if t.source == "paper" else t
 
 
-def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list[Provenance],
-           figures: dict[str, tuple[bytes, bytes]]) -> dict[str, bytes]:
+def render(
+    cfg: ReportCfg,
+    data: StoreData,
+    sections: list[_Section],
+    prov: list[Provenance],
+    figures: dict[str, tuple[bytes, bytes]],
+) -> dict[str, bytes]:
     """The report's files (name -> bytes), see the module docstring."""
     from morfic_cli.recording.tables import rows_to_csv
 
     prov_rows = _provenance_rows(prov)
     run_names = [r.name for r in data.runs]
     files: dict[str, bytes] = {}
-    doc = {"title": cfg.title, "morfic_version": __version__, "runs": [asdict(r) for r in data.runs],
-           "sections": [{"heading": s.heading, "text": s.text, "tables": [t.to_dict() for t in s.tables],
-                         **({"claims": [asdict(c) for c in s.claims]} if s.claims else {})} for s in sections],
-           "figures": sorted(figures), "provenance": prov_rows}
+    doc = {
+        "title": cfg.title,
+        "morfic_version": __version__,
+        "runs": [asdict(r) for r in data.runs],
+        "sections": [
+            {
+                "heading": s.heading,
+                "text": s.text,
+                "tables": [t.to_dict() for t in s.tables],
+                **({"claims": [asdict(c) for c in s.claims]} if s.claims else {}),
+            }
+            for s in sections
+        ],
+        "figures": sorted(figures),
+        "provenance": prov_rows,
+    }
     files["report.json"] = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False, default=str).encode()
     files["provenance.csv"] = rows_to_csv(prov_rows, ("kind", "ref", "id", "role"))
     for name, (png, pdf) in figures.items():
@@ -354,15 +482,19 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
 
         md = []
         for s in sections:
-            body = "\n\n".join(x for x in [s.text, claims_markdown(s.claims),
-                                            *(table_markdown(_paper_title(t)) for t in s.tables)] if x)
+            body = "\n\n".join(
+                x
+                for x in [s.text, claims_markdown(s.claims), *(table_markdown(_paper_title(t)) for t in s.tables)]
+                if x
+            )
             md.append((s.heading, body))
         if figures:
             fixed = [n for n in figures if not n.startswith(SPEED_PREFIX)]
             body = [f"![{FIGURES[n]}](figures/{n}.png)\n\n*{FIGURES[n]}*\n" for n in fixed]
             for run, names in _speed_groups([n for n in figures if n.startswith(SPEED_PREFIX)], run_names).items():
-                body.append(" ".join(f"![{n}](figures/{n}.png)" for n in names)
-                            + f"\n\n*{SPEED_CAPTION.format(run=run)}*\n")
+                body.append(
+                    " ".join(f"![{n}](figures/{n}.png)" for n in names) + f"\n\n*{SPEED_CAPTION.format(run=run)}*\n"
+                )
             md.append(("Figures", "\n".join(body)))
         table = ["| kind | ref | id | role |", "|---|---|---|---|"]
         table += [f"| {p['kind']} | {p['ref'] or '-'} | `{p['id']}` | {p['role']} |" for p in prov_rows]
@@ -381,23 +513,41 @@ def render(cfg: ReportCfg, data: StoreData, sections: list[_Section], prov: list
 
         tex = []
         for s in sections:
-            body = "\n\n".join(x for x in [escape(s.text) if s.text else "", claims_latex(s.claims),
-                                            *(table_latex(_paper_title(t)) for t in s.tables)] if x)
+            body = "\n\n".join(
+                x
+                for x in [
+                    escape(s.text) if s.text else "",
+                    claims_latex(s.claims),
+                    *(table_latex(_paper_title(t)) for t in s.tables),
+                ]
+                if x
+            )
             tex.append((s.heading, body or escape("Nothing in the store for this section.")))
         if figures:
             fixed = [figure_latex(f"figures/{n}.pdf", FIGURES[n]) for n in figures if not n.startswith(SPEED_PREFIX)]
             grids = []
             for run, names in _speed_groups([n for n in figures if n.startswith(SPEED_PREFIX)], run_names).items():
-                chunks = [names[i:i + SPEED_PER_FIGURE] for i in range(0, len(names), SPEED_PER_FIGURE)]
+                chunks = [names[i : i + SPEED_PER_FIGURE] for i in range(0, len(names), SPEED_PER_FIGURE)]
                 for k, chunk in enumerate(chunks):
                     part = f" (part {k + 1} of {len(chunks)})" if len(chunks) > 1 else ""
-                    grids.append(figure_grid_latex([f"figures/{n}.pdf" for n in chunk],
-                                                   SPEED_CAPTION.format(run=run) + part, per_row=2))
+                    grids.append(
+                        figure_grid_latex(
+                            [f"figures/{n}.pdf" for n in chunk], SPEED_CAPTION.format(run=run) + part, per_row=2
+                        )
+                    )
             tex.append(("Figures", "\n\n".join(fixed + grids)))
-        tex.append(("Provenance", escape("Every artifact this report was built from (`morfic store show ID`):")
-                    + "\n\n" + longtable_latex(("kind", "ref", "id", "role"),
-                                               [(p["kind"], p["ref"] or "-", p["id"], p["role"]) for p in prov_rows],
-                                               "llp{0.5\\linewidth}l")))
+        tex.append(
+            (
+                "Provenance",
+                escape("Every artifact this report was built from (`morfic store show ID`):")
+                + "\n\n"
+                + longtable_latex(
+                    ("kind", "ref", "id", "role"),
+                    [(p["kind"], p["ref"] or "-", p["id"], p["role"]) for p in prov_rows],
+                    "llp{0.5\\linewidth}l",
+                ),
+            )
+        )
         files["report.tex"] = document_latex(cfg.title, tex, preamble_note=intro).encode()
     return files
 
@@ -423,8 +573,9 @@ def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:
     return json.loads(json.dumps({"report": "morfic", **doc}))
 
 
-def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
-                 on_stage: Callable[[str], None] | None = None) -> ReportResult:
+def build_report(
+    store: Store, cfg: ReportCfg, *, out: Path | None = None, on_stage: Callable[[str], None] | None = None
+) -> ReportResult:
     """Build (or find) the report of ``cfg`` and store it; with ``out``, also write its files there.
 
     Raises:
@@ -439,8 +590,11 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
     support_id, _ = ensure_support_table(store)
     tables = compare_tables(data, with_paper=cfg.with_paper)
     compare, _ = store_comparison(store, data, tables, with_paper=cfg.with_paper)
-    prov = [*data.provenance, Provenance(support_id, "table", SUPPORT_REF, "table/morphology-support"),
-            Provenance(compare.id, "table", COMPARE_REF, "table/compare-baselines")]
+    prov = [
+        *data.provenance,
+        Provenance(support_id, "table", SUPPORT_REF, "table/morphology-support"),
+        Provenance(compare.id, "table", COMPARE_REF, "table/compare-baselines"),
+    ]
     config = report_config(cfg, data)
     inputs = {p.role: p.id for p in prov}
     ref = REPORTS_PREFIX + cfg.name
@@ -459,8 +613,9 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
                 **ev_external_figure(at_command(tables.get("calibration", []), PAPER_COMMAND)),
                 "distance": F.distance_figure(tables.get("transfer", []), with_paper=cfg.with_paper),
                 "compute": F.compute_figure(tables.get("compute", []), with_paper=cfg.with_paper),
-                "curves": F.curves_figure(data.curves, {r.name: r.variant for r in runs},
-                                          {r.name: r.preset for r in runs}),
+                "curves": F.curves_figure(
+                    data.curves, {r.name: r.variant for r in runs}, {r.name: r.preset for r in runs}
+                ),
                 **eval_figures(store, data.evals),
             }
         stage("writing the report")
@@ -471,21 +626,36 @@ def build_report(store: Store, cfg: ReportCfg, *, out: Path | None = None,
             if pdflatex() is not None:
                 stage("compiling the PDF")
                 try:
-                    files["report.pdf"] = compile_pdf(files["report.tex"].decode(),
-                                                      {k: v for k, v in files.items() if k.startswith("figures/")})
+                    files["report.pdf"] = compile_pdf(
+                        files["report.tex"].decode(), {k: v for k, v in files.items() if k.startswith("figures/")}
+                    )
                 except RuntimeError as exc:
                     pdf_error = str(exc)
             else:
                 pdf_error = "pdflatex is not installed; report.tex is written, report.pdf is not"
         n_tables = sum(len(s.tables) for s in sections)
-        pub = store.publish("report", ref, config=config, inputs=inputs, files=files,
-                            meta={"tables": n_tables, "runs": [r.name for r in runs], "pdf_error": pdf_error})
+        pub = store.publish(
+            "report",
+            ref,
+            config=config,
+            inputs=inputs,
+            files=files,
+            meta={"tables": n_tables, "runs": [r.name for r in runs], "pdf_error": pdf_error},
+        )
     else:
         pub = store.publish("report", ref, config=config, inputs=inputs, reuse=True)
     existing, version, reused = pub.id, pub.version, pub.reused
     manifest = store.read_manifest(existing)
-    result = ReportResult(existing, ref, version, sorted(manifest.files), reused,
-                          int(manifest.meta.get("tables", 0)), prov, pdf_error=manifest.meta.get("pdf_error"))
+    result = ReportResult(
+        existing,
+        ref,
+        version,
+        sorted(manifest.files),
+        reused,
+        int(manifest.meta.get("tables", 0)),
+        prov,
+        pdf_error=manifest.meta.get("pdf_error"),
+    )
     if out is not None:
         result.out_files = write_out(store, existing, out)
     return result

@@ -43,8 +43,9 @@ OOD_ROBOTS: tuple[str, ...] = ("aliengo", "mini_cheetah", "anymal_c")
 FIXED_ROBOTS: tuple[str, ...] = ("aliengo", "mini_cheetah")
 #: Multiplicative and additive critics (claim (a)) among the paper's variants (tables main / ablation; not issue 58's
 #: film-act, which shares film's critic but not its training distribution).
-MULTIPLICATIVE: tuple[str, ...] = tuple(n for n, v in STOCK.items()
-                                        if v.multiplicative and {"main", "ablation"} & set(v.tables))
+MULTIPLICATIVE: tuple[str, ...] = tuple(
+    n for n, v in STOCK.items() if v.multiplicative and {"main", "ablation"} & set(v.tables)
+)
 #: The additive ones are the paper's PPO variants (Fig. 3); the external baselines (bot, genloco) are in neither.
 ADDITIVE: tuple[str, ...] = ("ppo", "actor-only", "concat")
 #: The paper's seven PPO variants: claim (e)'s variants.
@@ -148,8 +149,10 @@ class Comparison:
         """``film - ppo +0.31 [+0.12, +0.50] (n 3 vs 3, p 0.021, Holm 0.063; 6 seeds/side for 80 % power)``."""
         if self.effect is not None and self.p_label and self.effect.has_test:
             e, d = self.effect, self.decimals
-            body = (f"{e.estimate:+.{d}f} [{e.lo:+.{d}f}, {e.hi:+.{d}f}] (n {e.n_a} vs {e.n_b}, {self.p_label} p "
-                    f"{stats.p_text(self.p)}, Holm {stats.p_text(self.p_holm)})")
+            body = (
+                f"{e.estimate:+.{d}f} [{e.lo:+.{d}f}, {e.hi:+.{d}f}] (n {e.n_a} vs {e.n_b}, {self.p_label} p "
+                f"{stats.p_text(self.p)}, Holm {stats.p_text(self.p_holm)})"
+            )
         elif self.effect is not None:
             body = self.effect.text(self.decimals, self.p_holm)
         elif math.isnan(self.p):
@@ -169,11 +172,20 @@ class Comparison:
         def num(x: float | None) -> float | None:
             return None if x is None or not math.isfinite(x) else float(x)
 
-        return {"unit": self.unit, "comparison": self.what, "effect": num(self.estimate),
-                "lo": num(e.lo) if e else None, "hi": num(e.hi) if e else None, "n_a": e.n_a if e else None,
-                "n_b": e.n_b if e else None, "p": num(self.p), "p_holm": num(self.p_holm),
-                "outcome": {stats.FOR: "for", stats.AGAINST: "against"}.get(self.outcome, "not significant"),
-                "seeds_needed": self.need, "why": self.why}
+        return {
+            "unit": self.unit,
+            "comparison": self.what,
+            "effect": num(self.estimate),
+            "lo": num(e.lo) if e else None,
+            "hi": num(e.hi) if e else None,
+            "n_a": e.n_a if e else None,
+            "n_b": e.n_b if e else None,
+            "p": num(self.p),
+            "p_holm": num(self.p_holm),
+            "outcome": {stats.FOR: "for", stats.AGAINST: "against"}.get(self.outcome, "not significant"),
+            "seeds_needed": self.need,
+            "why": self.why,
+        }
 
 
 @dataclass
@@ -283,14 +295,17 @@ def judged_reason(comparisons: Sequence[Comparison], claimed: str) -> str:
     m = len(comparisons)
     if m and all(math.isnan(c.p) for c in comparisons) and any(c.why == stats.NO_TEST for c in comparisons):
         others = sorted({c.why for c in comparisons if c.why and c.why != stats.NO_TEST})
-        return ("One seed per variant: no test (a comparison needs 2 seeds or more on each side to have a spread "
-                f"to test against; {m} primary comparisons" + (f"; also: {'; '.join(others)}" if others else "")
-                + ").")
+        return (
+            "One seed per variant: no test (a comparison needs 2 seeds or more on each side to have a spread "
+            f"to test against; {m} primary comparisons" + (f"; also: {'; '.join(others)}" if others else "") + ")."
+        )
     f = [c for c in comparisons if c.outcome == stats.FOR]
     a = [c for c in comparisons if c.outcome == stats.AGAINST]
     untested = [c for c in comparisons if math.isnan(c.p)]
-    text = (f"{len(f)} of {m} primary comparisons significant in the claimed direction ({claimed}), {len(a)} "
-            f"against it (Holm over {m}, alpha {stats.ALPHA:g})")
+    text = (
+        f"{len(f)} of {m} primary comparisons significant in the claimed direction ({claimed}), {len(a)} "
+        f"against it (Holm over {m}, alpha {stats.ALPHA:g})"
+    )
     if f:
         text += "; for: " + ", ".join(f"{c.unit} {c.what}" for c in f)
     if a:
@@ -313,8 +328,9 @@ def _by_unit(comparisons: Sequence[Comparison], units: Sequence[str], note: dict
 
 def _ids(rows: Sequence[dict[str, Any]], variants: Iterable[str], robots: Iterable[str]) -> list[str]:
     vs, rs = set(variants), set(robots)
-    return sorted({str(r["artifact"]) for r in rows if r.get("variant") in vs and r.get("robot") in rs
-                   and r.get("artifact")})
+    return sorted(
+        {str(r["artifact"]) for r in rows if r.get("variant") in vs and r.get("robot") in rs and r.get("artifact")}
+    )
 
 
 def _vx(command_vx: float) -> str:
@@ -328,8 +344,10 @@ def _made(claim: Claim, comparisons: Sequence[Comparison]) -> Claim:
 
 def claim_a(calibration: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) -> Claim:
     """(a) On each OOD robot, the t-contrast on EV: multiplicative critics minus additive ones, claimed > 0."""
-    text = ("Multiplicative critics keep a higher EV than additive ones on out-of-distribution robots "
-            f"(diagnosed at {_vx(command_vx)}).")
+    text = (
+        "Multiplicative critics keep a higher EV than additive ones on out-of-distribution robots "
+        f"(diagnosed at {_vx(command_vx)})."
+    )
     rows = at_command(calibration, command_vx)
     comps, notes = [], {}
     for robot in OOD_ROBOTS:
@@ -344,11 +362,20 @@ def claim_a(calibration: Sequence[dict[str, Any]], command_vx: float = PAPER_COM
         comps.append(t_comparison(robot, what, stats.group_effect(list(mult.values()), list(add.values()))))
         notes[robot] = ", ".join(f"{v} {_mean(x)}" for v, x in (*mult.items(), *add.items()))
     verdict = judge(comps)
-    return _made(Claim(
-        "a", text, "Fig. 3 (EV, no numbers): additive critics lose calibration on the heavier and "
-        "out-of-distribution robots; multiplicative ones keep it on Mini Cheetah and AlienGo.",
-        _by_unit(comps, OOD_ROBOTS, notes), verdict, judged_reason(comps, "> 0"),
-        _ids(rows, (*MULTIPLICATIVE, *ADDITIVE), OOD_ROBOTS), command_vx), comps)
+    return _made(
+        Claim(
+            "a",
+            text,
+            "Fig. 3 (EV, no numbers): additive critics lose calibration on the heavier and "
+            "out-of-distribution robots; multiplicative ones keep it on Mini Cheetah and AlienGo.",
+            _by_unit(comps, OOD_ROBOTS, notes),
+            verdict,
+            judged_reason(comps, "> 0"),
+            _ids(rows, (*MULTIPLICATIVE, *ADDITIVE), OOD_ROBOTS),
+            command_vx,
+        ),
+        comps,
+    )
 
 
 def with_speed_kept(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -356,14 +383,19 @@ def with_speed_kept(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
     A run that is fast until it falls scores its speed times the fraction of envs that survive.
     """
-    return [{**r, "vx_s": float(r["vx_mean"]) * float(r["survival"])} for r in rows
-            if r.get("vx_mean") not in (None, "") and r.get("survival") not in (None, "")]
+    return [
+        {**r, "vx_s": float(r["vx_mean"]) * float(r["survival"])}
+        for r in rows
+        if r.get("vx_mean") not in (None, "") and r.get("survival") not in (None, "")
+    ]
 
 
 def claim_b(evals: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) -> Claim:
     """(b) Per OOD robot, Welch: film's v_x x S (descriptor mode) minus each of PPO's, actor-only's and concat's."""
-    text = (f"MorFiC-F transfers better than PPO, actor-only and concat (v_x x S at {_vx(command_vx)}, descriptor "
-            "mode: the speed kept over the episode).")
+    text = (
+        f"MorFiC-F transfers better than PPO, actor-only and concat (v_x x S at {_vx(command_vx)}, descriptor "
+        "mode: the speed kept over the episode)."
+    )
     rows = with_speed_kept(at_command(evals, command_vx, "descriptor"))
     comps, notes = [], {}
     for robot in OOD_ROBOTS:
@@ -375,28 +407,50 @@ def claim_b(evals: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) 
                 comps.append(missing(robot, what, f"{'film' if 'film' not in kept else b} not evaluated"))
             else:
                 comps.append(t_comparison(robot, what, stats.mean_difference(kept["film"], kept[b])))
-        notes[robot] = "" if not kept else "v_x x S, seed mean: " + ", ".join(
-            f"{v} {np.mean(kept[v]):.2f} (v_x {np.mean(vx[v]):.2f}, S {np.mean(s[v]):.2f}"
-            + (f"; n={len(kept[v])})" if len(kept[v]) > 1 else ")") for v in ("film", *BASELINES) if v in kept)
+        notes[robot] = (
+            ""
+            if not kept
+            else "v_x x S, seed mean: "
+            + ", ".join(
+                f"{v} {np.mean(kept[v]):.2f} (v_x {np.mean(vx[v]):.2f}, S {np.mean(s[v]):.2f}"
+                + (f"; n={len(kept[v])})" if len(kept[v]) > 1 else ")")
+                for v in ("film", *BASELINES)
+                if v in kept
+            )
+        )
     paper_cells = []
     for v in ("film", *BASELINES):
         cell = paper.transfer_values(v, "aliengo", PAPER_COMMAND)
         if cell["vx"] is not None:
             paper_cells.append(f"{v} {cell['vx']:.2f} m/s, S {cell['survival']:.2f}")
     verdict = judge(comps)
-    return _made(Claim(
-        "b", text, "AlienGo at 2.0 m/s: " + "; ".join(paper_cells) + " (Table \"zero-shot transfer\").",
-        _by_unit(comps, OOD_ROBOTS, notes), verdict, judged_reason(comps, "film - baseline > 0"),
-        _ids(rows, ("film", *BASELINES), OOD_ROBOTS), command_vx), comps)
+    return _made(
+        Claim(
+            "b",
+            text,
+            "AlienGo at 2.0 m/s: " + "; ".join(paper_cells) + ' (Table "zero-shot transfer").',
+            _by_unit(comps, OOD_ROBOTS, notes),
+            verdict,
+            judged_reason(comps, "film - baseline > 0"),
+            _ids(rows, ("film", *BASELINES), OOD_ROBOTS),
+            command_vx,
+        ),
+        comps,
+    )
 
 
 def claim_c(fixed: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) -> Claim:
     """(c) Film actor frozen: film's Flip minus each baseline's < 0 and its Cos minus theirs > 0 (Welch)."""
-    text = ("With the film actor frozen, the film critic has a lower Flip and a higher Cos than PPO's, actor-only's "
-            f"and concat's (AlienGo, Mini Cheetah; rollout at {_vx(command_vx)}).")
+    text = (
+        "With the film actor frozen, the film critic has a lower Flip and a higher Cos than PPO's, actor-only's "
+        f"and concat's (AlienGo, Mini Cheetah; rollout at {_vx(command_vx)})."
+    )
     # Only critics scored on the frozen film actor's rollouts compare (a store may hold analyses of other actors).
-    rows = [r for r in at_command(fixed, command_vx)
-            if r.get("variant") in STOCK and r.get("actor_variant") == FIXED_ROLLOUT_ACTOR]
+    rows = [
+        r
+        for r in at_command(fixed, command_vx)
+        if r.get("variant") in STOCK and r.get("actor_variant") == FIXED_ROLLOUT_ACTOR
+    ]
     comps, beside, notes = [], [], {}
     for robot in FIXED_ROBOTS:
         flip, cos = per_seed(rows, "flip", robot), per_seed(rows, "cos_grad", robot)
@@ -411,21 +465,40 @@ def claim_c(fixed: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) 
                 c = t_comparison(robot, what, stats.mean_difference(values["film"], values[v]), higher, 3)
                 (comps if primary else beside).append(c)
         notes[robot] = "Flip/Cos: " + ", ".join(
-            f"{v} {np.mean(flip[v]):.3f}/{np.mean(cos[v]):.3f}" + (f" (n={len(flip[v])})" if len(flip[v]) > 1
-                                                                   else "") for v in STOCK if v in flip and v in cos)
+            f"{v} {np.mean(flip[v]):.3f}/{np.mean(cos[v]):.3f}" + (f" (n={len(flip[v])})" if len(flip[v]) > 1 else "")
+            for v in STOCK
+            if v in flip and v in cos
+        )
     verdict = judge(comps)
     paper_cells = []
     for robot in FIXED_ROBOTS:
         cells = [(v, paper.fixed_rollout_values(v, robot)) for v in ("film", *BASELINES)]
-        paper_cells.append(f"{robot}: " + ", ".join(f"{v} {c['flip']:.3f}/{c['cos_grad']:.3f}" for v, c in cells
-                                                    if c.get("flip") is not None and c.get("cos_grad") is not None))
+        paper_cells.append(
+            f"{robot}: "
+            + ", ".join(
+                f"{v} {c['flip']:.3f}/{c['cos_grad']:.3f}"
+                for v, c in cells
+                if c.get("flip") is not None and c.get("cos_grad") is not None
+            )
+        )
     ours = _by_unit(comps, FIXED_ROBOTS, notes)
     if beside:
-        ours += ("; beside (not deciding, no correction): "
-                 + "; ".join(f"{c.unit} {c.what} {c.effect.text(3)}" for c in beside if c.effect))
-    return _made(Claim("c", text, "Flip/Cos. " + "; ".join(paper_cells) + " (Table \"causal advantage\").",
-                       ours, verdict, judged_reason(comps, "Flip < 0, Cos > 0"), _ids(rows, STOCK, FIXED_ROBOTS),
-                       command_vx), comps)
+        ours += "; beside (not deciding, no correction): " + "; ".join(
+            f"{c.unit} {c.what} {c.effect.text(3)}" for c in beside if c.effect
+        )
+    return _made(
+        Claim(
+            "c",
+            text,
+            "Flip/Cos. " + "; ".join(paper_cells) + ' (Table "causal advantage").',
+            ours,
+            verdict,
+            judged_reason(comps, "Flip < 0, Cos > 0"),
+            _ids(rows, STOCK, FIXED_ROBOTS),
+            command_vx,
+        ),
+        comps,
+    )
 
 
 def paper_spread(robot: str) -> float | None:
@@ -454,15 +527,17 @@ def equivalence_comparison(unit: str, what: str, effect: stats.Effect, tol: floa
 
 def claim_d(evals: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) -> Claim:
     """(d) Every pair of multiplicative variants: equivalence of their v_x within ±:func:`tolerance`."""
-    text = ("All multiplicative variants (film, film-scaled, hyper, adaln) transfer similarly (v_x at "
-            f"{_vx(command_vx)}: every pair within the tolerance).")
+    text = (
+        "All multiplicative variants (film, film-scaled, hyper, adaln) transfer similarly (v_x at "
+        f"{_vx(command_vx)}: every pair within the tolerance)."
+    )
     rows = at_command(evals, command_vx, "descriptor")
     comps, notes = [], {}
     for robot in OOD_ROBOTS:
         vx = per_seed(rows, "vx_mean", robot)
         tol = tolerance(robot, command_vx)
         for i, a in enumerate(MULTIPLICATIVE):
-            for b in MULTIPLICATIVE[i + 1:]:
+            for b in MULTIPLICATIVE[i + 1 :]:
                 what = f"{a} - {b}"
                 if a not in vx or b not in vx:
                     comps.append(missing(robot, what, f"{a if a not in vx else b} not evaluated"))
@@ -470,15 +545,34 @@ def claim_d(evals: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) 
                     comps.append(equivalence_comparison(robot, what, stats.mean_difference(vx[a], vx[b]), tol))
         got = {v: vx[v] for v in MULTIPLICATIVE if v in vx}
         spread = (max(np.mean(x) for x in got.values()) - min(np.mean(x) for x in got.values())) if got else math.nan
-        notes[robot] = (f"tolerance ±{tol:.2f} m/s; spread of the means {spread:.2f}; v_x " +
-                        ", ".join(f"{v} {_mean(x)}" for v, x in got.items())) if got else ""
-    paper_text = ("Spread of v_x over its multiplicative variants at 2.0 m/s (Table \"critic conditioning "
-                  "ablation\"): " + ", ".join(f"{r} {paper_spread(r):.2f}" if paper_spread(r) is not None
-                                              else f"{r} -" for r in OOD_ROBOTS) + " m/s.")
+        notes[robot] = (
+            (
+                f"tolerance ±{tol:.2f} m/s; spread of the means {spread:.2f}; v_x "
+                + ", ".join(f"{v} {_mean(x)}" for v, x in got.items())
+            )
+            if got
+            else ""
+        )
+    paper_text = (
+        'Spread of v_x over its multiplicative variants at 2.0 m/s (Table "critic conditioning '
+        'ablation"): '
+        + ", ".join(f"{r} {paper_spread(r):.2f}" if paper_spread(r) is not None else f"{r} -" for r in OOD_ROBOTS)
+        + " m/s."
+    )
     verdict = judge(comps)
-    return _made(Claim("d", text, paper_text, _by_unit(comps, OOD_ROBOTS, notes), verdict,
-                       judged_reason(comps, "95 % interval inside ±tolerance"), _ids(rows, MULTIPLICATIVE, OOD_ROBOTS),
-                       command_vx), comps)
+    return _made(
+        Claim(
+            "d",
+            text,
+            paper_text,
+            _by_unit(comps, OOD_ROBOTS, notes),
+            verdict,
+            judged_reason(comps, "95 % interval inside ±tolerance"),
+            _ids(rows, MULTIPLICATIVE, OOD_ROBOTS),
+            command_vx,
+        ),
+        comps,
+    )
 
 
 def spearman(xs: Sequence[float], ys: Sequence[float]) -> float | None:
@@ -489,8 +583,10 @@ def spearman(xs: Sequence[float], ys: Sequence[float]) -> float | None:
 
 def claim_e(evals: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) -> Claim:
     """(e) Per variant, Spearman's rho of the seed-mean v_x x S against d over the robots, claimed < 0."""
-    text = (f"Transfer degrades with the normalised morphology distance d (v_x x S against d, {_vx(command_vx)}, "
-            "descriptor mode).")
+    text = (
+        f"Transfer degrades with the normalised morphology distance d (v_x x S against d, {_vx(command_vx)}, "
+        "descriptor mode)."
+    )
     rows = with_speed_kept(at_command(evals, command_vx, "descriptor"))
     dist = {}
     for r in rows:
@@ -518,12 +614,26 @@ def claim_e(evals: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) 
         comps.append(Comparison(variant, what, rho, p, -int(np.sign(rho)) if not math.isnan(rho) else 0))
     verdict = judge(comps)
     rho_paper = _paper_rho()
-    reason = (judged_reason(comps, "rho < 0") if comps
-              else f"No descriptor-mode evaluation at {_vx(command_vx)} in the store.")
-    return _made(Claim("e", text, f"MorFiC-F at 2.0 m/s, from its zero-shot table: rho {rho_paper:+.2f} (Fig. "
-                       "\"distance\")." if rho_paper is not None else "Fig. \"distance\".",
-                       "; ".join(f"{c.unit}: {c.text()}" for c in comps), verdict, reason,
-                       sorted({str(r["artifact"]) for r in rows if r.get("artifact")}), command_vx), comps)
+    reason = (
+        judged_reason(comps, "rho < 0")
+        if comps
+        else f"No descriptor-mode evaluation at {_vx(command_vx)} in the store."
+    )
+    return _made(
+        Claim(
+            "e",
+            text,
+            f'MorFiC-F at 2.0 m/s, from its zero-shot table: rho {rho_paper:+.2f} (Fig. "distance").'
+            if rho_paper is not None
+            else 'Fig. "distance".',
+            "; ".join(f"{c.unit}: {c.text()}" for c in comps),
+            verdict,
+            reason,
+            sorted({str(r["artifact"]) for r in rows if r.get("artifact")}),
+            command_vx,
+        ),
+        comps,
+    )
 
 
 def _paper_rho() -> float | None:
@@ -540,8 +650,12 @@ def _paper_rho() -> float | None:
 
 def claim_parts(claim: Claim) -> list[tuple[str, str]]:
     """What a report prints under a claim, as (label, plain text): the paper's numbers, ours, why, the ids."""
-    return [("Paper", claim.paper), ("Ours", claim.ours or "-"), ("Why", claim.reason),
-            ("From", ", ".join(f"`{i[:12]}`" for i in claim.artifacts) or "-")]
+    return [
+        ("Paper", claim.paper),
+        ("Ours", claim.ours or "-"),
+        ("Why", claim.reason),
+        ("From", ", ".join(f"`{i[:12]}`" for i in claim.artifacts) or "-"),
+    ]
 
 
 def judged_commands(evals: Sequence[dict[str, Any]]) -> list[float]:
@@ -550,13 +664,18 @@ def judged_commands(evals: Sequence[dict[str, Any]]) -> list[float]:
     The paper's always; another where the store holds descriptor-mode eval rows at it on an out-of-distribution
     robot (a walking check on Go2 alone is not enough).
     """
-    present = {round(row_command(r), 6) for r in evals if r.get("mode") == "descriptor" and r.get("robot")
-               in OOD_ROBOTS}
+    present = {
+        round(row_command(r), 6) for r in evals if r.get("mode") == "descriptor" and r.get("robot") in OOD_ROBOTS
+    }
     return [c for c in JUDGED_COMMANDS if c == PAPER_COMMAND or round(c, 6) in present]
 
 
-def check_claims(evals: Sequence[dict[str, Any]], calibration: Sequence[dict[str, Any]],
-                 fixed: Sequence[dict[str, Any]], commands: Sequence[float] | None = None) -> list[Claim]:
+def check_claims(
+    evals: Sequence[dict[str, Any]],
+    calibration: Sequence[dict[str, Any]],
+    fixed: Sequence[dict[str, Any]],
+    commands: Sequence[float] | None = None,
+) -> list[Claim]:
     """Claims (a)-(e) on the store's results, at each command of ``commands`` (default :func:`judged_commands`).
 
     Args:
@@ -572,4 +691,3 @@ def check_claims(evals: Sequence[dict[str, Any]], calibration: Sequence[dict[str
     for c in judged_commands(evals) if commands is None else commands:
         out += [claim_a(calibration, c), claim_b(evals, c), claim_c(fixed, c), claim_d(evals, c), claim_e(evals, c)]
     return out
-

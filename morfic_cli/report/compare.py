@@ -72,18 +72,21 @@ PAPER_VARIANTS: tuple[str, ...] = tuple(dict.fromkeys(table_variants("main") + t
 """The paper's own seven variants (its zero-shot and ablation tables): the variants its claims are about."""
 EXTERNAL_VARIANTS: tuple[str, ...] = table_variants("external")
 """The external baselines re-implemented in morfic's pipeline (``bot``, ``urma``, ``genloco``)."""
-EXTERNAL_PAPER_TABLES: tuple[paper.PaperTable, ...] = (paper.CROSS_EMBODIMENT_BASELINES,
-                                                       paper.CROSS_EMBODIMENT_BASELINES_25)
+EXTERNAL_PAPER_TABLES: tuple[paper.PaperTable, ...] = (
+    paper.CROSS_EMBODIMENT_BASELINES,
+    paper.CROSS_EMBODIMENT_BASELINES_25,
+)
 """The paper's external-baselines tables (2.0 and 2.5 m/s): the ``paper`` group of the ``external`` table."""
 PAPER_METHOD: dict[str, str] = {"bot": "bodytransformer"}
 """A variant's key among :mod:`morfic_cli.report.paper`'s methods where it differs from the variant's name."""
 _OURS_OF = {m: v for v, m in PAPER_METHOD.items()}
 EXTERNAL_TABLE_VARIANTS: tuple[str, ...] = tuple(
-    _OURS_OF.get(c, c) for c in paper.CROSS_EMBODIMENT_BASELINES.columns if _OURS_OF.get(c, c) in STOCK)
+    _OURS_OF.get(c, c) for c in paper.CROSS_EMBODIMENT_BASELINES.columns if _OURS_OF.get(c, c) in STOCK
+)
 """Our rows of the external-baselines tables, in the paper's column order: ``urma``, ``bot``, ``genloco``, ``film``."""
 PAPER_ONLY: dict[str, str] = {
     "embodiment-scaling": "Embodiment Scaling Laws (Ai et al. 2025): the paper's numbers only; not retrainable here "
-                          "(about 1,500 GPU-hours and terabytes of generated robots) and its weights are out of reach.",
+    "(about 1,500 GPU-hours and terabytes of generated robots) and its weights are out of reach.",
 }
 """The paper's external baselines with no row of ours, and the one-line reason."""
 PAPER_GROUP = "The paper's (released weights, their simulators)"
@@ -125,9 +128,10 @@ def external_note(has_ours: bool) -> str:
     """The line that says our external baselines are not trained yet (empty when some are)."""
     if has_ours:
         return ""
-    return (f"Ours: not trained yet (no {' / '.join(EXTERNAL_VARIANTS)} run among these runs): `morfic train "
-            "--variant bot --preset cpu` (likewise urma, genloco), then `morfic eval` and `morfic diagnose`.")
-
+    return (
+        f"Ours: not trained yet (no {' / '.join(EXTERNAL_VARIANTS)} run among these runs): `morfic train "
+        "--variant bot --preset cpu` (likewise urma, genloco), then `morfic eval` and `morfic diagnose`."
+    )
 
 
 def robot_order(robot: str) -> int:
@@ -152,17 +156,26 @@ def _transfer_rows(evals: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     groups = _group(evals, lambda r: (r["preset"], r["variant"], r["robot"], r["mode"], float(r["command_vx"])))
     out = []
     for (preset, variant, robot, mode, vx_cmd), rows in groups.items():
-        out.append({
-            "table": "transfer", "preset": preset, "variant": variant, "robot": robot, "mode": mode,
-            "command_vx": vx_cmd, "d": rows[0].get("d"), "n_seeds": len(rows),
-            "runs": ";".join(sorted(r["run"] for r in rows)),
-            **{col.name: col.reduce(rows) for col in seed_columns()},  # each eval metric's columns over seeds
-            # the evaluation budget behind the cell (the smallest, when seeds differ): the caption names it
-            "num_envs": min((int(r["num_envs"]) for r in rows if r.get("num_envs") is not None), default=None),
-            "steps": min((int(r["steps"]) for r in rows if r.get("steps") is not None), default=None),
-        })
-    out.sort(key=lambda r: (r["preset"], r["mode"], r["command_vx"], variant_order(r["variant"]),
-                            robot_order(r["robot"])))
+        out.append(
+            {
+                "table": "transfer",
+                "preset": preset,
+                "variant": variant,
+                "robot": robot,
+                "mode": mode,
+                "command_vx": vx_cmd,
+                "d": rows[0].get("d"),
+                "n_seeds": len(rows),
+                "runs": ";".join(sorted(r["run"] for r in rows)),
+                **{col.name: col.reduce(rows) for col in seed_columns()},  # each eval metric's columns over seeds
+                # the evaluation budget behind the cell (the smallest, when seeds differ): the caption names it
+                "num_envs": min((int(r["num_envs"]) for r in rows if r.get("num_envs") is not None), default=None),
+                "steps": min((int(r["steps"]) for r in rows if r.get("steps") is not None), default=None),
+            }
+        )
+    out.sort(
+        key=lambda r: (r["preset"], r["mode"], r["command_vx"], variant_order(r["variant"]), robot_order(r["robot"]))
+    )
     return out
 
 
@@ -186,13 +199,27 @@ def paper_external_rows() -> list[dict[str, Any]]:
             for robot in table.rows:
                 vx, sd = table.value(robot, method, speed), table.value(robot, method, f"{speed}_std")
                 s = table.value(robot, method, "survival")
-                out.append({
-                    "table": "external", "group": "paper", "preset": None, "variant": our_variant(method),
-                    "label": method_name(method), "robot": robot, "mode": table.mode,
-                    "command_vx": float(table.command_vx or 0.0), "n_seeds": None, "runs": None,
-                    "vx": vx, "vx_std": sd, "survival": s, "cell": _paper_cell(vx, sd, s),
-                    "quantity": paper.speed_quantity(table), "source": table.label, "note": PAPER_ONLY.get(method),
-                })
+                out.append(
+                    {
+                        "table": "external",
+                        "group": "paper",
+                        "preset": None,
+                        "variant": our_variant(method),
+                        "label": method_name(method),
+                        "robot": robot,
+                        "mode": table.mode,
+                        "command_vx": float(table.command_vx or 0.0),
+                        "n_seeds": None,
+                        "runs": None,
+                        "vx": vx,
+                        "vx_std": sd,
+                        "survival": s,
+                        "cell": _paper_cell(vx, sd, s),
+                        "quantity": paper.speed_quantity(table),
+                        "source": table.label,
+                        "note": PAPER_ONLY.get(method),
+                    }
+                )
     return out
 
 
@@ -207,8 +234,16 @@ def external_rows(data: StoreData, *, with_paper: bool = False) -> list[dict[str
         return []
     ours = _transfer_rows([r for r in data.evals if r["variant"] in EXTERNAL_TABLE_VARIANTS]) if has_ours else []
     for row in ours:
-        row.update({"table": "external", "group": "ours", "label": method_name(row["variant"]),
-                    "quantity": "v_x", "source": None, "note": None})
+        row.update(
+            {
+                "table": "external",
+                "group": "ours",
+                "label": method_name(row["variant"]),
+                "quantity": "v_x",
+                "source": None,
+                "note": None,
+            }
+        )
     return paper_external_rows() + ours
 
 
@@ -220,16 +255,25 @@ def calibration_rows(data: StoreData) -> list[dict[str, Any]]:
     groups = _group(data.calibration, lambda r: (r["preset"], r["variant"], r["robot"], r["mode"], row_command(r)))
     out = []
     for (preset, variant, robot, mode, command_vx), rows in groups.items():
-        row: dict[str, Any] = {"table": "calibration", "preset": preset, "variant": variant, "robot": robot,
-                               "mode": mode, "command_vx": command_vx, "d": rows[0].get("d"), "n_seeds": len(rows),
-                               "runs": ";".join(sorted(r["run"] for r in rows))}
+        row: dict[str, Any] = {
+            "table": "calibration",
+            "preset": preset,
+            "variant": variant,
+            "robot": robot,
+            "mode": mode,
+            "command_vx": command_vx,
+            "d": rows[0].get("d"),
+            "n_seeds": len(rows),
+            "runs": ";".join(sorted(r["run"] for r in rows)),
+        }
         for m in CALIBRATION_METRICS:
             row[m] = mean(r[m] for r in rows)
             row[f"{m}_seed_std"] = seed_std(r[m] for r in rows)
         row["cell"] = "/".join(_num(row[m], 3) for m in ("abs_nvb", "nve", "asa"))
         out.append(row)
-    out.sort(key=lambda r: (r["preset"], r["mode"], r["command_vx"], variant_order(r["variant"]),
-                            robot_order(r["robot"])))
+    out.sort(
+        key=lambda r: (r["preset"], r["mode"], r["command_vx"], variant_order(r["variant"]), robot_order(r["robot"]))
+    )
     return out
 
 
@@ -241,22 +285,44 @@ def fixed_rollout_rows(data: StoreData) -> list[dict[str, Any]]:
     """
     preset_of = {r.checkpoint: r.preset for r in data.runs}
     variant_of = {r.checkpoint: r.variant for r in data.runs}
-    groups = _group(data.fixed, lambda r: (preset_of.get(r["actor_checkpoint"], r.get("preset") or "?"),
-                                           r.get("actor_variant") or variant_of.get(r["actor_checkpoint"], "?"),
-                                           r["robot"], r["variant"], row_command(r)))
+    groups = _group(
+        data.fixed,
+        lambda r: (
+            preset_of.get(r["actor_checkpoint"], r.get("preset") or "?"),
+            r.get("actor_variant") or variant_of.get(r["actor_checkpoint"], "?"),
+            r["robot"],
+            r["variant"],
+            row_command(r),
+        ),
+    )
     out = []
     for (preset, actor_variant, robot, variant, command_vx), rows in groups.items():
-        row: dict[str, Any] = {"table": "fixed_rollout", "preset": preset, "actor_variant": actor_variant,
-                               "variant": variant, "robot": robot, "mode": rows[0].get("mode"),
-                               "command_vx": command_vx, "n_seeds": len(rows),
-                               "runs": ";".join(sorted(str(r["run"]) for r in rows)),
-                               "actors": ";".join(sorted({str(r["actor"]) for r in rows}))}
+        row: dict[str, Any] = {
+            "table": "fixed_rollout",
+            "preset": preset,
+            "actor_variant": actor_variant,
+            "variant": variant,
+            "robot": robot,
+            "mode": rows[0].get("mode"),
+            "command_vx": command_vx,
+            "n_seeds": len(rows),
+            "runs": ";".join(sorted(str(r["run"]) for r in rows)),
+            "actors": ";".join(sorted({str(r["actor"]) for r in rows})),
+        }
         for m in ("flip", "cos_grad", "asa", "ev"):
             row[m] = mean(r[m] for r in rows)
             row[f"{m}_seed_std"] = seed_std(r[m] for r in rows)
         out.append(row)
-    out.sort(key=lambda r: (r["preset"], r["command_vx"], r["actor_variant"] != FIXED_ROLLOUT_ACTOR, r["actor_variant"],
-                            robot_order(r["robot"]), -1 if r["variant"] == "mc" else variant_order(r["variant"])))
+    out.sort(
+        key=lambda r: (
+            r["preset"],
+            r["command_vx"],
+            r["actor_variant"] != FIXED_ROLLOUT_ACTOR,
+            r["actor_variant"],
+            robot_order(r["robot"]),
+            -1 if r["variant"] == "mc" else variant_order(r["variant"]),
+        )
+    )
     return out
 
 
@@ -275,8 +341,9 @@ def paper_hours(variant: str) -> str | None:
     if not rows:
         return None
     text = [r.gpu_hours_text.replace("--", "-") for r in rows]
-    return text[0] if len(rows) == 1 else "; ".join(f"{t} ({r.transitions_text})" for t, r in zip(text, rows,
-                                                                                                     strict=True))
+    return (
+        text[0] if len(rows) == 1 else "; ".join(f"{t} ({r.transitions_text})" for t, r in zip(text, rows, strict=True))
+    )
 
 
 def compute_rows(data: StoreData) -> list[dict[str, Any]]:
@@ -288,21 +355,29 @@ def compute_rows(data: StoreData) -> list[dict[str, Any]]:
         iterations = mean(r["iteration"] for r in rows)
         wall = mean(r["wall_time_s"] for r in rows)
         hours = None if wall is None else wall / 3600.0
-        out.append({
-            "table": "compute", "preset": preset, "variant": variant, "n_seeds": len(rows),
-            "runs": ";".join(sorted(r["name"] for r in rows)),
-            "device": ",".join(sorted({r["device"] for r in rows})),
-            "transitions": transitions, "iterations": iterations,
-            "s_per_iteration": None if not iterations or wall is None else wall / iterations,
-            "s_per_iteration_seed_std": seed_std(r["wall_time_s"] / r["iteration"] for r in rows if r["iteration"]),
-            "device_hours": hours,
-            "device_hours_400m": None if not transitions or hours is None else hours * TRANSITIONS_400M / transitions,
-            "finished": all(r["finished"] for r in rows),
-            "wall_time_s": wall,
-            "machine": ",".join(sorted({r.get("machine") or "" for r in rows} - {""})),
-            "actor_params": _one({data.params.get(r["checkpoint"], (None, None))[0] for r in rows}),
-            "critic_params": _one({data.params.get(r["checkpoint"], (None, None))[1] for r in rows}),
-        })
+        out.append(
+            {
+                "table": "compute",
+                "preset": preset,
+                "variant": variant,
+                "n_seeds": len(rows),
+                "runs": ";".join(sorted(r["name"] for r in rows)),
+                "device": ",".join(sorted({r["device"] for r in rows})),
+                "transitions": transitions,
+                "iterations": iterations,
+                "s_per_iteration": None if not iterations or wall is None else wall / iterations,
+                "s_per_iteration_seed_std": seed_std(r["wall_time_s"] / r["iteration"] for r in rows if r["iteration"]),
+                "device_hours": hours,
+                "device_hours_400m": None
+                if not transitions or hours is None
+                else hours * TRANSITIONS_400M / transitions,
+                "finished": all(r["finished"] for r in rows),
+                "wall_time_s": wall,
+                "machine": ",".join(sorted({r.get("machine") or "" for r in rows} - {""})),
+                "actor_params": _one({data.params.get(r["checkpoint"], (None, None))[0] for r in rows}),
+                "critic_params": _one({data.params.get(r["checkpoint"], (None, None))[1] for r in rows}),
+            }
+        )
     out.sort(key=lambda r: (r["preset"], variant_order(r["variant"])))
     return out
 
@@ -313,6 +388,7 @@ def claim_rows(data: StoreData) -> tuple[list[dict[str, Any]], list[dict[str, An
     Only the variants of the paper's zero-shot and ablation tables (:data:`PAPER_VARIANTS`) and the Monte-Carlo
     reference of the fixed-rollout rows: never an external baseline, nor another stock variant of morfic's own.
     """
+
     def keep(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         return [r for r in rows if r.get("variant") in PAPER_VARIANTS or r.get("variant") == "mc"]
 
@@ -321,14 +397,25 @@ def claim_rows(data: StoreData) -> tuple[list[dict[str, Any]], list[dict[str, An
 
 def verdict_rows(data: StoreData) -> list[dict[str, Any]]:
     """The claims' primary comparisons, one row each (:meth:`~morfic_cli.report.claims.Comparison.row`)."""
+
     def cell(r: dict[str, Any]) -> str:
         if r["effect"] is None:
             return "-"
         return f"{r['effect']:+.3f}" + (f" [{r['lo']:+.3f}, {r['hi']:+.3f}]" if r["lo"] is not None else "")
 
     claims = check_claims(*claim_rows(data))
-    return [{"table": "verdicts", "claim": c.key, "command_vx": c.command_vx, "verdict": c.verdict, **row,
-             "cell": cell(row)} for c in claims for row in c.comparisons]
+    return [
+        {
+            "table": "verdicts",
+            "claim": c.key,
+            "command_vx": c.command_vx,
+            "verdict": c.verdict,
+            **row,
+            "cell": cell(row),
+        }
+        for c in claims
+        for row in c.comparisons
+    ]
 
 
 def external_critic_values(variant: str, robot: str) -> tuple[paper.PaperTable, dict[str, float | None]]:
@@ -421,15 +508,24 @@ baselines out of ``transfer`` and the claims), parameter counts and the machine 
 
 def compare_config(data: StoreData, with_paper: bool) -> dict[str, Any]:
     """The config of a stored comparison: which runs, whether the paper's columns are in, :data:`COMPARE_LAYOUT`."""
-    return json.loads(json.dumps({"table": "compare-baselines", "runs": sorted(r.spec for r in data.runs),
-                                  "with_paper": with_paper, "layout": COMPARE_LAYOUT}))
+    return json.loads(
+        json.dumps(
+            {
+                "table": "compare-baselines",
+                "runs": sorted(r.spec for r in data.runs),
+                "with_paper": with_paper,
+                "layout": COMPARE_LAYOUT,
+            }
+        )
+    )
 
 
 COMPARE_REF = "tables/compare-baselines"
 
 
-def store_comparison(store: Store, data: StoreData, tables: dict[str, list[dict[str, Any]]],
-                     with_paper: bool) -> tuple[Published, bool]:
+def store_comparison(
+    store: Store, data: StoreData, tables: dict[str, list[dict[str, Any]]], with_paper: bool
+) -> tuple[Published, bool]:
     """Store the comparison as a ``table`` manifest (a CSV per table), or find the identical one already stored.
 
     Inputs are every artifact the rows came from (:attr:`StoreData.provenance`), so the same runs and results
@@ -441,8 +537,14 @@ def store_comparison(store: Store, data: StoreData, tables: dict[str, list[dict[
     from morfic_cli.recording.tables import rows_to_csv
 
     pub = store.publish(
-        "table", COMPARE_REF, config=compare_config(data, with_paper), inputs=data.input_ids(), reuse=True,
-        files=lambda: {f"{name}.csv": rows_to_csv(rows, list(flat_rows({name: rows})[0]))
-                       for name, rows in tables.items()},
-        meta={"tables": list(tables), "runs": [r.name for r in data.runs]})
+        "table",
+        COMPARE_REF,
+        config=compare_config(data, with_paper),
+        inputs=data.input_ids(),
+        reuse=True,
+        files=lambda: {
+            f"{name}.csv": rows_to_csv(rows, list(flat_rows({name: rows})[0])) for name, rows in tables.items()
+        },
+        meta={"tables": list(tables), "runs": [r.name for r in data.runs]},
+    )
     return pub, pub.reused

@@ -42,9 +42,16 @@ def ev_figure(calibration: Sequence[dict[str, Any]]) -> tuple[bytes, bytes]:
     """Grouped EV bars: robots on the x axis, one bar per variant (the paper's Fig. 3, left)."""
     from morfic_cli.diagnostics.figures import ev_figure as bars
 
-    rows = [{"run": f"{r['variant']}, {r['preset']}, {r['n_seeds']} seed" + ("s" if r["n_seeds"] != 1 else ""),
-             "variant": r["variant"], "robot": paper.ROBOT_LABELS.get(r["robot"], r["robot"]), "ev": r["ev"]}
-            for r in calibration if r["mode"] == "descriptor" and r["ev"] is not None]
+    rows = [
+        {
+            "run": f"{r['variant']}, {r['preset']}, {r['n_seeds']} seed" + ("s" if r["n_seeds"] != 1 else ""),
+            "variant": r["variant"],
+            "robot": paper.ROBOT_LABELS.get(r["robot"], r["robot"]),
+            "ev": r["ev"],
+        }
+        for r in calibration
+        if r["mode"] == "descriptor" and r["ev"] is not None
+    ]
     return bars(rows)
 
 
@@ -60,35 +67,65 @@ def distance_plot(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0
     robot; the paper's values (``with_paper``) are black crosses.
     """
     plt = _plt()
-    sel = [r for r in transfer if r["mode"] == "descriptor" and abs(r["command_vx"] - command_vx) < 1e-9
-           and r.get("d") is not None]
+    sel = [
+        r
+        for r in transfer
+        if r["mode"] == "descriptor" and abs(r["command_vx"] - command_vx) < 1e-9 and r.get("d") is not None
+    ]
     multi = len({r["preset"] for r in sel}) > 1
     fig, ax = plt.subplots(figsize=(8.4, 4.0), constrained_layout=True)
     groups = sorted({(r["preset"], r["variant"]) for r in sel}, key=lambda p: (p[0], variant_order(p[1])))
     span = max([float(r["d"]) for r in sel] + [0.1])
     step = 0.012 * span
     for k, (preset, variant) in enumerate(groups):
-        pts = sorted((float(r["d"]), r["vx"], r["vx_std"] or 0.0) for r in sel
-                     if (r["preset"], r["variant"]) == (preset, variant) and r["vx"] is not None)
+        pts = sorted(
+            (float(r["d"]), r["vx"], r["vx_std"] or 0.0)
+            for r in sel
+            if (r["preset"], r["variant"]) == (preset, variant) and r["vx"] is not None
+        )
         if pts:
             xs, ys, es = zip(*pts, strict=True)
             shift = (k - (len(groups) - 1) / 2) * step
-            ax.errorbar([x + shift for x in xs], ys, yerr=es, ls="none", marker=MARKERS[k % len(MARKERS)], ms=6,
-                        capsize=3, color=f"C{k}", label=_label(preset, variant, multi))
+            ax.errorbar(
+                [x + shift for x in xs],
+                ys,
+                yerr=es,
+                ls="none",
+                marker=MARKERS[k % len(MARKERS)],
+                ms=6,
+                capsize=3,
+                color=f"C{k}",
+                label=_label(preset, variant, multi),
+            )
     if with_paper:
         d_of = {r["robot"]: float(r["d"]) for r in sel}
         for j, variant in enumerate(("ppo", "film")):
-            pts = [(d_of[robot], paper.transfer_values(variant, robot, command_vx)["vx"]) for robot in d_of
-                   if paper.transfer_values(variant, robot, command_vx)["vx"] is not None]
+            pts = [
+                (d_of[robot], paper.transfer_values(variant, robot, command_vx)["vx"])
+                for robot in d_of
+                if paper.transfer_values(variant, robot, command_vx)["vx"] is not None
+            ]
             if pts:
                 xs, ys = zip(*pts, strict=True)
-                ax.scatter(xs, ys, marker="x" if j else "+", s=40, color="black", lw=1.0,
-                           label=f"paper: {paper.METHOD_LABELS[variant]}")
+                ax.scatter(
+                    xs,
+                    ys,
+                    marker="x" if j else "+",
+                    s=40,
+                    color="black",
+                    lw=1.0,
+                    label=f"paper: {paper.METHOD_LABELS[variant]}",
+                )
     robots = sorted({r["robot"]: r for r in sel}.values(), key=lambda r: float(r["d"]))
     for k, r in enumerate(robots):  # alternate above / below so neighbours in d do not overlap
         best = max((x["vx"] for x in sel if x["robot"] == r["robot"] and x["vx"] is not None), default=0.0)
-        ax.annotate(paper.ROBOT_LABELS.get(r["robot"], r["robot"]), (float(r["d"]), best), fontsize=8,
-                    xytext=(5, 5 if k % 2 == 0 else -11), textcoords="offset points")
+        ax.annotate(
+            paper.ROBOT_LABELS.get(r["robot"], r["robot"]),
+            (float(r["d"]), best),
+            fontsize=8,
+            xytext=(5, 5 if k % 2 == 0 else -11),
+            textcoords="offset points",
+        )
     ax.axhline(command_vx, color="grey", lw=0.8, ls=":", label=f"command {command_vx:g} m/s")
     ax.set_xlabel("normalised morphology distance d to Go2", fontsize=9)
     ax.set_ylabel("forward speed v_x (m/s)", fontsize=9)
@@ -100,8 +137,9 @@ def distance_plot(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0
     return fig
 
 
-def distance_figure(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0,
-                    with_paper: bool = False) -> tuple[bytes, bytes]:
+def distance_figure(
+    transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0, with_paper: bool = False
+) -> tuple[bytes, bytes]:
     """:func:`distance_plot` as ``(png, pdf)`` bytes."""
     return _save(distance_plot(transfer, command_vx=command_vx, with_paper=with_paper))
 
@@ -119,8 +157,10 @@ def compute_plot(compute: Sequence[dict[str, Any]], *, with_paper: bool = False)
     multi = len({r["preset"] for r in compute}) > 1
     for r in compute:
         if r["transitions"] and r["device_hours_400m"]:
-            label = (f"{_label(r['preset'], r['variant'], multi)}, {r['preset']} on {r['device']}\n"
-                     f"({r['transitions'] / 1e6:.1f}M transitions)")
+            label = (
+                f"{_label(r['preset'], r['variant'], multi)}, {r['preset']} on {r['device']}\n"
+                f"({r['transitions'] / 1e6:.1f}M transitions)"
+            )
             v = float(r["device_hours_400m"])
             bars.append((label, v, v, v, "C0"))
     if with_paper:
@@ -131,8 +171,14 @@ def compute_plot(compute: Sequence[dict[str, Any]], *, with_paper: bool = False)
     ys = list(range(len(bars)))[::-1]
     for y, (_label_text, v, lo, hi, colour) in zip(ys, bars, strict=True):
         ax.barh(y, v, color=colour, height=0.5, xerr=[[v - lo], [hi - v]] if hi > lo else None, capsize=3)
-        ax.annotate(f"{v:.1f} h" if v >= 1 else f"{v:.2f} h", (v, y), xytext=(4, 0), textcoords="offset points",
-                    va="center", fontsize=8)
+        ax.annotate(
+            f"{v:.1f} h" if v >= 1 else f"{v:.2f} h",
+            (v, y),
+            xytext=(4, 0),
+            textcoords="offset points",
+            va="center",
+            fontsize=8,
+        )
     ax.set_yticks(ys, [b[0] for b in bars], fontsize=8)
     values = [b[1] for b in bars]
     if values and max(values) / max(min(values), 1e-9) > 20:
@@ -183,9 +229,13 @@ def seed_band(runs: Sequence[Sequence[dict[str, float]]], key: str) -> dict[str,
 
     series = []
     for rows in runs:
-        pts = sorted((float(r["env_steps"]), float(r[key])) for r in rows
-                     if r.get("env_steps") is not None and _has_values([r.get(key, math.nan)])
-                     and math.isfinite(float(r["env_steps"])))
+        pts = sorted(
+            (float(r["env_steps"]), float(r[key]))
+            for r in rows
+            if r.get("env_steps") is not None
+            and _has_values([r.get(key, math.nan)])
+            and math.isfinite(float(r["env_steps"]))
+        )
         series.append(pts)
     x = np.array(sorted({p[0] for pts in series for p in pts}))
     ys = np.full((len(series), len(x)), np.nan)
@@ -201,8 +251,9 @@ def seed_band(runs: Sequence[Sequence[dict[str, float]]], key: str) -> dict[str,
     return {"x": x.tolist(), "mean": mean.tolist(), "low": low.tolist(), "high": high.tolist(), "n": n.tolist()}
 
 
-def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, str],
-                presets: dict[str, str] | None = None):
+def curves_plot(
+    curves: dict[str, list[dict[str, float]]], variants: dict[str, str], presets: dict[str, str] | None = None
+):
     """:data:`CURVE_PANELS` against env steps, one line per variant and preset (a Figure; two panels a row).
 
     The seeds of a variant and preset are drawn as their mean with a band from the lowest to the highest seed
@@ -223,12 +274,14 @@ def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, s
     colours = {v: f"C{i}" for i, v in enumerate(sorted({g[1] for g in groups}, key=variant_order))}
     multi = len({g[0] for g in groups}) > 1
     styles = {p: ("-", "--", ":", "-.")[i % 4] for i, p in enumerate(sorted({g[0] for g in groups}))}
-    panels = [(key, title) for key, title in CURVE_PANELS
-              if any(_has_values([r.get(key, math.nan) for r in curves[n]]) for n in curves)]
+    panels = [
+        (key, title)
+        for key, title in CURVE_PANELS
+        if any(_has_values([r.get(key, math.nan) for r in curves[n]]) for n in curves)
+    ]
     cols = min(max(len(panels), 1), 2)
     rows_n = max(math.ceil(len(panels) / 2), 1)
-    fig, axes = plt.subplots(rows_n, cols, figsize=(4.5 * cols, 3.4 * rows_n), constrained_layout=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(rows_n, cols, figsize=(4.5 * cols, 3.4 * rows_n), constrained_layout=True, squeeze=False)
     flat = list(axes.flat)
     handles: dict[str, Any] = {}
     for ax, (key, title) in zip(flat, panels, strict=False):
@@ -238,8 +291,14 @@ def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, s
             colour, style = colours.get(variant), styles.get(preset, "-")
             if len(names) == 1:
                 rows = curves[names[0]]
-                (line,) = ax.plot([r.get("env_steps", math.nan) for r in rows], [r.get(key, math.nan) for r in rows],
-                                  lw=1.0, color=colour, ls=style, marker="." if len(rows) < 5 else None)
+                (line,) = ax.plot(
+                    [r.get("env_steps", math.nan) for r in rows],
+                    [r.get(key, math.nan) for r in rows],
+                    lw=1.0,
+                    color=colour,
+                    ls=style,
+                    marker="." if len(rows) < 5 else None,
+                )
                 handles.setdefault(f"{label} ({names[0]})", line)
                 continue
             band = seed_band([curves[n] for n in names], key)
@@ -251,18 +310,25 @@ def curves_plot(curves: dict[str, list[dict[str, float]]], variants: dict[str, s
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("env steps", fontsize=9)
         ax.grid(alpha=0.3)
-    for ax in flat[len(panels):] if panels else ():
+    for ax in flat[len(panels) :] if panels else ():
         fig.delaxes(ax)
     if not panels:
         flat[0].text(0.5, 0.5, "no training curves", ha="center", va="center", transform=flat[0].transAxes)
     elif handles:
-        fig.legend(list(handles.values()), list(handles), loc="outside lower center", fontsize=8,
-                   ncol=min(len(handles), 2 if cols == 2 else 1), frameon=False)
+        fig.legend(
+            list(handles.values()),
+            list(handles),
+            loc="outside lower center",
+            fontsize=8,
+            ncol=min(len(handles), 2 if cols == 2 else 1),
+            frameon=False,
+        )
     return fig
 
 
-def curves_figure(curves: dict[str, list[dict[str, float]]], variants: dict[str, str],
-                  presets: dict[str, str] | None = None) -> tuple[bytes, bytes]:
+def curves_figure(
+    curves: dict[str, list[dict[str, float]]], variants: dict[str, str], presets: dict[str, str] | None = None
+) -> tuple[bytes, bytes]:
     """:func:`curves_plot` as ``(png, pdf)`` bytes.
 
     Args:

@@ -117,16 +117,26 @@ def run_info(store: Store, spec: str) -> RunInfo:
         spec = RUNS_PREFIX + spec
     manifest = store.read_manifest(spec)
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
-        raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training run; pass run refs such as "
-                          "runs/film-cpu-s0 (see `morfic store ls --kind checkpoint`).")
+        raise MorficError(
+            f"'{spec}' is a {manifest.kind} artifact, not a training run; pass run refs such as "
+            "runs/film-cpu-s0 (see `morfic store ls --kind checkpoint`)."
+        )
     meta, cfg = manifest.meta, manifest.config
     name = run_of(spec, meta)
     return RunInfo(
-        spec=spec, name=str(name), checkpoint=manifest.id, variant=str(meta.get("variant") or cfg.get("variant")),
-        seed=int(meta.get("seed", cfg.get("seed", 0))), preset=str(meta.get("preset") or cfg.get("preset") or "?"),
-        iteration=int(meta.get("iteration", 0)), max_iterations=int(meta.get("max_iterations", 0)),
-        env_steps=int(meta.get("env_steps", 0)), wall_time_s=float(meta.get("wall_time_s", 0.0)),
-        device=str(meta.get("device", "cpu")), finished=bool(meta.get("finished", False)), created=manifest.created,
+        spec=spec,
+        name=str(name),
+        checkpoint=manifest.id,
+        variant=str(meta.get("variant") or cfg.get("variant")),
+        seed=int(meta.get("seed", cfg.get("seed", 0))),
+        preset=str(meta.get("preset") or cfg.get("preset") or "?"),
+        iteration=int(meta.get("iteration", 0)),
+        max_iterations=int(meta.get("max_iterations", 0)),
+        env_steps=int(meta.get("env_steps", 0)),
+        wall_time_s=float(meta.get("wall_time_s", 0.0)),
+        device=str(meta.get("device", "cpu")),
+        finished=bool(meta.get("finished", False)),
+        created=manifest.created,
         machine=str(meta.get("machine") or meta.get("host") or ""),
     )
 
@@ -151,8 +161,10 @@ def resolve_runs(store: Store, specs: Sequence[str] | None) -> list[RunInfo]:
     """
     names = list(specs) if specs else all_runs(store)
     if not names:
-        raise MorficError(f"no training runs in store {store.root}; train some (`morfic train`, or `morfic reproduce "
-                          "--preset smoke`) or pass --store.")
+        raise MorficError(
+            f"no training runs in store {store.root}; train some (`morfic train`, or `morfic reproduce "
+            "--preset smoke`) or pass --store."
+        )
     runs, seen = [], set()
     for spec in names:
         info = run_info(store, spec)
@@ -172,10 +184,13 @@ def filter_presets(runs: Sequence[RunInfo], presets: Sequence[str]) -> list[RunI
         return list(runs)
     kept = [r for r in runs if r.preset in presets]
     if not kept:
-        have = ", ".join(f"{p} ({n} run{'s' if n != 1 else ''})"
-                         for p, n in sorted(Counter(r.preset for r in runs).items()))
-        raise MorficError(f"no run has preset {' or '.join(presets)}; the runs here have: {have}. Pass one of "
-                          "those to --preset, or leave --preset out for every run.")
+        have = ", ".join(
+            f"{p} ({n} run{'s' if n != 1 else ''})" for p, n in sorted(Counter(r.preset for r in runs).items())
+        )
+        raise MorficError(
+            f"no run has preset {' or '.join(presets)}; the runs here have: {have}. Pass one of "
+            "those to --preset, or leave --preset out for every run."
+        )
     return kept
 
 
@@ -208,6 +223,7 @@ def ref_labels(store: Store) -> dict[str, str]:
 
 def _keep(table: dict[tuple, dict[str, Any]], key: tuple, row: dict[str, Any]) -> None:
     """Put ``row`` under ``key`` unless a row measured on more samples is there (rows come oldest first)."""
+
     def size(r: dict[str, Any]) -> float:
         try:
             return float(r.get("num_envs") or 0) * float(r.get("steps") or 0)
@@ -219,8 +235,13 @@ def _keep(table: dict[tuple, dict[str, Any]], key: tuple, row: dict[str, Any]) -
 
 
 def _run_keys(run: RunInfo) -> dict[str, Any]:
-    return {"run": run.name, "variant": run.variant, "seed": run.seed, "preset": run.preset,
-            "checkpoint": run.checkpoint}
+    return {
+        "run": run.name,
+        "variant": run.variant,
+        "seed": run.seed,
+        "preset": run.preset,
+        "checkpoint": run.checkpoint,
+    }
 
 
 def parameter_counts(store: Store, runs: Sequence[RunInfo]) -> dict[str, tuple[int, int]]:
@@ -295,8 +316,10 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                     from morfic_cli.diagnostics.critic_study import check_layout
 
                     check_layout(manifest.config)  # a study laid out by a newer morfic is refused, not misread
-                    data.study = [{**row, "artifact": manifest.id}
-                                  for row in read_csv_rows(store.read_file(manifest.id, "critic_study.csv"))]
+                    data.study = [
+                        {**row, "artifact": manifest.id}
+                        for row in read_csv_rows(store.read_file(manifest.id, "critic_study.csv"))
+                    ]
                     data.study_meta = dict(manifest.meta)
             elif kind == "diagnosis" and "fixed_rollout.csv" in manifest.files:
                 rows = read_csv_rows(store.read_file(manifest.id, "fixed_rollout.csv"))
@@ -312,8 +335,11 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                     extra = _run_keys(by_ckpt[critic]) if critic != "mc" else {"run": "MC", "variant": "mc"}
                     _keep(fixed, key, {**row, **extra, "actor_checkpoint": actor, "artifact": manifest.id})
 
-    for rows, kind, role in ((evals, "eval", "eval"), (calib, "diagnosis", "calibration"),
-                             (fixed, "diagnosis", "fixed-rollout")):
+    for rows, kind, role in (
+        (evals, "eval", "eval"),
+        (calib, "diagnosis", "calibration"),
+        (fixed, "diagnosis", "fixed-rollout"),
+    ):
         for row in rows.values():
             use(row["artifact"], kind, f"{role}/{row['artifact'][:12]}")
     if data.study:

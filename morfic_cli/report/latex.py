@@ -27,10 +27,27 @@ if TYPE_CHECKING:
     from morfic_cli.report.claims import Claim
 
 _ESCAPES = {
-    "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{",
-    "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "±": r"$\pm$", "σ": r"$\sigma$",
-    "↑": r"$\uparrow$", "↓": r"$\downarrow$", "≥": r"$\geq$", "≤": r"$\leq$", "×": r"$\times$", "–": "--",
-    "—": "---", "|": r"$|$", "†": r"$^\dagger$",
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\textasciicircum{}",
+    "±": r"$\pm$",
+    "σ": r"$\sigma$",
+    "↑": r"$\uparrow$",
+    "↓": r"$\downarrow$",
+    "≥": r"$\geq$",
+    "≤": r"$\leq$",
+    "×": r"$\times$",
+    "–": "--",
+    "—": "---",
+    "|": r"$|$",
+    "†": r"$^\dagger$",
 }
 
 
@@ -103,8 +120,17 @@ def table_latex(table: Table, *, float_env: bool = True) -> str:
     label = f"tab:paper-{table.key}" if table.source == "paper" else f"tab:{table.key}"
     caption = rf"\textbf{{{escape(table.title)}.}} {_caption_text(table.caption)}"
     notes = "".join(rf"\\[2pt]{{\footnotesize {escape(n)}}}" for n in table.notes)
-    return "\n".join([r"\begin{table}[H]", r"\centering", r"\small", rf"\caption{{{caption}}}",
-                      rf"\label{{{label}}}", body + notes, r"\end{table}"])
+    return "\n".join(
+        [
+            r"\begin{table}[H]",
+            r"\centering",
+            r"\small",
+            rf"\caption{{{caption}}}",
+            rf"\label{{{label}}}",
+            body + notes,
+            r"\end{table}",
+        ]
+    )
 
 
 def _caption_text(caption: str) -> str:
@@ -149,18 +175,31 @@ def document_latex(title: str, sections: Sequence[tuple[str, str]], *, preamble_
 
 def figure_latex(path: str, caption: str) -> str:
     """A figure float including ``path`` (relative to the .tex)."""
-    return "\n".join([r"\begin{figure}[H]", r"\centering",
-                      rf"\includegraphics[width=0.9\linewidth,height=0.4\textheight,keepaspectratio]{{{path}}}",
-                      rf"\caption{{{escape(caption)}}}", r"\end{figure}"])
+    return "\n".join(
+        [
+            r"\begin{figure}[H]",
+            r"\centering",
+            rf"\includegraphics[width=0.9\linewidth,height=0.4\textheight,keepaspectratio]{{{path}}}",
+            rf"\caption{{{escape(caption)}}}",
+            r"\end{figure}",
+        ]
+    )
 
 
 def figure_grid_latex(paths: Sequence[str], caption: str, per_row: int = 3) -> str:
     """One figure float with ``paths`` side by side, ``per_row`` to a row (e.g. one eval figure per robot)."""
     width = 0.97 / per_row
     cells = [rf"\includegraphics[width={width:.3f}\linewidth]{{{p}}}" for p in paths]
-    rows = ["\n".join(cells[i:i + per_row]) for i in range(0, len(cells), per_row)]
-    return "\n".join([r"\begin{figure}[H]", r"\centering", "\\\\[4pt]\n".join(rows),
-                      rf"\caption{{{escape(caption)}}}", r"\end{figure}"])
+    rows = ["\n".join(cells[i : i + per_row]) for i in range(0, len(cells), per_row)]
+    return "\n".join(
+        [
+            r"\begin{figure}[H]",
+            r"\centering",
+            "\\\\[4pt]\n".join(rows),
+            rf"\caption{{{escape(caption)}}}",
+            r"\end{figure}",
+        ]
+    )
 
 
 def longtable_latex(header: Sequence[str], rows: Sequence[Sequence[str]], spec: str) -> str:
@@ -172,8 +211,10 @@ def longtable_latex(header: Sequence[str], rows: Sequence[Sequence[str]], spec: 
     """
     import pandas as pd
 
-    frame = pd.DataFrame([[escape(str(c)) for c in row] for row in rows] or [["-"] * len(header)],  # never empty
-                         columns=[rf"\textbf{{{escape(h)}}}" for h in header])
+    frame = pd.DataFrame(
+        [[escape(str(c)) for c in row] for row in rows] or [["-"] * len(header)],  # never empty
+        columns=[rf"\textbf{{{escape(h)}}}" for h in header],
+    )
     body = frame.style.hide(axis="index").to_latex(environment="longtable", hrules=True, column_format=spec)
     return "{\\scriptsize\n" + body.rstrip("\n") + "}"
 
@@ -202,8 +243,14 @@ def compile_pdf(tex: str, files: Mapping[str, bytes] | None = None, *, timeout_s
             path.write_bytes(data)
         (root / "report.tex").write_text(tex, encoding="utf-8")
         for _ in range(2):
-            proc = subprocess.run([exe, "-interaction=nonstopmode", "-halt-on-error", "report.tex"], cwd=root,
-                                  capture_output=True, text=True, timeout=timeout_s, check=False)
+            proc = subprocess.run(
+                [exe, "-interaction=nonstopmode", "-halt-on-error", "report.tex"],
+                cwd=root,
+                capture_output=True,
+                text=True,
+                timeout=timeout_s,
+                check=False,
+            )
             if proc.returncode != 0:
                 tail = "\n".join(proc.stdout.splitlines()[-25:])
                 raise RuntimeError(f"pdflatex failed (exit {proc.returncode}):\n{tail}")
@@ -216,6 +263,9 @@ def claims_latex(claims: Sequence[Claim]) -> str:
 
     if not claims:
         return ""
-    items = [rf"\item \textbf{{({c.key}) {escape(c.claim)}}} Verdict: \textbf{{{escape(c.verdict)}}}. "
-             + " ".join(f"{label}: {escape(text)}." for label, text in claim_parts(c)) for c in claims]
+    items = [
+        rf"\item \textbf{{({c.key}) {escape(c.claim)}}} Verdict: \textbf{{{escape(c.verdict)}}}. "
+        + " ".join(f"{label}: {escape(text)}." for label, text in claim_parts(c))
+        for c in claims
+    ]
     return "\\begin{itemize}\n" + "\n".join(items) + "\n\\end{itemize}"

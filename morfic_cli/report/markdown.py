@@ -41,9 +41,12 @@ def table_markdown(table: Table) -> str:
     if table.groups:
         names = [g for g, span in table.groups for _ in range(span)]
         header = [table.corner] + [f"{g} {c}" for g, c in zip(names, table.columns, strict=True)]
-    lines = [f"**{table.title}.** {table.caption}".rstrip(), "",
-             "| " + " | ".join(_escape(h) for h in header) + " |",
-             "|" + "---|" + "---:|" * len(table.columns)]
+    lines = [
+        f"**{table.title}.** {table.caption}".rstrip(),
+        "",
+        "| " + " | ".join(_escape(h) for h in header) + " |",
+        "|" + "---|" + "---:|" * len(table.columns),
+    ]
     for row in table.rows:
         if not row.cells:
             lines.append(f"| *{_escape(row.label)}* |" + " |" * len(table.columns))
@@ -70,7 +73,8 @@ def claims_markdown(claims: Sequence[Claim]) -> str:
 
     out = []
     for c in claims:
-        parts = "".join(f"\n  - {label}: {text if label == 'From' else _escape(text)}"
-                        for label, text in claim_parts(c))
+        parts = "".join(
+            f"\n  - {label}: {text if label == 'From' else _escape(text)}" for label, text in claim_parts(c)
+        )
         out.append(f"- **({c.key}) {_escape(c.claim)}** Verdict: **{c.verdict}**.{parts}")
     return "\n".join(out)

@@ -86,11 +86,17 @@ class Table:
     def to_dict(self) -> dict:
         """JSON-ready form (``report.json``): every part with its value, std and bold flag."""
         return {
-            "key": self.key, "title": self.title, "caption": self.caption, "corner": self.corner,
-            "columns": list(self.columns), "groups": [list(g) for g in self.groups], "source": self.source,
+            "key": self.key,
+            "title": self.title,
+            "caption": self.caption,
+            "corner": self.corner,
+            "columns": list(self.columns),
+            "groups": [list(g) for g in self.groups],
+            "source": self.source,
             "notes": list(self.notes),
-            "rows": [{"label": r.label, "cells": [[_part_dict(p) for p in cell] for cell in r.cells]}
-                     for r in self.rows],
+            "rows": [
+                {"label": r.label, "cells": [[_part_dict(p) for p in cell] for cell in r.cells]} for r in self.rows
+            ],
         }
 
 

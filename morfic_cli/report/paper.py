@@ -27,15 +27,24 @@ from morfic_cli.rl.variants import STOCK
 #: The paper's robot order and names (its tables' row labels).
 ROBOTS: tuple[str, ...] = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")
 ROBOT_LABELS: dict[str, str] = {
-    "go2": "Go2", "go1": "Go1", "a1": "A1", "aliengo": "AlienGo", "b1": "B1", "mini_cheetah": "Cheetah",
+    "go2": "Go2",
+    "go1": "Go1",
+    "a1": "A1",
+    "aliengo": "AlienGo",
+    "b1": "B1",
+    "mini_cheetah": "Cheetah",
     "anymal_c": "ANYmal-C",
 }
 
 #: Method keys: morfic's variant names for the paper's own variants (labels from the variant registry), the
 #: Monte-Carlo reference and the external baselines.
 METHOD_LABELS: dict[str, str] = {
-    **{name: v.label for name, v in STOCK.items()}, "mc": "MC",
-    "expanded-range": "Expanded range", "urma": "URMA", "bodytransformer": "BodyTrans.", "genloco": "GenLoco",
+    **{name: v.label for name, v in STOCK.items()},
+    "mc": "MC",
+    "expanded-range": "Expanded range",
+    "urma": "URMA",
+    "bodytransformer": "BodyTrans.",
+    "genloco": "GenLoco",
     "embodiment-scaling": "Embod.",
 }
 EXTERNAL_BASELINES: tuple[str, ...] = ("urma", "bodytransformer", "genloco", "embodiment-scaling")
@@ -152,10 +161,21 @@ def parse_cell(text: str, n_parts: int) -> Cell:
     return parts
 
 
-def _table(key: str, title: str, caption: str, *, rows: tuple[str, ...], columns: tuple[str, ...],
-           parts: tuple[str, ...], higher: tuple[bool | None, ...], data: Mapping[str, str],
-           row_labels: Mapping[str, str] | None = None, column_labels: Mapping[str, str] | None = None,
-           command_vx: float | None = None, mode: str | None = None) -> PaperTable:
+def _table(
+    key: str,
+    title: str,
+    caption: str,
+    *,
+    rows: tuple[str, ...],
+    columns: tuple[str, ...],
+    parts: tuple[str, ...],
+    higher: tuple[bool | None, ...],
+    data: Mapping[str, str],
+    row_labels: Mapping[str, str] | None = None,
+    column_labels: Mapping[str, str] | None = None,
+    command_vx: float | None = None,
+    mode: str | None = None,
+) -> PaperTable:
     """Build a table from one ``" | "``-separated string of cells per row (in ``columns`` order)."""
     cells: dict[tuple[str, str], Cell] = {}
     for row in rows:
@@ -165,9 +185,18 @@ def _table(key: str, title: str, caption: str, *, rows: tuple[str, ...], columns
         for column, text in zip(columns, texts, strict=True):
             cells[(row, column)] = parse_cell(text, len(parts))
     return PaperTable(
-        key=key, title=title, caption=caption, rows=rows, columns=columns, parts=parts, higher_is_better=higher,
-        row_labels=dict(row_labels or ROBOT_LABELS), column_labels=dict(column_labels or METHOD_LABELS),
-        cells=cells, command_vx=command_vx, mode=mode,
+        key=key,
+        title=title,
+        caption=caption,
+        rows=rows,
+        columns=columns,
+        parts=parts,
+        higher_is_better=higher,
+        row_labels=dict(row_labels or ROBOT_LABELS),
+        column_labels=dict(column_labels or METHOD_LABELS),
+        cells=cells,
+        command_vx=command_vx,
+        mode=mode,
     )
 
 
@@ -176,10 +205,15 @@ _VXMAX_S = ("vx_max", "survival")
 _CRITIC = ("abs_nvb", "nve", "asa")
 
 ZERO_SHOT_TRANSFER = _table(
-    "zero_shot_transfer", "Zero-shot cross-morphology transfer",
+    "zero_shot_transfer",
+    "Zero-shot cross-morphology transfer",
     r"$\bar{v}_x \pm \sigma / S$ at $v^{cmd}_x = 2.0$ m/s; 64 envs, 500 steps; trained on Go2.",
-    rows=ROBOTS, columns=("ppo", "actor-only", "concat", "film"), parts=_VX_S, higher=(True, True),
-    command_vx=2.0, mode="descriptor",
+    rows=ROBOTS,
+    columns=("ppo", "actor-only", "concat", "film"),
+    parts=_VX_S,
+    higher=(True, True),
+    command_vx=2.0,
+    mode="descriptor",
     data={
         "go2": "1.79±0.31/0.984 | 0.88±0.23/0.265 | 1.70±0.30/0.891 | *2.04±0.37*/*0.984*",
         "go1": "1.93±0.27/*0.906* | 1.49±0.36/0.594 | 1.82±0.32/0.859 | *2.06±0.46*/0.547",
@@ -192,9 +226,14 @@ ZERO_SHOT_TRANSFER = _table(
 )
 
 CROSS_EMBODIMENT_BASELINES = _table(
-    "cross_embodiment_baselines", "External baselines vs. MorFiC",
+    "cross_embodiment_baselines",
+    "External baselines vs. MorFiC",
     r"$\bar{v}_x \pm \sigma / S$ at $v^{cmd}_x = 2.0$ m/s (GenLoco: no command input); - = no forward motion.",
-    rows=ROBOTS, columns=(*EXTERNAL_BASELINES, "film"), parts=_VX_S, higher=(True, True), command_vx=2.0,
+    rows=ROBOTS,
+    columns=(*EXTERNAL_BASELINES, "film"),
+    parts=_VX_S,
+    higher=(True, True),
+    command_vx=2.0,
     mode="descriptor",
     data={
         "go2": "1.84±0.26/*1.000* | 0.30±0.21/0.656 | 0.59±0.05/0.922 | 1.23±0.06/0.906 | *2.04±0.37*/0.984",
@@ -208,30 +247,38 @@ CROSS_EMBODIMENT_BASELINES = _table(
 )
 
 CROSS_EMBODIMENT_BASELINES_25 = _table(
-    "cross_embodiment_baselines_25", "External baselines vs. MorFiC at higher commanded speed",
+    "cross_embodiment_baselines_25",
+    "External baselines vs. MorFiC at higher commanded speed",
     r"$v_x^{\max} \pm \sigma / S$ at $v^{cmd}_x = 2.5$ m/s (GenLoco: no command input).",
-    rows=ROBOTS, columns=(*EXTERNAL_BASELINES, "film"), parts=_VXMAX_S, higher=(True, True), command_vx=2.5,
+    rows=ROBOTS,
+    columns=(*EXTERNAL_BASELINES, "film"),
+    parts=_VXMAX_S,
+    higher=(True, True),
+    command_vx=2.5,
     mode="descriptor",
     data={
-        "go2": "2.389±0.405/*1.000* | 0.313±0.232/0.625 | 0.592±0.047/0.922 | 1.072±0.092/0.859 | "
-               "*2.405±0.405*/0.859",
+        "go2": "2.389±0.405/*1.000* | 0.313±0.232/0.625 | 0.592±0.047/0.922 | 1.072±0.092/0.859 | *2.405±0.405*/0.859",
         "go1": "*2.514±0.430*/*1.000* | 0.206±0.151/*1.000* | 0.985±0.007/*1.000* | 2.343±0.131/0.797 | "
-               "1.972±0.442/0.516",
-        "a1": "*2.230±0.336*/*1.000* | 0.374±0.183/0.515 | 0.919±0.011/*1.000* | 2.143±0.116/0.719 | "
-              "1.595±0.467/0.156",
+        "1.972±0.442/0.516",
+        "a1": "*2.230±0.336*/*1.000* | 0.374±0.183/0.515 | 0.919±0.011/*1.000* | 2.143±0.116/0.719 | 1.595±0.467/0.156",
         "aliengo": "-/0.000 | 0.358±0.315/0.203 | *0.964±0.032*/*1.000* | 0.452±0.085/0.000 | 0.832±0.542/*1.000*",
         "b1": "-/0.000 | 0.080±0.140/0.640 | 0.00/0.000 | *3.062±0.214*/*0.797* | 0.121±0.060/0.000",
         "mini_cheetah": "-/0.000 | -/*1.000* | 0.729±0.061/0.969 | -0.118±0.091/0.000 | *1.128±0.986*/0.234",
         "anymal_c": "*2.159±0.354*/*1.000* | 0.014±0.081/0.843 | 0.708±0.005/*1.000* | 0.359±0.150/0.453 | "
-                    "0.303±0.422/0.984",
+        "0.303±0.422/0.984",
     },
 )
 
 CRITIC_CONDITIONING_ABLATION = _table(
-    "critic_conditioning_ablation", "Ablation Table",
+    "critic_conditioning_ablation",
+    "Ablation Table",
     r"$\bar{v}_x \pm \sigma / S$ at $v^{cmd}_x = 2.0$ m/s of the multiplicative critic variants.",
-    rows=ROBOTS, columns=("film", "film-scaled", "hyper", "adaln"), parts=_VX_S, higher=(True, True),
-    command_vx=2.0, mode="descriptor",
+    rows=ROBOTS,
+    columns=("film", "film-scaled", "hyper", "adaln"),
+    parts=_VX_S,
+    higher=(True, True),
+    command_vx=2.0,
+    mode="descriptor",
     row_labels={**ROBOT_LABELS, "anymal_c": "ANYmal"},
     data={
         "go2": "2.04±0.37/0.984 | 2.03±0.26/0.875 | *2.10±0.28*/0.953 | 2.03±0.19/*1.000*",
@@ -245,10 +292,16 @@ CRITIC_CONDITIONING_ABLATION = _table(
 )
 
 FILM_MORPH_RANGE_ABLATION = _table(
-    "film_morph_range_ablation", "Effect of expanded morphology ranges and FiLM conditioning",
+    "film_morph_range_ablation",
+    "Effect of expanded morphology ranges and FiLM conditioning",
     r"$v_x^{\max} \pm \sigma / S$; training on a wider morphology support vs. the paper's.",
-    rows=ROBOTS, columns=("expanded-range", "film"), parts=_VXMAX_S, higher=(True, True), command_vx=2.0,
-    mode="descriptor", column_labels={**METHOD_LABELS, "film": "FiLM"},
+    rows=ROBOTS,
+    columns=("expanded-range", "film"),
+    parts=_VXMAX_S,
+    higher=(True, True),
+    command_vx=2.0,
+    mode="descriptor",
+    column_labels={**METHOD_LABELS, "film": "FiLM"},
     data={
         "go2": "1.9013±0.3510/0.8531 | *2.0415±0.3670*/*0.9844*",
         "go1": "1.9208±0.3087/*0.7656* | *2.0649±0.4552*/0.5469",
@@ -261,11 +314,20 @@ FILM_MORPH_RANGE_ABLATION = _table(
 )
 
 CRITIC_METRICS_VARIANTS = _table(
-    "critic_metrics_variants", "Extended critic calibration diagnostics across PPO variants",
+    "critic_metrics_variants",
+    "Extended critic calibration diagnostics across PPO variants",
     r"$|\mathrm{NVB}|$/NVE/ASA; lower $|\mathrm{NVB}|$ and NVE, higher ASA are better.",
-    rows=ROBOTS, columns=("ppo", "actor-only", "concat", "film"), parts=_CRITIC, higher=(False, False, True),
-    column_labels={**METHOD_LABELS, "ppo": "Vanilla PPO", "actor-only": "Concat-z Actor only",
-                   "concat": "Concat-z Actor+Critic", "film": "FiLM"},
+    rows=ROBOTS,
+    columns=("ppo", "actor-only", "concat", "film"),
+    parts=_CRITIC,
+    higher=(False, False, True),
+    column_labels={
+        **METHOD_LABELS,
+        "ppo": "Vanilla PPO",
+        "actor-only": "Concat-z Actor only",
+        "concat": "Concat-z Actor+Critic",
+        "film": "FiLM",
+    },
     data={
         "go2": "1.944/1.981/0.610 | *0.177*/1.168/0.689 | 0.535/*0.960*/0.670 | 1.768/1.943/*0.771*",
         "go1": "1.591/1.817/0.612 | *0.068*/*1.096*/0.662 | 1.623/1.834/0.674 | 1.375/1.653/*0.681*",
@@ -278,57 +340,81 @@ CRITIC_METRICS_VARIANTS = _table(
 )
 
 CRITIC_METRICS_EXTERNAL = _table(
-    "critic_metrics_external", "Extended critic calibration diagnostics for external baselines",
+    "critic_metrics_external",
+    "Extended critic calibration diagnostics for external baselines",
     r"$|\mathrm{NVB}|$/NVE/ASA; -- = not reported.",
-    rows=ROBOTS, columns=("embodiment-scaling", "urma", "bodytransformer", "genloco", "film"), parts=_CRITIC,
-    higher=(False, False, True), column_labels={**METHOD_LABELS, "embodiment-scaling": "Embod. Scale"},
+    rows=ROBOTS,
+    columns=("embodiment-scaling", "urma", "bodytransformer", "genloco", "film"),
+    parts=_CRITIC,
+    higher=(False, False, True),
+    column_labels={**METHOD_LABELS, "embodiment-scaling": "Embod. Scale"},
     data={
         "go2": "3.437/3.646/0.657 | 3.005/3.178/*0.702* | 3.319/3.492/0.652 | "
-                "5.458/5.674/0.561 | *1.768*/*1.943*/0.671",
+        "5.458/5.674/0.561 | *1.768*/*1.943*/0.671",
         "go1": "2.569/2.772/0.607 | 3.170/3.333/0.692 | 4.771/4.983/*0.724* | "
-                "3.402/3.594/0.623 | *1.375*/*1.653*/0.681",
+        "3.402/3.594/0.623 | *1.375*/*1.653*/0.681",
         "a1": "2.368/2.585/0.599 | 3.390/3.551/*0.686* | 3.853/4.032/0.686 | 2.956/3.128/0.612 | *1.482*/*1.813*/0.675",
         "aliengo": "-- | -- | 3.104/3.476/0.661 | 1.170/1.522/*0.709* | *0.098*/*0.835*/0.706",
         "b1": "3.330/3.590/0.657 | -- | 3.571/3.781/*0.694* | 7.428/7.729/0.667 | *0.645*/*1.279*/0.618",
         "mini_cheetah": "-- | -- | -- | 5.294/5.511/0.594 | *0.464*/*0.947*/*0.768*",
         "anymal_c": "3.589/3.812/0.667 | 2.538/2.740/0.728 | 3.368/3.529/0.674 | 1.107/2.324/*0.733* | "
-                    "*0.120*/*1.229*/0.578",
+        "*0.120*/*1.229*/0.578",
     },
 )
 
 _FIXED_METHODS = ("mc", "film", "concat", "actor-only", "ppo")
 CAUSAL_ADV_ALL = _table(
-    "causal_adv_all", "Fixed-rollout critic diagnostic across target morphologies",
+    "causal_adv_all",
+    "Fixed-rollout critic diagnostic across target morphologies",
     "Flip/Cos.: sign-flip rate vs. the MC advantage (lower is better) / actor-gradient cosine with the MC "
     "gradient (higher is better); the MC row is the reference.",
-    rows=_FIXED_METHODS, columns=ROBOTS, parts=("flip", "cos_grad"), higher=(False, True),
-    row_labels={**METHOD_LABELS, "film": "MorFiC", "concat": "Concat", "actor-only": "Act-only",
-                "ppo": "Vanilla PPO"}, column_labels=ROBOT_LABELS, mode="descriptor",
+    rows=_FIXED_METHODS,
+    columns=ROBOTS,
+    parts=("flip", "cos_grad"),
+    higher=(False, True),
+    row_labels={**METHOD_LABELS, "film": "MorFiC", "concat": "Concat", "actor-only": "Act-only", "ppo": "Vanilla PPO"},
+    column_labels=ROBOT_LABELS,
+    mode="descriptor",
     data={
         "mc": " | ".join(["0.000/1.000"] * 7),
         "film": "*0.227*/0.880 | 0.187/*0.972* | *0.239*/*0.785* | *0.255*/*0.366* | 0.272/-0.182 | "
-                "*0.209*/*0.679* | *0.402*/-0.149",
-        "concat": "0.307/0.720 | *0.151*/0.830 | 0.344/0.427 | 0.329/0.004 | 0.269/0.106 | 0.236/0.575 | "
-                  "0.479/-0.419",
+        "*0.209*/*0.679* | *0.402*/-0.149",
+        "concat": "0.307/0.720 | *0.151*/0.830 | 0.344/0.427 | 0.329/0.004 | 0.269/0.106 | 0.236/0.575 | 0.479/-0.419",
         "actor-only": "0.524/*0.890* | 0.502/0.924 | 0.511/0.717 | 0.318/0.342 | 0.565/*0.647* | 0.265/0.644 | "
-                      "0.470/*-0.044*",
-        "ppo": "0.235/0.865 | 0.229/0.684 | 0.260/0.653 | 0.322/-0.113 | *0.176*/0.601 | 0.253/0.264 | "
-               "0.461/-0.074",
+        "0.470/*-0.044*",
+        "ppo": "0.235/0.865 | 0.229/0.684 | 0.260/0.653 | 0.322/-0.113 | *0.176*/0.601 | 0.253/0.264 | 0.461/-0.074",
     },
 )
 
 
-def _subset(table: PaperTable, key: str, title: str, columns: tuple[str, ...],
-            row_labels: Mapping[str, str]) -> PaperTable:
+def _subset(
+    table: PaperTable, key: str, title: str, columns: tuple[str, ...], row_labels: Mapping[str, str]
+) -> PaperTable:
     cells = {(r, c): v for (r, c), v in table.cells.items() if c in columns}
-    return PaperTable(key=key, title=title, caption=table.caption, rows=table.rows, columns=columns,
-                      parts=table.parts, higher_is_better=table.higher_is_better, row_labels=dict(row_labels),
-                      column_labels=table.column_labels, cells=cells, command_vx=table.command_vx, mode=table.mode)
+    return PaperTable(
+        key=key,
+        title=title,
+        caption=table.caption,
+        rows=table.rows,
+        columns=columns,
+        parts=table.parts,
+        higher_is_better=table.higher_is_better,
+        row_labels=dict(row_labels),
+        column_labels=table.column_labels,
+        cells=cells,
+        command_vx=table.command_vx,
+        mode=table.mode,
+    )
 
 
 #: The main text's fixed-rollout table: the AlienGo and Cheetah columns of :data:`CAUSAL_ADV_ALL`.
-CAUSAL_ADV = _subset(CAUSAL_ADV_ALL, "causal_adv", "Fixed-rollout diagnostic", ("aliengo", "mini_cheetah"),
-                     {**CAUSAL_ADV_ALL.row_labels, "ppo": "PPO"})
+CAUSAL_ADV = _subset(
+    CAUSAL_ADV_ALL,
+    "causal_adv",
+    "Fixed-rollout diagnostic",
+    ("aliengo", "mini_cheetah"),
+    {**CAUSAL_ADV_ALL.row_labels, "ppo": "PPO"},
+)
 
 
 def parse_count(text: str) -> float:
@@ -390,25 +476,65 @@ class ComputeRow:
 
 TRAINING_COMPUTE_TITLE = "Training compute comparison"
 TRAINING_COMPUTE: tuple[ComputeRow, ...] = (
-    ComputeRow("film", "MorFiC", "400M", "4,000", "1.98--2.70", "2.2--3.0", "2.2--3.0",
-               "Single generalist policy; local run", bold=("sec_per_iter", "gpu_hours", "gpu_hours_400m")),
+    ComputeRow(
+        "film",
+        "MorFiC",
+        "400M",
+        "4,000",
+        "1.98--2.70",
+        "2.2--3.0",
+        "2.2--3.0",
+        "Single generalist policy; local run",
+        bold=("sec_per_iter", "gpu_hours", "gpu_hours_400m"),
+    ),
     ComputeRow("bodytransformer", "BodyTransformer", "400M", "8,000", "17.25", "38.3", "39.0", "Reproduced model_8000"),
     ComputeRow("urma", "URMA", "1.600B", "3,064", "366--392", "311--333", "77.8--83.3", "Original training budget"),
     ComputeRow("genloco", "GenLoco", "200M", "1,526", "125.8", "53.3", "106.6", "200M setting"),
     ComputeRow("genloco", "GenLoco", "800M", "6,104", "125.8", "213.5", "106.8", "800M setting"),
-    ComputeRow("embodiment-scaling", "Embod. Scaling, Gendog8 expert", "1.720B", "17,499", "0.94", "4.5", "1.05",
-               "One selected released expert", expert_pool=True),
-    ComputeRow("embodiment-scaling", "Embod. Scaling, full Gendog pool", "570.6B", "~5.80M", "0.94", "1507", "1.06",
-               "332 experts; ~5 TB storage", expert_pool=True),
+    ComputeRow(
+        "embodiment-scaling",
+        "Embod. Scaling, Gendog8 expert",
+        "1.720B",
+        "17,499",
+        "0.94",
+        "4.5",
+        "1.05",
+        "One selected released expert",
+        expert_pool=True,
+    ),
+    ComputeRow(
+        "embodiment-scaling",
+        "Embod. Scaling, full Gendog pool",
+        "570.6B",
+        "~5.80M",
+        "0.94",
+        "1507",
+        "1.06",
+        "332 experts; ~5 TB storage",
+        expert_pool=True,
+    ),
 )
 
 #: Column order of the paper's morphology-support table: the training support, then the robots.
-SUPPORT_COLUMNS: tuple[str, ...] = ("train_min", "train_max", "go2", "go1", "a1", "mini_cheetah", "aliengo",
-                                    "anymal_c", "b1")
+SUPPORT_COLUMNS: tuple[str, ...] = (
+    "train_min",
+    "train_max",
+    "go2",
+    "go1",
+    "a1",
+    "mini_cheetah",
+    "aliengo",
+    "anymal_c",
+    "b1",
+)
 MORPHOLOGY_SUPPORT = _table(
-    "morphology_support", "Morphology randomization parameters",
+    "morphology_support",
+    "Morphology randomization parameters",
     r"Training support and each robot's 11-D descriptor; out-of-support values in bold with $\uparrow$/$\downarrow$.",
-    rows=DESCRIPTOR_NAMES, columns=SUPPORT_COLUMNS, parts=("value",), higher=(None,),
+    rows=DESCRIPTOR_NAMES,
+    columns=SUPPORT_COLUMNS,
+    parts=("value",),
+    higher=(None,),
     row_labels=dict(zip(DESCRIPTOR_NAMES, DESCRIPTOR_LABELS, strict=True)),
     column_labels={**ROBOT_LABELS, "train_min": "Train min", "train_max": "Train max", "anymal_c": "ANYmal"},
     data={
@@ -420,7 +546,7 @@ MORPHOLOGY_SUPPORT = _table(
         "hip_limit_min": "-1.100 | -0.800 | -1.047 | -0.803 | -0.803 | *-1.600↓* | *-1.222↓* | *-0.720↑* | *-0.750↑*",
         "hip_limit_max": "0.800 | 1.100 | 1.047 | 0.803 | 0.803 | *1.600↑* | *1.222↑* | *0.720↓* | *0.750↓*",
         "thigh_limit_min": "-1.650 | -1.050 | -1.571 | *-1.047↑* | *-1.047↑* | *-2.600↓* | *-3.142↓* | -1.650 | "
-                           "*-1.000↑*",
+        "*-1.000↑*",
         "thigh_limit_max": "3.490 | 4.050 | 3.491 | *4.189↑* | *4.189↑* | *2.600↓* | *3.142↓* | 4.050 | 3.500",
         "calf_limit_min": "-2.720 | -2.600 | *-2.723↓* | -2.697 | -2.697 | -2.600 | *-2.775↓* | -2.720 | -2.600",
         "calf_limit_max": "-0.950 | -0.780 | -0.838 | -0.916 | -0.916 | -0.800 | *-0.646↑* | -0.780 | *-0.600↑*",
@@ -430,9 +556,18 @@ MORPHOLOGY_SUPPORT = _table(
 #: Every results table of the paper, by key.
 TABLES: dict[str, PaperTable] = {
     t.key: t
-    for t in (ZERO_SHOT_TRANSFER, CROSS_EMBODIMENT_BASELINES, CROSS_EMBODIMENT_BASELINES_25,
-              CRITIC_CONDITIONING_ABLATION, FILM_MORPH_RANGE_ABLATION, CRITIC_METRICS_VARIANTS,
-              CRITIC_METRICS_EXTERNAL, CAUSAL_ADV, CAUSAL_ADV_ALL, MORPHOLOGY_SUPPORT)
+    for t in (
+        ZERO_SHOT_TRANSFER,
+        CROSS_EMBODIMENT_BASELINES,
+        CROSS_EMBODIMENT_BASELINES_25,
+        CRITIC_CONDITIONING_ABLATION,
+        FILM_MORPH_RANGE_ABLATION,
+        CRITIC_METRICS_VARIANTS,
+        CRITIC_METRICS_EXTERNAL,
+        CAUSAL_ADV,
+        CAUSAL_ADV_ALL,
+        MORPHOLOGY_SUPPORT,
+    )
 }
 
 

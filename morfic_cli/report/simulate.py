@@ -101,9 +101,11 @@ def false_verdict_rates(n: int, draws: int = DRAWS, seed: int = SEED, tol: float
         ``{"a": .., "b": .., "c": .., "d equal": .., "d boundary": .., "e": ..}``.
     """
     rng = np.random.default_rng(seed)
-    out = {"a": np.mean(claim_a(rng.normal(size=(draws, 3, 7, n))) != stats.CANNOT),
-           "b": np.mean(claim_b(rng.normal(size=(draws, 3, 4, n))) != stats.CANNOT),
-           "c": np.mean(claim_c(rng.normal(size=(draws, 2, 2, 4, n))) != stats.CANNOT)}
+    out = {
+        "a": np.mean(claim_a(rng.normal(size=(draws, 3, 7, n))) != stats.CANNOT),
+        "b": np.mean(claim_b(rng.normal(size=(draws, 3, 4, n))) != stats.CANNOT),
+        "c": np.mean(claim_c(rng.normal(size=(draws, 2, 2, 4, n))) != stats.CANNOT),
+    }
     reversal = (stats.NOT, stats.REVERSED, stats.MIXED)
     out["d equal"] = np.mean(np.isin(claim_d(rng.normal(size=(draws, 3, 4, n)), tol), reversal))
     shifted = rng.normal(size=(draws, 3, 4, n)) + np.array([0, 0, 0, tol])[None, None, :, None]
@@ -123,8 +125,10 @@ def coverage(n: int, draws: int = DRAWS, seed: int = SEED) -> dict[str, float]:
     x = rng.normal(size=(draws, 7, n)) * sds[:, None] + mu[:, None]
     _, _, _, _, clo, chi = stats.contrast(x.mean(-1), x.var(-1, ddof=1), np.full(7, float(n)), c)
     truth = float((c * mu).sum())
-    return {"welch": float(np.mean((lo <= 0.5) & (0.5 <= hi))), "contrast": float(np.mean((clo <= truth) &
-                                                                                       (truth <= chi)))}
+    return {
+        "welch": float(np.mean((lo <= 0.5) & (0.5 <= hi))),
+        "contrast": float(np.mean((clo <= truth) & (truth <= chi))),
+    }
 
 
 def simulation_se(rate: float, draws: int = DRAWS) -> float:
@@ -137,19 +141,33 @@ def calibration_markdown(ns: tuple[int, ...] = SEEDS, draws: int = DRAWS, seed: 
     rates = {n: false_verdict_rates(n, draws, seed) for n in ns}
     cover = {n: coverage(n, draws, seed) for n in ns}
     head = " | ".join(f"n = {n}" for n in ns)
-    lines = [f"Simulated with `morfic_cli/report/simulate.py` ({draws} draws per cell, generator seed {seed}; one "
-             f"simulation standard error is about {simulation_se(stats.ALPHA, draws):.3f} at a rate of "
-             f"{stats.ALPHA:g} and {simulation_se(0.95, draws):.3f} at 95 %; `python scripts/stats_calibration.py "
-             "--write docs/report.md` regenerates this block):", "",
-             f"| rule, simulated case | should be | {head} |", "|---|---|" + "---|" * len(ns)]
-    label = {"a": "(a) null: no variant differs; any verdict", "b": "(b) null; any verdict",
-             "c": "(c) null; any verdict", "d equal": "(d) the four alike; a verdict with a reversal",
-             "d boundary": "(d) adaln one tolerance away; holds or a reversal",
-             "e": "(e) null: no robot differs; any verdict"}
+    lines = [
+        f"Simulated with `morfic_cli/report/simulate.py` ({draws} draws per cell, generator seed {seed}; one "
+        f"simulation standard error is about {simulation_se(stats.ALPHA, draws):.3f} at a rate of "
+        f"{stats.ALPHA:g} and {simulation_se(0.95, draws):.3f} at 95 %; `python scripts/stats_calibration.py "
+        "--write docs/report.md` regenerates this block):",
+        "",
+        f"| rule, simulated case | should be | {head} |",
+        "|---|---|" + "---|" * len(ns),
+    ]
+    label = {
+        "a": "(a) null: no variant differs; any verdict",
+        "b": "(b) null; any verdict",
+        "c": "(c) null; any verdict",
+        "d equal": "(d) the four alike; a verdict with a reversal",
+        "d boundary": "(d) adaln one tolerance away; holds or a reversal",
+        "e": "(e) null: no robot differs; any verdict",
+    }
     for key, text in label.items():
         lines.append(f"| {text} | <= {stats.ALPHA:g} | " + " | ".join(f"{rates[n][key]:.3f}" for n in ns) + " |")
-    lines.append("| Welch 95 % interval holds the true difference (sds 1 and 2) | 0.95 | "
-                 + " | ".join(f"{cover[n]['welch']:.3f}" for n in ns) + " |")
-    lines.append("| t-contrast 95 % interval holds the true contrast ((a)'s 4 against 3 variants, sds 0.5-2) | 0.95 | "
-                 + " | ".join(f"{cover[n]['contrast']:.3f}" for n in ns) + " |")
+    lines.append(
+        "| Welch 95 % interval holds the true difference (sds 1 and 2) | 0.95 | "
+        + " | ".join(f"{cover[n]['welch']:.3f}" for n in ns)
+        + " |"
+    )
+    lines.append(
+        "| t-contrast 95 % interval holds the true contrast ((a)'s 4 against 3 variants, sds 0.5-2) | 0.95 | "
+        + " | ".join(f"{cover[n]['contrast']:.3f}" for n in ns)
+        + " |"
+    )
     return "\n".join(lines)

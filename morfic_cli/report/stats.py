@@ -120,8 +120,9 @@ def t_p(t: np.ndarray | float, df: np.ndarray | float) -> np.ndarray:
     return np.where(np.isnan(t), 1.0, np.where(np.isinf(t), 0.0, p))
 
 
-def contrast(means: np.ndarray, variances: np.ndarray, ns: np.ndarray, c: np.ndarray,
-             alpha: float = ALPHA) -> tuple[np.ndarray, ...]:
+def contrast(
+    means: np.ndarray, variances: np.ndarray, ns: np.ndarray, c: np.ndarray, alpha: float = ALPHA
+) -> tuple[np.ndarray, ...]:
     """The t-contrast Σ c_i m_i with Welch-Satterthwaite degrees of freedom, vectorised over leading axes.
 
     Args:
@@ -149,8 +150,9 @@ def contrast(means: np.ndarray, variances: np.ndarray, ns: np.ndarray, c: np.nda
     return est, se, df, p, est - half, est + half
 
 
-def group_effect(side_a: Sequence[Sequence[float]], side_b: Sequence[Sequence[float]], *,
-                 alpha: float = ALPHA) -> Effect:
+def group_effect(
+    side_a: Sequence[Sequence[float]], side_b: Sequence[Sequence[float]], *, alpha: float = ALPHA
+) -> Effect:
     """Effect = mean over a's variants of their seed means - the same for b, with its t-contrast test.
 
     Args:
@@ -176,8 +178,17 @@ def group_effect(side_a: Sequence[Sequence[float]], side_b: Sequence[Sequence[fl
     variances = np.array([v.var(ddof=1) for v in groups])
     ns = np.array([v.size for v in groups], dtype=np.float64)
     _, se, df, p, lo, hi = contrast(means, variances, ns, c, alpha)
-    return Effect(estimate, float(lo), float(hi), n_a, n_b, float(p), float(df), float(se),
-                  tuple(float(x) for x in c**2 * variances))
+    return Effect(
+        estimate,
+        float(lo),
+        float(hi),
+        n_a,
+        n_b,
+        float(p),
+        float(df),
+        float(se),
+        tuple(float(x) for x in c**2 * variances),
+    )
 
 
 def mean_difference(a: Sequence[float], b: Sequence[float], *, alpha: float = ALPHA) -> Effect:
@@ -193,8 +204,17 @@ def mean_difference(a: Sequence[float], b: Sequence[float], *, alpha: float = AL
     ci = r.confidence_interval(1 - alpha)
     est = float(x.mean() - y.mean())
     unit = (float(x.var(ddof=1)), float(y.var(ddof=1)))
-    return Effect(est, float(ci.low), float(ci.high), x.size, y.size, float(r.pvalue), float(r.df),
-                  math.sqrt(unit[0] / x.size + unit[1] / y.size), unit)
+    return Effect(
+        est,
+        float(ci.low),
+        float(ci.high),
+        x.size,
+        y.size,
+        float(r.pvalue),
+        float(r.df),
+        math.sqrt(unit[0] / x.size + unit[1] / y.size),
+        unit,
+    )
 
 
 def paired_effect(differences: Sequence[float], *, alpha: float = ALPHA) -> Effect:
@@ -211,8 +231,7 @@ def paired_effect(differences: Sequence[float], *, alpha: float = ALPHA) -> Effe
     if d.size < MIN_SEEDS:
         return Effect(est, math.nan, math.nan, d.size, d.size, why=NO_TEST)
     var = float(d.var(ddof=1))
-    _, se, df, p, lo, hi = contrast(np.array([est]), np.array([var]), np.array([float(d.size)]), np.array([1.0]),
-                                    alpha)
+    _, se, df, p, lo, hi = contrast(np.array([est]), np.array([var]), np.array([float(d.size)]), np.array([1.0]), alpha)
     return Effect(est, float(lo), float(hi), d.size, d.size, float(p), float(df), float(se), (var,))
 
 
@@ -254,8 +273,9 @@ def holm(p: Sequence[float] | np.ndarray) -> np.ndarray:
     return np.where(np.isnan(p), np.nan, out)
 
 
-def outcome(estimate: float | np.ndarray, p: float | np.ndarray, higher: bool | np.ndarray = True,
-            alpha: float = ALPHA) -> int | np.ndarray:
+def outcome(
+    estimate: float | np.ndarray, p: float | np.ndarray, higher: bool | np.ndarray = True, alpha: float = ALPHA
+) -> int | np.ndarray:
     """:data:`FOR` / :data:`AGAINST` / :data:`NONE`: significant (p < alpha) in the claimed direction or not."""
     sig = np.asarray(p) < alpha
     sign = np.where(np.asarray(higher), 1, -1) * np.sign(np.asarray(estimate, dtype=np.float64))
@@ -274,13 +294,15 @@ def decide(outcomes: Sequence[int] | np.ndarray) -> str | np.ndarray:
     if o.shape[-1] == 0:
         return CANNOT if o.ndim == 1 else np.full(o.shape[:-1], CANNOT, dtype=object)
     f, a, m = (o == FOR).sum(-1), (o == AGAINST).sum(-1), o.shape[-1]
-    out = np.select([f == m, a == m, (f > 0) & (a > 0), f > 0, a > 0], [HOLDS, NOT, MIXED, PARTLY, REVERSED],
-                    CANNOT).astype(object)
+    out = np.select(
+        [f == m, a == m, (f > 0) & (a > 0), f > 0, a > 0], [HOLDS, NOT, MIXED, PARTLY, REVERSED], CANNOT
+    ).astype(object)
     return str(out) if out.ndim == 0 else out
 
 
-def seeds_needed(effect: Effect, *, alpha: float = ALPHA, power: float = POWER,
-                 delta: float | None = None) -> int | None:
+def seeds_needed(
+    effect: Effect, *, alpha: float = ALPHA, power: float = POWER, delta: float | None = None
+) -> int | None:
     """Seeds per variant that detect ``delta`` (default ``|estimate|``) with ``power`` at two-sided ``alpha``.
 
     For an equivalence reading ((d)) ``delta`` is the estimate's distance to the nearer bound of ±tol (each of its

@@ -19,11 +19,21 @@ from morfic_cli.report.model import Part, Row, Table
 from morfic_cli.report.tables import robot_label, robot_order
 from morfic_cli.rl.variants import variant_label, variant_order
 
-STUDY_TABLE_METRICS: tuple[tuple[str, str], ...] = (("ev", "EV"), ("nvb", "NVB"), ("nve", "NVE"), ("flip", "Flip"),
-                                                    ("cos_grad", "Cos."))
+STUDY_TABLE_METRICS: tuple[tuple[str, str], ...] = (
+    ("ev", "EV"),
+    ("nvb", "NVB"),
+    ("nve", "NVE"),
+    ("flip", "Flip"),
+    ("cos_grad", "Cos."),
+)
 """The metrics of the study's tables, one table each per command."""
-_BETTER = {"ev": "higher is better", "nvb": "0 is best (> 0 overestimates G)", "nve": "lower is better",
-           "flip": "lower is better", "cos_grad": "higher is better"}
+_BETTER = {
+    "ev": "higher is better",
+    "nvb": "0 is best (> 0 overestimates G)",
+    "nve": "lower is better",
+    "flip": "lower is better",
+    "cos_grad": "higher is better",
+}
 
 
 def _num(x: float) -> str:
@@ -67,15 +77,30 @@ def study_tables(rows: Sequence[dict[str, Any]]) -> list[Table]:
     tables = []
     for command in sorted({r["command_vx"] for r in summary}):
         for metric, name in metrics:
-            out = [Row("train (held out)" if robot == "train" else robot_label(robot),
-                       tuple(_cell(by.get((command, robot, v, metric))) for v in variants)) for robot in robots]
-            caption = (f"{name} of every critic fitted from scratch on a frozen actor's rollouts of the training "
-                       f"distribution, scored on that actor's rollouts at {command:g} m/s: mean over {unit} "
-                       f"[95 % t interval]{flags}; {_BETTER[metric]}.")
+            out = [
+                Row(
+                    "train (held out)" if robot == "train" else robot_label(robot),
+                    tuple(_cell(by.get((command, robot, v, metric))) for v in variants),
+                )
+                for robot in robots
+            ]
+            caption = (
+                f"{name} of every critic fitted from scratch on a frozen actor's rollouts of the training "
+                f"distribution, scored on that actor's rollouts at {command:g} m/s: mean over {unit} "
+                f"[95 % t interval]{flags}; {_BETTER[metric]}."
+            )
             key = f"critic_study_{metric}_{command:g}".replace(".", "_")
-            tables.append(Table(key, f"Critic study: {name} at {command:g} m/s", caption, "Target",
-                                tuple(STUDY_LABELS.get(v, variant_label(v)) for v in variants), tuple(out),
-                                math=False))
+            tables.append(
+                Table(
+                    key,
+                    f"Critic study: {name} at {command:g} m/s",
+                    caption,
+                    "Target",
+                    tuple(STUDY_LABELS.get(v, variant_label(v)) for v in variants),
+                    tuple(out),
+                    math=False,
+                )
+            )
     return tables
 
 
@@ -86,25 +111,35 @@ def study_text(rows: Sequence[dict[str, Any]], actor: str, artifact: str, second
     critics explain more variance with a larger total error is named as such (their values are biased).
     """
     unit = study_unit(rows)
-    lines = [f"The conditioning alone: frozen actors ({actor}), every critic fitted from scratch on its actor's "
-             f"training-distribution data (`morfic critic-study`, artifact `{artifact[:12]}`; fits "
-             f"{seconds.get('fits', math.nan):.0f} s, rollouts {seconds.get('rollouts', math.nan):.0f} s, scoring "
-             f"{seconds.get('scoring', math.nan):.0f} s). The unit: {_unit_words(rows)}; {convergence_text(rows)}. "
-             + ("Verdicts from t tests over actors, paired by actor, " if unit == ACTOR else
-                "Verdicts from Welch and t-contrast tests over fit seeds, ")
-             + "Holm-corrected per claim (docs/report.md).", ""]
+    lines = [
+        f"The conditioning alone: frozen actors ({actor}), every critic fitted from scratch on its actor's "
+        f"training-distribution data (`morfic critic-study`, artifact `{artifact[:12]}`; fits "
+        f"{seconds.get('fits', math.nan):.0f} s, rollouts {seconds.get('rollouts', math.nan):.0f} s, scoring "
+        f"{seconds.get('scoring', math.nan):.0f} s). The unit: {_unit_words(rows)}; {convergence_text(rows)}. "
+        + (
+            "Verdicts from t tests over actors, paired by actor, "
+            if unit == ACTOR
+            else "Verdicts from Welch and t-contrast tests over fit seeds, "
+        )
+        + "Holm-corrected per claim (docs/report.md).",
+        "",
+    ]
     for c in study_claims(rows):
         if c["claim"] == "a":
             parts = []
             for r in c["robots"]:
-                text = (f"{r['robot']} {r['effect'].text(p_holm=r['p_holm'])} ({r['verdict']}); NVE "
-                        f"{r['nve'].text()}, NVB {r['nvb'].text()}")
+                text = (
+                    f"{r['robot']} {r['effect'].text(p_holm=r['p_holm'])} ({r['verdict']}); NVE "
+                    f"{r['nve'].text()}, NVB {r['nvb'].text()}"
+                )
                 if r["effect"].estimate > 0 and r["nve"].estimate > 0:
                     (nve_m, nve_a), (nvb_m, nvb_a) = r["levels"]["nve"], r["levels"]["nvb"]
-                    text += (f": higher EV with a larger total error (NVE {nve_m:.1f} against {nve_a:.1f}; NVB "
-                             f"{nvb_m:+.1f} against {nvb_a:+.1f}: the multiplicative critics' values sit "
-                             f"{abs(nvb_m):.1f} σ_G {'above' if nvb_m > 0 else 'below'} the returns on average, a "
-                             "bias EV does not see)")
+                    text += (
+                        f": higher EV with a larger total error (NVE {nve_m:.1f} against {nve_a:.1f}; NVB "
+                        f"{nvb_m:+.1f} against {nvb_a:+.1f}: the multiplicative critics' values sit "
+                        f"{abs(nvb_m):.1f} σ_G {'above' if nvb_m > 0 else 'below'} the returns on average, a "
+                        "bias EV does not see)"
+                    )
                 parts.append(text)
             what = "EV multiplicative - additive"
         else:
@@ -119,8 +154,12 @@ def study_text(rows: Sequence[dict[str, Any]], actor: str, artifact: str, second
 
 def _worst_pair(pairs: Sequence[dict[str, Any]]) -> str:
     """The comparison whose interval lies lowest (the weakest for the claim), as text, with its Holm p."""
-    cands = [(p[m].lo if math.isfinite(p[m].lo) else p[m].estimate, p["other"], m, p[m], p.get(f"{m}_p_holm"))
-             for p in pairs for m in ("flip", "cos_grad") if math.isfinite(p[m].estimate)]
+    cands = [
+        (p[m].lo if math.isfinite(p[m].lo) else p[m].estimate, p["other"], m, p[m], p.get(f"{m}_p_holm"))
+        for p in pairs
+        for m in ("flip", "cos_grad")
+        if math.isfinite(p[m].estimate)
+    ]
     if not cands:
         return ""
     _, other, m, e, p_holm = min(cands, key=lambda t: t[0])

@@ -14,8 +14,7 @@ from typing import Any
 from morfic_cli.store import Store
 
 SUPPORT_REF = "tables/morphology-support"
-SUPPORT_COLUMNS: tuple[str, ...] = ("parameter", "label", "unit", "robot", "value", "train_min", "train_max",
-                                    "support")
+SUPPORT_COLUMNS: tuple[str, ...] = ("parameter", "label", "unit", "robot", "value", "train_min", "train_max", "support")
 
 
 def support_rows(robots: Sequence[str]) -> list[dict[str, Any]]:
@@ -26,9 +25,18 @@ def support_rows(robots: Sequence[str]) -> list[dict[str, Any]]:
     rows = []
     for robot in robots:
         for label, d in zip(DESCRIPTOR_LABELS, descriptor_rows(load_robot(robot)), strict=True):
-            rows.append({"parameter": d["name"], "label": label, "unit": d["unit"], "robot": robot,
-                         "value": d["value"], "train_min": d["train_min"], "train_max": d["train_max"],
-                         "support": d["support"]})
+            rows.append(
+                {
+                    "parameter": d["name"],
+                    "label": label,
+                    "unit": d["unit"],
+                    "robot": robot,
+                    "value": d["value"],
+                    "train_min": d["train_min"],
+                    "train_max": d["train_max"],
+                    "support": d["support"],
+                }
+            )
     return rows
 
 
@@ -44,6 +52,11 @@ def ensure_support_table(store: Store, robots: Sequence[str] | None = None) -> t
 
     names = list(robots or ROBOTS)
     config = {"table": "morphology-support", "robots": names, "robot_toml_sha256": robot_file_digests(names)}
-    pub = store.publish("table", SUPPORT_REF, config=config, reuse=True,
-                        files={"support.csv": rows_to_csv(support_rows(names), SUPPORT_COLUMNS)})
+    pub = store.publish(
+        "table",
+        SUPPORT_REF,
+        config=config,
+        reuse=True,
+        files={"support.csv": rows_to_csv(support_rows(names), SUPPORT_COLUMNS)},
+    )
     return pub.id, pub.reused

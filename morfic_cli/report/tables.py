@@ -69,15 +69,22 @@ def _command_key(key: str, title: str, command_vx: float) -> tuple[str, str]:
 
 def _seed_note(rows: Sequence[dict[str, Any]], pooled: bool = False) -> str:
     seeds = sorted({int(r["n_seeds"]) for r in rows})
-    what = f"{seeds[0]} seed" + ("s" if seeds[0] != 1 else "") if len(seeds) == 1 else \
-        f"{seeds[0]}-{seeds[-1]} seeds"
+    what = f"{seeds[0]} seed" + ("s" if seeds[0] != 1 else "") if len(seeds) == 1 else f"{seeds[0]}-{seeds[-1]} seeds"
     sigma = " (σ over all alive env-steps, pooled over seeds)" if pooled else ""
     return f"Mean over {what} per cell{sigma}; numbers from the artifacts listed under Provenance."
 
 
-def transfer_table(rows: Sequence[dict[str, Any]], *, key: str, title: str, command_vx: float, mode: str,
-                   variants: Sequence[str] | None = None, use_max: bool = False,
-                   min_columns: int = 1) -> Table | None:
+def transfer_table(
+    rows: Sequence[dict[str, Any]],
+    *,
+    key: str,
+    title: str,
+    command_vx: float,
+    mode: str,
+    variants: Sequence[str] | None = None,
+    use_max: bool = False,
+    min_columns: int = 1,
+) -> Table | None:
     """Robots x variants, cells ``v ± σ / S``; bold best speed and survival per robot.
 
     ``use_max`` labels the speed v_x^max, as the paper's 2.5 m/s table does: the paper's v_x^max is the forward speed
@@ -95,20 +102,39 @@ def transfer_table(rows: Sequence[dict[str, Any]], *, key: str, title: str, comm
         cells = [by.get((robot, p, v)) for p, v in cols]
         v_bold = bold_best([c[speed] if c else None for c in cells], True)
         s_bold = bold_best([c["survival"] if c else None for c in cells], True)
-        out_rows.append(Row(robot_label(robot), tuple(
-            (Part(c[speed] if c else None, c[std] if c else None, 2, vb),
-             Part(c["survival"] if c else None, None, 3, sb))
-            for c, vb, sb in zip(cells, v_bold, s_bold, strict=True))))
+        out_rows.append(
+            Row(
+                robot_label(robot),
+                tuple(
+                    (
+                        Part(c[speed] if c else None, c[std] if c else None, 2, vb),
+                        Part(c["survival"] if c else None, None, 3, sb),
+                    )
+                    for c, vb, sb in zip(cells, v_bold, s_bold, strict=True)
+                ),
+            )
+        )
     quantity = r"$v_x^{\max} \pm \sigma / S$" if use_max else r"$\bar{v}_x \pm \sigma / S$"
     meaning = r" ($v_x^{\max}$ as the paper uses it: the mean forward speed under this command)" if use_max else ""
-    where = {"descriptor": "the target descriptor on the Go2 template",
-             "actuation-matched": "the target descriptor on the Go2 template with Kp, Kd and torque limits x the "
-                                  "target's mass / Go2's"}.get(mode, "the target robot model itself")
+    where = {
+        "descriptor": "the target descriptor on the Go2 template",
+        "actuation-matched": "the target descriptor on the Go2 template with Kp, Kd and torque limits x the "
+        "target's mass / Go2's",
+    }.get(mode, "the target robot model itself")
     where = f"{where} ({protocol_text(sel)})"
-    caption = (f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s{meaning}, "
-               f"σ over all alive env-steps, {where}; bold: best speed and best survival per robot.")
-    return Table(key, title, caption, "Target", tuple(method_label(v, p, multi) for p, v in cols),
-                 tuple(out_rows), notes=(_seed_note(sel, pooled=True),))
+    caption = (
+        f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s{meaning}, "
+        f"σ over all alive env-steps, {where}; bold: best speed and best survival per robot."
+    )
+    return Table(
+        key,
+        title,
+        caption,
+        "Target",
+        tuple(method_label(v, p, multi) for p, v in cols),
+        tuple(out_rows),
+        notes=(_seed_note(sel, pooled=True),),
+    )
 
 
 def protocol_text(rows: Sequence[dict[str, Any]]) -> str:
@@ -119,8 +145,13 @@ def protocol_text(rows: Sequence[dict[str, Any]]) -> str:
     from morfic_cli.evaluation.protocol import EvalCfg
 
     paper = (EvalCfg.num_envs, EvalCfg.steps)
-    sizes = sorted({(int(r["num_envs"]), int(r["steps"])) for r in rows
-                    if r.get("num_envs") is not None and r.get("steps") is not None})
+    sizes = sorted(
+        {
+            (int(r["num_envs"]), int(r["steps"]))
+            for r in rows
+            if r.get("num_envs") is not None and r.get("steps") is not None
+        }
+    )
     if sizes == [paper]:
         return f"the paper protocol: {paper[0]} envs x {paper[1]} steps"
     if not sizes:
@@ -129,9 +160,14 @@ def protocol_text(rows: Sequence[dict[str, Any]]) -> str:
     return f"a reduced protocol: {shown}; the paper's is {paper[0]} x {paper[1]}"
 
 
-def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
-                 command_vx: float = PAPER_COMMAND, *, key: str = "critic_metrics_variants",
-                 title: str = "Critic calibration diagnostics") -> Table | None:
+def critic_table(
+    rows: Sequence[dict[str, Any]],
+    mode: str = "descriptor",
+    command_vx: float = PAPER_COMMAND,
+    *,
+    key: str = "critic_metrics_variants",
+    title: str = "Critic calibration diagnostics",
+) -> Table | None:
     """Robots x variants, cells ``|NVB|/NVE/ASA``; bold lowest |NVB| and NVE, highest ASA per robot.
 
     Only the diagnoses at ``command_vx`` (m/s) are shown.
@@ -145,23 +181,46 @@ def critic_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
     out_rows = []
     for robot in sorted({r["robot"] for r in sel}, key=robot_order):
         cells = [by.get((robot, p, v)) for p, v in cols]
-        bolds = [bold_best([c[m] if c else None for c in cells], hib)
-                 for m, hib in (("abs_nvb", False), ("nve", False), ("asa", True))]
-        out_rows.append(Row(robot_label(robot), tuple(
-            tuple(Part(c[m] if c else None, None, 3, bolds[k][j])
-                  for k, m in enumerate(("abs_nvb", "nve", "asa")))
-            for j, c in enumerate(cells))))
-    caption = (r"Each cell is $|\mathrm{NVB}|$/NVE/ASA of the critic against Monte-Carlo returns on its own "
-               "actor's rollouts; "
-               r"lower $|\mathrm{NVB}|$ and NVE, higher ASA are better; bold: best per robot and metric.")
+        bolds = [
+            bold_best([c[m] if c else None for c in cells], hib)
+            for m, hib in (("abs_nvb", False), ("nve", False), ("asa", True))
+        ]
+        out_rows.append(
+            Row(
+                robot_label(robot),
+                tuple(
+                    tuple(
+                        Part(c[m] if c else None, None, 3, bolds[k][j]) for k, m in enumerate(("abs_nvb", "nve", "asa"))
+                    )
+                    for j, c in enumerate(cells)
+                ),
+            )
+        )
+    caption = (
+        r"Each cell is $|\mathrm{NVB}|$/NVE/ASA of the critic against Monte-Carlo returns on its own "
+        "actor's rollouts; "
+        r"lower $|\mathrm{NVB}|$ and NVE, higher ASA are better; bold: best per robot and metric."
+    )
     key, title = _command_key(key, title, command_vx)
-    return Table(key, title, caption, "Target",
-                 tuple(method_label(v, p, multi) for p, v in cols), tuple(out_rows), notes=(_seed_note(sel),))
+    return Table(
+        key,
+        title,
+        caption,
+        "Target",
+        tuple(method_label(v, p, multi) for p, v in cols),
+        tuple(out_rows),
+        notes=(_seed_note(sel),),
+    )
 
 
-def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
-             command_vx: float = PAPER_COMMAND, *, key: str = "critic_ev",
-             title: str = "Explained variance of the critics") -> Table | None:
+def ev_table(
+    rows: Sequence[dict[str, Any]],
+    mode: str = "descriptor",
+    command_vx: float = PAPER_COMMAND,
+    *,
+    key: str = "critic_ev",
+    title: str = "Explained variance of the critics",
+) -> Table | None:
     """Robots x variants, explained variance EV (higher is better; 1 is perfect).
 
     Only the diagnoses at ``command_vx`` (m/s) are shown.
@@ -176,14 +235,29 @@ def ev_table(rows: Sequence[dict[str, Any]], mode: str = "descriptor",
     for robot in sorted({r["robot"] for r in sel}, key=robot_order):
         cells = [by.get((robot, p, v)) for p, v in cols]
         bold = bold_best([c["ev"] if c else None for c in cells], True)
-        out_rows.append(Row(robot_label(robot), tuple(
-            (Part(c["ev"] if c else None, c["ev_seed_std"] if c else None, 3, b),) for c, b in zip(cells, bold,
-                                                                                                   strict=True))))
-    caption = (r"$\mathrm{EV} = 1 - \mathrm{Var}(G - V) / \mathrm{Var}(G)$ over $I_\epsilon$ (± std over seeds "
-               "where there are several); bold: best.")
+        out_rows.append(
+            Row(
+                robot_label(robot),
+                tuple(
+                    (Part(c["ev"] if c else None, c["ev_seed_std"] if c else None, 3, b),)
+                    for c, b in zip(cells, bold, strict=True)
+                ),
+            )
+        )
+    caption = (
+        r"$\mathrm{EV} = 1 - \mathrm{Var}(G - V) / \mathrm{Var}(G)$ over $I_\epsilon$ (± std over seeds "
+        "where there are several); bold: best."
+    )
     key, title = _command_key(key, title, command_vx)
-    return Table(key, title, caption, "Target",
-                 tuple(method_label(v, p, multi) for p, v in cols), tuple(out_rows), notes=(_seed_note(sel),))
+    return Table(
+        key,
+        title,
+        caption,
+        "Target",
+        tuple(method_label(v, p, multi) for p, v in cols),
+        tuple(out_rows),
+        notes=(_seed_note(sel),),
+    )
 
 
 def fixed_rollout_table(rows: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) -> Table | None:
@@ -199,8 +273,10 @@ def fixed_rollout_table(rows: Sequence[dict[str, Any]], command_vx: float = PAPE
     robots = sorted({r["robot"] for r in rows}, key=robot_order)
     actor_of = lambda r: r.get("actor_variant") or "?"  # noqa: E731
     actors = sorted({actor_of(r) for r in rows}, key=lambda a: (a != FIXED_ROLLOUT_ACTOR, a))
-    sources = sorted({(actor_of(r), r["preset"], r["variant"]) for r in rows},
-                     key=lambda s: (actors.index(s[0]), s[2] != "mc", s[1], variant_order(s[2])))
+    sources = sorted(
+        {(actor_of(r), r["preset"], r["variant"]) for r in rows},
+        key=lambda s: (actors.index(s[0]), s[2] != "mc", s[1], variant_order(s[2])),
+    )
     multi = len({p for _, p, v in sources if v != "mc"}) > 1
     by = {(actor_of(r), r["preset"], r["variant"], r["robot"]): r for r in rows}
     bold: dict[tuple, bool] = {}
@@ -223,16 +299,26 @@ def fixed_rollout_table(rows: Sequence[dict[str, Any]], command_vx: float = PAPE
         if len(actors) > 1:
             label += f" ({method_label(a, p, False)}'s rollout)"
         out_rows.append(Row(label, tuple(cells)))
-    caption = ("One frozen actor's rollout per robot; each critic scored on exactly those samples. Flip: sign-flip "
-               "rate vs. the MC advantage (lower is better); Cos.: actor-gradient cosine with the MC gradient "
-               "(higher is better); the MC row is the reference.")
+    caption = (
+        "One frozen actor's rollout per robot; each critic scored on exactly those samples. Flip: sign-flip "
+        "rate vs. the MC advantage (lower is better); Cos.: actor-gradient cosine with the MC gradient "
+        "(higher is better); the MC row is the reference."
+    )
     if len(actors) > 1:
         caption += " Several actors were frozen: each block of rows is one actor's rollout, bold within the block."
     runs = sorted({a for r in rows for a in str(r.get("actors", "")).split(";") if a and a != "None"})
     key, title = _command_key("causal_adv_all", "Fixed-rollout critic diagnostic", command_vx)
-    return Table(key, title, caption, "Src.", ("Flip", "Cos.") * len(robots),
-                 tuple(out_rows), groups=tuple((robot_label(r), 2) for r in robots), math=False,
-                 notes=(f"Frozen actor(s): {', '.join(runs) or '-'}.",))
+    return Table(
+        key,
+        title,
+        caption,
+        "Src.",
+        ("Flip", "Cos.") * len(robots),
+        tuple(out_rows),
+        groups=tuple((robot_label(r), 2) for r in robots),
+        math=False,
+        notes=(f"Frozen actor(s): {', '.join(runs) or '-'}.",),
+    )
 
 
 def _si(value: float | None) -> str:
@@ -248,33 +334,49 @@ def compute_table(rows: Sequence[dict[str, Any]]) -> Table | None:
     """Variants x (transitions, iterations, s/iter, device-h, device-h@400M); bold the cheapest per column."""
     if not rows:
         return None
-    bolds = {m: bold_best([r[m] for r in rows], False)
-             for m in ("s_per_iteration", "device_hours", "device_hours_400m")}
+    bolds = {
+        m: bold_best([r[m] for r in rows], False) for m in ("s_per_iteration", "device_hours", "device_hours_400m")
+    }
     out_rows = []
     for i, r in enumerate(rows):
         iters = r["iterations"]
-        out_rows.append(Row(f"{paper.METHOD_LABELS.get(r['variant'], r['variant'])} ({r['preset']})", (
-            (Part(None, text=_si(r["transitions"])),),
-            (Part(None, text=f"{iters:,.0f}" if iters is not None else "-"),),
-            (Part(r["s_per_iteration"], None, 2, bolds["s_per_iteration"][i]),),
-            (Part(r["device_hours"], None, 3, bolds["device_hours"][i]),),
-            (Part(r["device_hours_400m"], None, 1, bolds["device_hours_400m"][i]),),
-            (Part(None, text=r["device"]),),
-        )))
-    caption = ("Transitions and iterations as trained; s/iter = wall time / iterations; device-hours on the device "
-               "of the run (CPU threads or one GPU); hours normalised to 400M transitions as the paper does. Bold: "
-               "cheapest.")
-    return Table("training_compute", "Training compute", caption, "Method",
-                 ("Transitions", "Iters.", "Sec/iter", "Device-h", "Device-h@400M", "Device"), tuple(out_rows),
-                 math=False, notes=(_seed_note(rows),))
+        out_rows.append(
+            Row(
+                f"{paper.METHOD_LABELS.get(r['variant'], r['variant'])} ({r['preset']})",
+                (
+                    (Part(None, text=_si(r["transitions"])),),
+                    (Part(None, text=f"{iters:,.0f}" if iters is not None else "-"),),
+                    (Part(r["s_per_iteration"], None, 2, bolds["s_per_iteration"][i]),),
+                    (Part(r["device_hours"], None, 3, bolds["device_hours"][i]),),
+                    (Part(r["device_hours_400m"], None, 1, bolds["device_hours_400m"][i]),),
+                    (Part(None, text=r["device"]),),
+                ),
+            )
+        )
+    caption = (
+        "Transitions and iterations as trained; s/iter = wall time / iterations; device-hours on the device "
+        "of the run (CPU threads or one GPU); hours normalised to 400M transitions as the paper does. Bold: "
+        "cheapest."
+    )
+    return Table(
+        "training_compute",
+        "Training compute",
+        caption,
+        "Method",
+        ("Transitions", "Iters.", "Sec/iter", "Device-h", "Device-h@400M", "Device"),
+        tuple(out_rows),
+        math=False,
+        notes=(_seed_note(rows),),
+    )
 
 
 def support_table(rows: Sequence[dict[str, Any]]) -> Table | None:
     """Descriptor dimensions x (train min, train max, robots); out-of-support values bold with ↑ / ↓."""
     if not rows:
         return None
-    robots = sorted({r["robot"] for r in rows}, key=lambda n: paper.SUPPORT_COLUMNS.index(n)
-                    if n in paper.SUPPORT_COLUMNS else 99)
+    robots = sorted(
+        {r["robot"] for r in rows}, key=lambda n: paper.SUPPORT_COLUMNS.index(n) if n in paper.SUPPORT_COLUMNS else 99
+    )
     params = list(dict.fromkeys(r["parameter"] for r in rows))
     by = {(r["parameter"], r["robot"]): r for r in rows}
     out_rows = []
@@ -284,13 +386,23 @@ def support_table(rows: Sequence[dict[str, Any]]) -> Table | None:
         for robot in robots:
             r = by.get((name, robot))
             flag = int(r["support"]) if r else 0
-            cells.append((Part(float(r["value"]) if r else None, None, 3, flag != 0,
-                               {1: "up", -1: "down"}.get(flag, "")),))
+            cells.append(
+                (Part(float(r["value"]) if r else None, None, 3, flag != 0, {1: "up", -1: "down"}.get(flag, "")),)
+            )
         out_rows.append(Row(f"{first['label']} ({first['unit']})", tuple(cells)))
-    caption = ("The 11-D morphology descriptor of each robot and the training support; values outside it in bold "
-               r"with $\uparrow$ (above) / $\downarrow$ (below).")
-    return Table("morphology_support", "Morphology support", caption, "Parameter",
-                 ("Train min", "Train max", *(robot_label(r) for r in robots)), tuple(out_rows), math=False)
+    caption = (
+        "The 11-D morphology descriptor of each robot and the training support; values outside it in bold "
+        r"with $\uparrow$ (above) / $\downarrow$ (below)."
+    )
+    return Table(
+        "morphology_support",
+        "Morphology support",
+        caption,
+        "Parameter",
+        ("Train min", "Train max", *(robot_label(r) for r in robots)),
+        tuple(out_rows),
+        math=False,
+    )
 
 
 # ---------------------------------------------------------------------------- the paper's own tables
@@ -306,20 +418,31 @@ def paper_table(t: paper.PaperTable) -> Table:
         return Part(p.value, p.std, p.decimals, p.bold, p.mark)
 
     if t.key in ("causal_adv", "causal_adv_all"):
-        rows = tuple(Row(t.row_labels.get(r, r), tuple((part(p),) for c in t.columns for p in t.cells[(r, c)]))
-                     for r in t.rows)
+        rows = tuple(
+            Row(t.row_labels.get(r, r), tuple((part(p),) for c in t.columns for p in t.cells[(r, c)])) for r in t.rows
+        )
         columns = tuple(name for _ in t.columns for name in ("Flip", "Cos."))
         groups = tuple((t.column_labels.get(c, c), len(t.parts)) for c in t.columns)
         return Table(t.key, t.title, t.caption, "Src.", columns, rows, groups=groups, math=math_mode, source="paper")
-    rows = tuple(Row(t.row_labels.get(r, r), tuple(tuple(part(p) for p in t.cells[(r, c)]) for c in t.columns))
-                 for r in t.rows)
+    rows = tuple(
+        Row(t.row_labels.get(r, r), tuple(tuple(part(p) for p in t.cells[(r, c)]) for c in t.columns)) for r in t.rows
+    )
     corner = "Parameter" if t.key == "morphology_support" else "Target"
-    return Table(t.key, t.title, t.caption, corner, tuple(t.column_labels.get(c, c) for c in t.columns), rows,
-                 math=math_mode, source="paper")
+    return Table(
+        t.key,
+        t.title,
+        t.caption,
+        corner,
+        tuple(t.column_labels.get(c, c) for c in t.columns),
+        rows,
+        math=math_mode,
+        source="paper",
+    )
 
 
 def paper_compute_table() -> Table:
     """The paper's training-compute table (ranges as printed, expert-pool methods in their own section)."""
+
     def rng(text: str, bold: bool) -> Part:
         return Part(None, text=text.replace("--", "–"), bold=bold)
 
@@ -327,14 +450,30 @@ def paper_compute_table() -> Table:
     for i, r in enumerate(paper.TRAINING_COMPUTE):
         if r.expert_pool and not paper.TRAINING_COMPUTE[i - 1].expert_pool:
             rows.append(Row("Expert-pool / selected-expert methods"))
-        rows.append(Row(r.label, (
-            (Part(None, text=r.transitions_text),), (Part(None, text=r.iterations_text),),
-            (rng(r.sec_per_iter_text, "sec_per_iter" in r.bold),), (rng(r.gpu_hours_text, "gpu_hours" in r.bold),),
-            (rng(r.gpu_hours_400m_text, "gpu_hours_400m" in r.bold),), (Part(None, text=r.notes),))))
-    return Table("training_compute", paper.TRAINING_COMPUTE_TITLE,
-                 "Total transitions, PPO iterations, seconds per iteration, single-GPU hours and GPU-hours per 400M "
-                 "transitions.", "Method", ("Transitions", "Iters.", "Sec/iter", "GPU-h", "GPU-h@400M", "Notes"),
-                 tuple(rows), math=False, source="paper")
+        rows.append(
+            Row(
+                r.label,
+                (
+                    (Part(None, text=r.transitions_text),),
+                    (Part(None, text=r.iterations_text),),
+                    (rng(r.sec_per_iter_text, "sec_per_iter" in r.bold),),
+                    (rng(r.gpu_hours_text, "gpu_hours" in r.bold),),
+                    (rng(r.gpu_hours_400m_text, "gpu_hours_400m" in r.bold),),
+                    (Part(None, text=r.notes),),
+                ),
+            )
+        )
+    return Table(
+        "training_compute",
+        paper.TRAINING_COMPUTE_TITLE,
+        "Total transitions, PPO iterations, seconds per iteration, single-GPU hours and GPU-hours per 400M "
+        "transitions.",
+        "Method",
+        ("Transitions", "Iters.", "Sec/iter", "GPU-h", "GPU-h@400M", "Notes"),
+        tuple(rows),
+        math=False,
+        source="paper",
+    )
 
 
 # ---------------------------------------------------------------------------- the external baselines
@@ -354,8 +493,11 @@ def external_table(rows: Sequence[dict[str, Any]], command_vx: float, *, mode: s
     Full mode (morfic's extension) has ours only. None when there is nothing to show.
     """
     src = _paper_external(command_vx) if mode == "descriptor" else None
-    ours = [r for r in rows if r.get("group") == "ours" and r["mode"] == mode
-            and abs(float(r["command_vx"]) - command_vx) < 1e-9]
+    ours = [
+        r
+        for r in rows
+        if r.get("group") == "ours" and r["mode"] == mode and abs(float(r["command_vx"]) - command_vx) < 1e-9
+    ]
     if src is None and not ours:
         return None
     robots = [*paper.ROBOTS, *sorted({r["robot"] for r in ours} - set(paper.ROBOTS))]
@@ -364,11 +506,20 @@ def external_table(rows: Sequence[dict[str, Any]], command_vx: float, *, mode: s
         out_rows.append(Row(PAPER_GROUP))
         missing = (Part(None), Part(None))
         for method in src.columns:
-            out_rows.append(Row(f"{method_name(method)} (paper)", tuple(
-                tuple(Part(p.value, p.std, p.decimals, p.bold, p.mark) for p in src.cells[(robot, method)])
-                if (robot, method) in src.cells else missing for robot in robots)))
-    cols = sorted({(r["preset"], r["variant"]) for r in ours},
-                  key=lambda p: (p[0], EXTERNAL_TABLE_VARIANTS.index(p[1])))
+            out_rows.append(
+                Row(
+                    f"{method_name(method)} (paper)",
+                    tuple(
+                        tuple(Part(p.value, p.std, p.decimals, p.bold, p.mark) for p in src.cells[(robot, method)])
+                        if (robot, method) in src.cells
+                        else missing
+                        for robot in robots
+                    ),
+                )
+            )
+    cols = sorted(
+        {(r["preset"], r["variant"]) for r in ours}, key=lambda p: (p[0], EXTERNAL_TABLE_VARIANTS.index(p[1]))
+    )
     has_external = any(v != "film" for _, v in cols)
     out_rows.append(Row(OURS_GROUP if has_external else "Ours: not trained yet"))
     by = {(r["robot"], r["preset"], r["variant"]): r for r in ours}
@@ -377,30 +528,47 @@ def external_table(rows: Sequence[dict[str, Any]], command_vx: float, *, mode: s
     s_bold = [bold_best([(cells[c][i] or {}).get("survival") for c in cells], True) for i in range(len(robots))]
     for k, (preset, variant) in enumerate(cells):
         n = max(int(r["n_seeds"]) for r in cells[(preset, variant)] if r)
-        out_rows.append(Row(f"{method_name(variant)} ({preset}, {n} seed{'s' if n != 1 else ''})", tuple(
-            (Part(c["vx"] if c else None, c["vx_std"] if c else None, 2, v_bold[i][k]),
-             Part(c["survival"] if c else None, None, 3, s_bold[i][k]))
-            for i, c in enumerate(cells[(preset, variant)]))))
+        out_rows.append(
+            Row(
+                f"{method_name(variant)} ({preset}, {n} seed{'s' if n != 1 else ''})",
+                tuple(
+                    (
+                        Part(c["vx"] if c else None, c["vx_std"] if c else None, 2, v_bold[i][k]),
+                        Part(c["survival"] if c else None, None, 3, s_bold[i][k]),
+                    )
+                    for i, c in enumerate(cells[(preset, variant)])
+                ),
+            )
+        )
     use_max = src is not None and src.parts[0] == "vx_max"
     quantity = r"$v_x^{\max} \pm \sigma / S$" if use_max else r"$\bar{v}_x \pm \sigma / S$"
     ours_rows = [r for c in cells for r in cells[c] if r]
-    where = ("the target descriptor on the Go2 template" if mode == "descriptor" else "the target robot model itself")
-    caption = (f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s"
-               + (r" ($v_x^{\max}$ as the paper uses it: the mean forward speed under this command)" if use_max else "")
-               + ("; the paper's rows are its published numbers (URMA, GenLoco and Embodiment Scaling from their "
-                  "released weights, BodyTransformer trained by the paper to 400M transitions; each in its own "
-                  "simulator with its own robot models and commands; GenLoco takes no command; - = no forward "
-                  "motion), bold the paper's" if src is not None else "")
-               + "; ours re-implement each approach in morfic's pipeline (the Go2 template, rewards, curriculum and "
-               f"budget of MorFiC-F), on {where}"
-               + (f" ({protocol_text(ours_rows)})" if ours_rows else "") + ", bold the best of ours per robot.")
+    where = "the target descriptor on the Go2 template" if mode == "descriptor" else "the target robot model itself"
+    caption = (
+        f"Each cell is {quantity} (m/s; survival) at a commanded {command_vx:.1f} m/s"
+        + (r" ($v_x^{\max}$ as the paper uses it: the mean forward speed under this command)" if use_max else "")
+        + (
+            "; the paper's rows are its published numbers (URMA, GenLoco and Embodiment Scaling from their "
+            "released weights, BodyTransformer trained by the paper to 400M transitions; each in its own "
+            "simulator with its own robot models and commands; GenLoco takes no command; - = no forward "
+            "motion), bold the paper's"
+            if src is not None
+            else ""
+        )
+        + "; ours re-implement each approach in morfic's pipeline (the Go2 template, rewards, curriculum and "
+        f"budget of MorFiC-F), on {where}"
+        + (f" ({protocol_text(ours_rows)})" if ours_rows else "")
+        + ", bold the best of ours per robot."
+    )
     notes = [PAPER_ONLY[m] for m in (src.columns if src is not None else ()) if m in PAPER_ONLY]
     notes += [_seed_note(ours_rows, pooled=True)] if ours_rows else [external_note(False)]
     key = f"external_baselines_{command_vx:.1f}".replace(".", "_") + ("" if mode == "descriptor" else "_full")
     title = f"External baselines vs. MorFiC-F at {command_vx:.1f} m/s" + (
-        "" if mode == "descriptor" else " on the targets' own models")
-    return Table(key, title, caption, "Method", tuple(robot_label(r) for r in robots), tuple(out_rows),
-                 notes=tuple(notes))
+        "" if mode == "descriptor" else " on the targets' own models"
+    )
+    return Table(
+        key, title, caption, "Method", tuple(robot_label(r) for r in robots), tuple(out_rows), notes=tuple(notes)
+    )
 
 
 def _duration(seconds: float | None) -> str:
@@ -420,30 +588,58 @@ def external_compute_table(rows: Sequence[dict[str, Any]]) -> Table:
     machine where the run records one). The paper's: its Table "Training compute" rows of these methods, their
     single-GPU hours as printed (the paper counts no parameters).
     """
+
     def count(n: Any) -> Part:
         return Part(None, text="-" if n is None else f"{int(n):,}")
 
-    ours = sorted((r for r in rows if r["variant"] in EXTERNAL_TABLE_VARIANTS),
-                  key=lambda r: (r["preset"], EXTERNAL_TABLE_VARIANTS.index(r["variant"])))
+    ours = sorted(
+        (r for r in rows if r["variant"] in EXTERNAL_TABLE_VARIANTS),
+        key=lambda r: (r["preset"], EXTERNAL_TABLE_VARIANTS.index(r["variant"])),
+    )
     out_rows: list[Row] = [Row(OURS_GROUP)] if ours else []
     for r in ours:
         n = int(r["n_seeds"])
         where = r["device"] + (f" ({r['machine']})" if r.get("machine") else "")
-        out_rows.append(Row(f"{method_name(r['variant'])} ({r['preset']}, {n} seed{'s' if n != 1 else ''})", (
-            (count(r.get("actor_params")),), (count(r.get("critic_params")),),
-            (Part(None, text=_si(r["transitions"])),), (Part(None, text=_duration(r.get("wall_time_s"))),),
-            (Part(None, text=where),))))
-    out_rows.append(Row(f"The paper's (its Table \"{paper.TRAINING_COMPUTE_TITLE}\")"))
+        out_rows.append(
+            Row(
+                f"{method_name(r['variant'])} ({r['preset']}, {n} seed{'s' if n != 1 else ''})",
+                (
+                    (count(r.get("actor_params")),),
+                    (count(r.get("critic_params")),),
+                    (Part(None, text=_si(r["transitions"])),),
+                    (Part(None, text=_duration(r.get("wall_time_s"))),),
+                    (Part(None, text=where),),
+                ),
+            )
+        )
+    out_rows.append(Row(f'The paper\'s (its Table "{paper.TRAINING_COMPUTE_TITLE}")'))
     for p in paper.TRAINING_COMPUTE:
         if our_variant(p.method) in EXTERNAL_TABLE_VARIANTS or p.method == "embodiment-scaling":
-            out_rows.append(Row(f"{p.label} (paper)", (
-                (Part(None, text="-"),), (Part(None, text="-"),), (Part(None, text=p.transitions_text),),
-                (Part(None, text=f"{p.gpu_hours_text.replace('--', '–')} GPU-h"),),
-                (Part(None, text=f"the paper's GPU; {p.notes}"),))))
-    caption = ("Parameters of the actor and of the critic (a module they share counts in both), transitions, the "
-               "training time and where it ran: ours as measured here (the run's wall time, mean over seeds), the "
-               "paper's as it prints them (single-GPU hours).")
+            out_rows.append(
+                Row(
+                    f"{p.label} (paper)",
+                    (
+                        (Part(None, text="-"),),
+                        (Part(None, text="-"),),
+                        (Part(None, text=p.transitions_text),),
+                        (Part(None, text=f"{p.gpu_hours_text.replace('--', '–')} GPU-h"),),
+                        (Part(None, text=f"the paper's GPU; {p.notes}"),),
+                    ),
+                )
+            )
+    caption = (
+        "Parameters of the actor and of the critic (a module they share counts in both), transitions, the "
+        "training time and where it ran: ours as measured here (the run's wall time, mean over seeds), the "
+        "paper's as it prints them (single-GPU hours)."
+    )
     notes = (_seed_note(ours),) if ours else ()
-    return Table("external_compute", "Compute of the external baselines", caption, "Method",
-                 ("Actor params", "Critic params", "Transitions", "Time", "Where"), tuple(out_rows), math=False,
-                 notes=notes)
+    return Table(
+        "external_compute",
+        "Compute of the external baselines",
+        caption,
+        "Method",
+        ("Actor params", "Critic params", "Transitions", "Time", "Where"),
+        tuple(out_rows),
+        math=False,
+        notes=notes,
+    )

@@ -89,14 +89,16 @@ class BodyEncoder(nn.Module):
     Shapes: root (N, root_dim), joints (N, 12, joint_dim) -> node features (N, 13, d_model).
     """
 
-    def __init__(self, root_dim: int, joint_dim: int, d_model: int, nhead: int, num_layers: int,
-                 dim_feedforward: int) -> None:
+    def __init__(
+        self, root_dim: int, joint_dim: int, d_model: int, nhead: int, num_layers: int, dim_feedforward: int
+    ) -> None:
         super().__init__()
         self.root_embedding = nn.Linear(root_dim, d_model)
         self.joint_embedding = NodeLinear(NUM_NODES - 1, joint_dim, d_model)
         self.node_embedding = nn.Embedding(NUM_NODES, d_model)
-        layer = nn.TransformerEncoderLayer(d_model, nhead, dim_feedforward, dropout=0.0, activation="relu",
-                                           batch_first=True, norm_first=False)
+        layer = nn.TransformerEncoderLayer(
+            d_model, nhead, dim_feedforward, dropout=0.0, activation="relu", batch_first=True, norm_first=False
+        )
         self.encoder = nn.TransformerEncoder(layer, num_layers, enable_nested_tensor=False)
         init_transformer_weights(self.encoder)
         init_transformer_weights(self.node_embedding)
@@ -156,17 +158,32 @@ def _frame(obs: TensorDict, group: str) -> torch.Tensor:
 def split_frame(frame: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """o_t as the root's input and the joints' inputs. Shapes: (N, 48) -> (N, 12), (N, 12, 3)."""
     n = NUM_NODES - 1
-    joints = torch.stack([frame[:, ROOT_DIM:ROOT_DIM + n], frame[:, ROOT_DIM + n:ROOT_DIM + 2 * n],
-                          frame[:, ROOT_DIM + 2 * n:ROOT_DIM + 3 * n]], dim=-1)
+    joints = torch.stack(
+        [
+            frame[:, ROOT_DIM : ROOT_DIM + n],
+            frame[:, ROOT_DIM + n : ROOT_DIM + 2 * n],
+            frame[:, ROOT_DIM + 2 * n : ROOT_DIM + 3 * n],
+        ],
+        dim=-1,
+    )
     return frame[:, :ROOT_DIM], joints
 
 
 class BotActor(TokenModel):
     """The BoT policy: per-joint linear heads on the joint nodes' features give the 12 action means."""
 
-    def __init__(self, obs: TensorDict, obs_groups: dict[str, list[str]], obs_set: str, output_dim: int,
-                 d_model: int = 64, nhead: int = 2, num_layers: int = 8, dim_feedforward: int = 128,
-                 distribution_cfg: dict | None = None) -> None:
+    def __init__(
+        self,
+        obs: TensorDict,
+        obs_groups: dict[str, list[str]],
+        obs_set: str,
+        output_dim: int,
+        d_model: int = 64,
+        nhead: int = 2,
+        num_layers: int = 8,
+        dim_feedforward: int = 128,
+        distribution_cfg: dict | None = None,
+    ) -> None:
         """Build the actor.
 
         Args:
@@ -209,9 +226,18 @@ class BotActor(TokenModel):
 class BotCritic(TokenModel):
     """The BoT value function: per-node linear value heads, averaged over the 13 nodes. Output (N, 1)."""
 
-    def __init__(self, obs: TensorDict, obs_groups: dict[str, list[str]], obs_set: str, output_dim: int,
-                 d_model: int = 64, nhead: int = 2, num_layers: int = 8, dim_feedforward: int = 128,
-                 privileged_group: str | None = "privileged") -> None:
+    def __init__(
+        self,
+        obs: TensorDict,
+        obs_groups: dict[str, list[str]],
+        obs_set: str,
+        output_dim: int,
+        d_model: int = 64,
+        nhead: int = 2,
+        num_layers: int = 8,
+        dim_feedforward: int = 128,
+        privileged_group: str | None = "privileged",
+    ) -> None:
         """Build the critic.
 
         Args:
@@ -229,8 +255,9 @@ class BotCritic(TokenModel):
         self.privileged_group = privileged_group
         self.state_group = next(g for g in self.obs_groups if g != privileged_group)
         extra_root, extra_joint = (PRIVILEGED_ROOT_DIM, 1) if privileged_group is not None else (0, 0)
-        self.body = BodyEncoder(ROOT_DIM + extra_root, JOINT_DIM + extra_joint, d_model, nhead, num_layers,
-                                dim_feedforward)
+        self.body = BodyEncoder(
+            ROOT_DIM + extra_root, JOINT_DIM + extra_joint, d_model, nhead, num_layers, dim_feedforward
+        )
         self.heads = NodeLinear(NUM_NODES, d_model, output_dim)
 
     def compute(self, obs: TensorDict) -> torch.Tensor:
@@ -243,8 +270,9 @@ class BotCritic(TokenModel):
         return float32_linear(self.heads, self.body(root, joints)).mean(dim=1)
 
 
-def parameter_count(d_model: int = 64, dim_feedforward: int = 128, num_layers: int = 8, critic: bool = False,
-                    privileged: bool = True) -> int:
+def parameter_count(
+    d_model: int = 64, dim_feedforward: int = 128, num_layers: int = 8, critic: bool = False, privileged: bool = True
+) -> int:
     """The number of parameters of :class:`BotActor` (with its 12 action stds) or :class:`BotCritic`, by formula.
 
     One encoder layer: attention 4 d^2 + 4 d (Q, K, V and output projections), feed-forward 2 d f + f + d, two

@@ -36,9 +36,11 @@ def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
     given = dummy_observations(cfg).keys()
     missing = [g for groups in obs_groups.values() for g in groups if g not in given]
     if missing:  # e.g. urma with --set env.obs.body_tokens=false
-        raise MorficError(f"variant {cfg.variant} reads the observation groups {', '.join(dict.fromkeys(missing))}, "
-                          "which this env config does not give; keep the variant's env settings (for urma "
-                          "env.obs.body_tokens=true).")
+        raise MorficError(
+            f"variant {cfg.variant} reads the observation groups {', '.join(dict.fromkeys(missing))}, "
+            "which this env config does not give; keep the variant's env settings (for urma "
+            "env.obs.body_tokens=true)."
+        )
     if "distribution_cfg" in actor:
         actor["distribution_cfg"]["init_std"] = cfg.model.init_std
     if not variant.own_models:  # the external baselines keep their own sizes (model.*_hidden_dims are the MLPs')
@@ -52,8 +54,13 @@ def rsl_rl_cfg(cfg: TrainCfg) -> dict[str, Any]:
             critic["conditioning"] = "hyper_head"
         if cfg.model.shared_morphology_encoder and variant.actor_morphology and variant.critic_morphology:
             critic["shared_morphology_encoder"] = True
-    algorithm = {"class_name": ALGORITHM_CLASS, "optimizer": "adam", **dataclasses.asdict(cfg.ppo),
-                 "rnd_cfg": None, "symmetry_cfg": None}
+    algorithm = {
+        "class_name": ALGORITHM_CLASS,
+        "optimizer": "adam",
+        **dataclasses.asdict(cfg.ppo),
+        "rnd_cfg": None,
+        "symmetry_cfg": None,
+    }
     return {
         "obs_groups": obs_groups,
         "num_steps_per_env": cfg.num_steps_per_env,
@@ -76,9 +83,15 @@ def dummy_observations(cfg: TrainCfg, batch: int = 1) -> TensorDict:
             "critic": torch.zeros(batch, h, O.POLICY_DIM),
             "privileged": torch.zeros(batch, O.PRIVILEGED_DIM),
             "morphology": torch.zeros(batch, EXTENDED_DIM if cfg.env.obs.extended_morphology else DESCRIPTOR_DIM),
-            **({"joint_description": torch.zeros(batch, NUM_JOINTS, O.JOINT_DESCRIPTION_DIM),
-                "foot_description": torch.zeros(batch, 4, O.FOOT_DESCRIPTION_DIM),
-                "foot_state": torch.zeros(batch, 4, O.FOOT_STATE_DIM)} if cfg.env.obs.body_tokens else {}),
+            **(
+                {
+                    "joint_description": torch.zeros(batch, NUM_JOINTS, O.JOINT_DESCRIPTION_DIM),
+                    "foot_description": torch.zeros(batch, 4, O.FOOT_DESCRIPTION_DIM),
+                    "foot_state": torch.zeros(batch, 4, O.FOOT_STATE_DIM),
+                }
+                if cfg.env.obs.body_tokens
+                else {}
+            ),
         },
         batch_size=[batch],
     )

@@ -29,8 +29,9 @@ class CheckpointSink(Protocol):
 
     head: str | None
 
-    def write(self, files: dict[str, bytes], config: dict[str, Any], meta: dict[str, Any],
-              inputs: dict[str, Part]) -> tuple[str, int]:
+    def write(
+        self, files: dict[str, bytes], config: dict[str, Any], meta: dict[str, Any], inputs: dict[str, Part]
+    ) -> tuple[str, int]:
         """Write ``inputs`` (role -> part), then the checkpoint naming them; return (checkpoint id, run version).
 
         Raises:

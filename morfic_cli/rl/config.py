@@ -103,8 +103,14 @@ def smoke_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
     A checkpoint every 10 iterations (and at the end): one costs more than a smoke iteration (a 6.7 MB store write).
     """
     return TrainCfg(
-        variant=variant, preset="smoke", seed=seed, max_iterations=2, num_steps_per_env=8, save_interval=10,
-        env=EnvCfg(num_envs=8), ppo=PPOCfg(num_learning_epochs=1, num_mini_batches=2),
+        variant=variant,
+        preset="smoke",
+        seed=seed,
+        max_iterations=2,
+        num_steps_per_env=8,
+        save_interval=10,
+        env=EnvCfg(num_envs=8),
+        ppo=PPOCfg(num_learning_epochs=1, num_mini_batches=2),
     )
 
 
@@ -123,16 +129,28 @@ def cpu_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
     env = EnvCfg(num_envs=512)
     env = dataclasses.replace(env, rand=dataclasses.replace(env.rand, max_latency_steps=2))
     return TrainCfg(
-        variant=variant, preset="cpu", seed=seed, max_iterations=1000, num_steps_per_env=24, save_interval=25,
-        env=env, ppo=PPOCfg(num_learning_epochs=2, num_mini_batches=4, use_mixed_precision=True),
+        variant=variant,
+        preset="cpu",
+        seed=seed,
+        max_iterations=1000,
+        num_steps_per_env=24,
+        save_interval=25,
+        env=env,
+        ppo=PPOCfg(num_learning_epochs=2, num_mini_batches=4, use_mixed_precision=True),
     )
 
 
 def paper_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
     """The paper's budget: 4096 envs x 24 steps x 4000 iterations (393 M transitions), paper PPO."""
     return TrainCfg(
-        variant=variant, preset="paper", seed=seed, max_iterations=4000, num_steps_per_env=24, save_interval=100,
-        env=EnvCfg(num_envs=4096), ppo=PPOCfg(),
+        variant=variant,
+        preset="paper",
+        seed=seed,
+        max_iterations=4000,
+        num_steps_per_env=24,
+        save_interval=100,
+        env=EnvCfg(num_envs=4096),
+        ppo=PPOCfg(),
     )
 
 
@@ -222,8 +240,9 @@ def train_cfg_from_dict(doc: dict[str, Any]) -> TrainCfg:
     """
     out = _build(TrainCfg, fill_legacy(doc), "")
     if out.model.hyper_conditions not in HYPER_CONDITIONS:
-        raise MorficError(f"model.hyper_conditions must be one of {', '.join(HYPER_CONDITIONS)}; "
-                          f"got '{out.model.hyper_conditions}'.")
+        raise MorficError(
+            f"model.hyper_conditions must be one of {', '.join(HYPER_CONDITIONS)}; got '{out.model.hyper_conditions}'."
+        )
     return out
 
 

@@ -29,8 +29,14 @@ class CurveLogger(Logger):
     rsl-rl's own ``tot_time`` (collection + learning only) is kept for what rsl-rl computes from it.
     """
 
-    def __init__(self, *args: Any, dt: float, on_iteration: Callable[[dict[str, float]], None],
-                 live: tuple[str, Path] | None = None, **kwargs: Any):
+    def __init__(
+        self,
+        *args: Any,
+        dt: float,
+        on_iteration: Callable[[dict[str, float]], None],
+        live: tuple[str, Path] | None = None,
+        **kwargs: Any,
+    ):
         super().__init__(*args, **kwargs)
         self.dt = dt
         self.on_iteration = on_iteration
@@ -78,8 +84,19 @@ class CurveLogger(Logger):
             (self.live.stop if hasattr(self.live, "stop") else self.live.close)()
             self.live = None
 
-    def log(self, it: int, start_it: int, total_it: int, collect_time: float, learn_time: float, loss_dict: dict,
-            learning_rate: float, action_std: torch.Tensor, rnd_weight: float | None, **_: Any) -> None:
+    def log(
+        self,
+        it: int,
+        start_it: int,
+        total_it: int,
+        collect_time: float,
+        learn_time: float,
+        loss_dict: dict,
+        learning_rate: float,
+        action_std: torch.Tensor,
+        rnd_weight: float | None,
+        **_: Any,
+    ) -> None:
         """Build the curve row of iteration ``it`` (0-based) and pass it on."""
         size = self.cfg["num_steps_per_env"] * self.num_envs
         self.tot_timesteps += size
@@ -92,7 +109,8 @@ class CurveLogger(Logger):
             "collect_s": collect_time,
             "learn_s": learn_time,
             "mean_reward": sum(self.rewbuffer) / len(self.rewbuffer) if self.rewbuffer else float("nan"),
-            "episode_length_s": (sum(self.lenbuffer) / len(self.lenbuffer) * self.dt) if self.lenbuffer
+            "episode_length_s": (sum(self.lenbuffer) / len(self.lenbuffer) * self.dt)
+            if self.lenbuffer
             else float("nan"),
             "learning_rate": learning_rate,
             "action_std": float(action_std.detach().mean()),
@@ -113,21 +131,45 @@ class CurveLogger(Logger):
 
             extras = means
             # before the first episode ends: the mean return and length so far of the episodes under way
-            reward = (sum(self.rewbuffer) / len(self.rewbuffer) if self.rewbuffer
-                      else float(self.cur_reward_sum.float().mean()))
-            length = (sum(self.lenbuffer) / len(self.lenbuffer) if self.lenbuffer
-                      else float(self.cur_episode_length.float().mean()))
+            reward = (
+                sum(self.rewbuffer) / len(self.rewbuffer)
+                if self.rewbuffer
+                else float(self.cur_reward_sum.float().mean())
+            )
+            length = (
+                sum(self.lenbuffer) / len(self.lenbuffer)
+                if self.lenbuffer
+                else float(self.cur_episode_length.float().mean())
+            )
             wall = None if self.live_cfg is not None and self.live_cfg[0] == "wandb" else self.wall_time_s  # as rsl-rl
-            write_iteration(self.live, it, size, collect_time, learn_time, {k: float(v) for k, v in loss_dict.items()},
-                            learning_rate, float(action_std.detach().mean()), extras, reward, length, wall)
+            write_iteration(
+                self.live,
+                it,
+                size,
+                collect_time,
+                learn_time,
+                {k: float(v) for k, v in loss_dict.items()},
+                learning_rate,
+                float(action_std.detach().mean()),
+                extras,
+                reward,
+                length,
+                wall,
+            )
         self.ep_extras.clear()
         self.on_iteration(row)
 
     def state_dict(self) -> dict[str, Any]:
         """The episode buffers and counters, for exact curves after a resume."""
-        return {"rewbuffer": list(self.rewbuffer), "lenbuffer": list(self.lenbuffer),
-                "cur_reward_sum": self.cur_reward_sum.clone(), "cur_episode_length": self.cur_episode_length.clone(),
-                "tot_timesteps": self.tot_timesteps, "tot_time": self.tot_time, "wall_time_s": self.clock()}
+        return {
+            "rewbuffer": list(self.rewbuffer),
+            "lenbuffer": list(self.lenbuffer),
+            "cur_reward_sum": self.cur_reward_sum.clone(),
+            "cur_episode_length": self.cur_episode_length.clone(),
+            "tot_timesteps": self.tot_timesteps,
+            "tot_time": self.tot_time,
+            "wall_time_s": self.clock(),
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore :meth:`state_dict`."""

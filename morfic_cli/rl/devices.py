@@ -21,14 +21,18 @@ def check_device(device: str) -> None:
     dist = distributed_info()
     if device == "cpu":
         if dist.world_size > 1:
-            raise MorficError(f"distributed training (torchrun, WORLD_SIZE={dist.world_size}) needs --device cuda: "
-                              "rsl-rl reduces gradients with NCCL; run a single process for --device cpu.")
+            raise MorficError(
+                f"distributed training (torchrun, WORLD_SIZE={dist.world_size}) needs --device cuda: "
+                "rsl-rl reduces gradients with NCCL; run a single process for --device cpu."
+            )
         return
     if device == "cuda":
         if not torch.cuda.is_available():
-            raise MorficError("--device cuda: no CUDA device is available on this machine (or torch is a CPU "
-                              "build); train with --device cpu, or on a GPU machine with a CUDA build of torch and "
-                              "`pip install 'morfic[gpu]'`.")
+            raise MorficError(
+                "--device cuda: no CUDA device is available on this machine (or torch is a CPU "
+                "build); train with --device cpu, or on a GPU machine with a CUDA build of torch and "
+                "`pip install 'morfic[gpu]'`."
+            )
         from morfic_cli.sim.warp import import_warp
 
         import_warp()  # MorficError with the install hint when mujoco_warp is missing
@@ -53,8 +57,9 @@ class DistributedInfo:
 
 def distributed_info() -> DistributedInfo:
     """Read torchrun's environment variables (the ones rsl-rl's OnPolicyRunner reads too)."""
-    return DistributedInfo(int(os.environ.get("WORLD_SIZE", "1")), int(os.environ.get("RANK", "0")),
-                           int(os.environ.get("LOCAL_RANK", "0")))
+    return DistributedInfo(
+        int(os.environ.get("WORLD_SIZE", "1")), int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
+    )
 
 
 def torch_device(device: str) -> str:

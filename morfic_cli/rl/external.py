@@ -54,8 +54,14 @@ class TokenModel(MLPModel):
     morphology_encoder: nn.Module | None = None
     """None: no descriptor input (export bakes nothing in, like ``ppo``)."""
 
-    def __init__(self, obs: TensorDict, obs_groups: dict[str, list[str]], obs_set: str, output_dim: int,
-                 distribution_cfg: dict | None = None) -> None:
+    def __init__(
+        self,
+        obs: TensorDict,
+        obs_groups: dict[str, list[str]],
+        obs_set: str,
+        output_dim: int,
+        distribution_cfg: dict | None = None,
+    ) -> None:
         nn.Module.__init__(self)
         self.obs_groups = list(obs_groups[obs_set])
         for group in self.obs_groups:
@@ -75,8 +81,13 @@ class TokenModel(MLPModel):
         """The action mean (N, 12) or the value (N, 1) of a batch of observations."""
         raise NotImplementedError
 
-    def forward(self, obs: TensorDict, masks: torch.Tensor | None = None, hidden_state: HiddenState = None,
-                stochastic_output: bool = False) -> torch.Tensor:
+    def forward(
+        self,
+        obs: TensorDict,
+        masks: torch.Tensor | None = None,
+        hidden_state: HiddenState = None,
+        stochastic_output: bool = False,
+    ) -> torch.Tensor:
         """As MLPModel's: the mean (or value); a sample of the distribution when ``stochastic_output``."""
         obs = unpad_trajectories(obs, masks) if masks is not None else obs
         out = self.compute(obs)
@@ -87,8 +98,9 @@ class TokenModel(MLPModel):
             return self.distribution.deterministic_output(out)
         return out
 
-    def get_latent(self, obs: TensorDict, masks: torch.Tensor | None = None,
-                   hidden_state: HiddenState = None) -> torch.Tensor:
+    def get_latent(
+        self, obs: TensorDict, masks: torch.Tensor | None = None, hidden_state: HiddenState = None
+    ) -> torch.Tensor:
         """Not a flat-latent model."""
         raise NotImplementedError(f"{type(self).__name__} has no flat latent; call the model.")
 

@@ -65,8 +65,10 @@ def check_logger(kind: str) -> None:
     if kind not in LOGGERS:
         raise MorficError(f"unknown logger '{kind}'; valid loggers are: {', '.join(LOGGERS)}.")
     if kind == "wandb" and importlib.util.find_spec("wandb") is None:
-        raise MorficError("--logger wandb needs the wandb package; `pip install 'morfic[wandb]'` (and `wandb login`), "
-                          "or use --logger tensorboard.")
+        raise MorficError(
+            "--logger wandb needs the wandb package; `pip install 'morfic[wandb]'` (and `wandb login`), "
+            "or use --logger tensorboard."
+        )
 
 
 def open_writer(kind: str, log_dir: Path, cfg: dict[str, Any], project: str = "morfic") -> Any:
@@ -113,10 +115,20 @@ def loss_tag(key: str) -> str | None:
     return f"PPO/{key}" if key in PPO_KEYS else f"Loss/{key}"
 
 
-def write_iteration(writer: Any, it: int, size: int, collect_time: float, learn_time: float,
-                    loss_dict: dict[str, float], learning_rate: float, action_std: float,
-                    extras: dict[str, float], mean_reward: float | None, mean_length: float | None,
-                    wall_time_s: float | None = None) -> None:
+def write_iteration(
+    writer: Any,
+    it: int,
+    size: int,
+    collect_time: float,
+    learn_time: float,
+    loss_dict: dict[str, float],
+    learning_rate: float,
+    action_std: float,
+    extras: dict[str, float],
+    mean_reward: float | None,
+    mean_length: float | None,
+    wall_time_s: float | None = None,
+) -> None:
     """Write one iteration's scalars at step ``it`` (0-based) under the tags of the module docstring.
 
     Args:

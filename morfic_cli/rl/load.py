@@ -47,8 +47,10 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
     """
     manifest = store.read_manifest(spec)
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
-        raise MorficError(f"'{spec}' is a {manifest.kind} artifact, not a training checkpoint; "
-                          "pass a run ref such as runs/film-cpu-s0 (see `morfic store ls --kind checkpoint`).")
+        raise MorficError(
+            f"'{spec}' is a {manifest.kind} artifact, not a training checkpoint; "
+            "pass a run ref such as runs/film-cpu-s0 (see `morfic store ls --kind checkpoint`)."
+        )
     check_weights(store, spec, manifest)
     cfg = check_stored_cfg(manifest.config, spec)  # a bundle's config: checked before anything is built
     variant = resolve_variant(cfg.variant, source=spec)  # a user variant: only with the user's consent, else Error
@@ -63,10 +65,13 @@ def load_trained(store: Store, spec: str) -> TrainedModels:
             raise MorficError(
                 f"checkpoint '{spec}' was written by morfic {manifest.morfic_version}, and its weights do not fit "
                 f"the '{cfg.variant}' models of this morfic {__version__} ({first}); evaluate it with morfic "
-                f"{manifest.morfic_version}, or retrain it with this version.") from exc
-        raise MorficError(f"checkpoint '{spec}' does not fit variant '{cfg.variant}' ({variant.critic_class}) as "
-                          f"it is installed now ({first}); install the version of the class it was trained "
-                          "with.") from exc
+                f"{manifest.morfic_version}, or retrain it with this version."
+            ) from exc
+        raise MorficError(
+            f"checkpoint '{spec}' does not fit variant '{cfg.variant}' ({variant.critic_class}) as "
+            f"it is installed now ({first}); install the version of the class it was trained "
+            "with."
+        ) from exc
     actor.eval()
     critic.eval()
     return TrainedModels(actor, critic, cfg, manifest.id, dict(manifest.meta))
@@ -80,19 +85,24 @@ def check_weights(store: Store, spec: str, manifest: Any) -> None:
     """
     if store.weights_omitted(manifest):
         name = run_of(spec, manifest.meta)
-        raise MorficError(f"{spec} was imported from a results-only bundle: its weights (model.pt) and trainer state "
-                          "were left out, so it cannot be evaluated, played, exported, diagnosed or resumed (its "
-                          "tables, curves and config are here, for `morfic report`). Import a bundle with its weights "
-                          f"first: its weights-only bundle (made by `morfic store export {RUNS_PREFIX}{name} --latest "
-                          "--without-trainer-state` in the store that trained it; shipped ones are under "
-                          "artifacts/bundles/), or its full bundle to resume it.")
+        raise MorficError(
+            f"{spec} was imported from a results-only bundle: its weights (model.pt) and trainer state "
+            "were left out, so it cannot be evaluated, played, exported, diagnosed or resumed (its "
+            "tables, curves and config are here, for `morfic report`). Import a bundle with its weights "
+            f"first: its weights-only bundle (made by `morfic store export {RUNS_PREFIX}{name} --latest "
+            "--without-trainer-state` in the store that trained it; shipped ones are under "
+            "artifacts/bundles/), or its full bundle to resume it."
+        )
 
 
 def load_weights(store: Store, ckpt_id: str, device: str) -> dict[str, Any]:
     """``model.pt`` of a checkpoint: ``{"actor": state dict, "critic": state dict}``, loaded as tensors only."""
-    state = trainer_state.load_tensors(store.read_file(ckpt_id, "model.pt"), f"model.pt of checkpoint {ckpt_id[:12]}",
-                                       map_location=device)
+    state = trainer_state.load_tensors(
+        store.read_file(ckpt_id, "model.pt"), f"model.pt of checkpoint {ckpt_id[:12]}", map_location=device
+    )
     if not (isinstance(state, dict) and isinstance(state.get("actor"), dict) and isinstance(state.get("critic"), dict)):
-        raise MorficError(f"model.pt of checkpoint {ckpt_id[:12]} is not {{'actor': ..., 'critic': ...}} weights; "
-                          "use a checkpoint written by `morfic train`.")
+        raise MorficError(
+            f"model.pt of checkpoint {ckpt_id[:12]} is not {{'actor': ..., 'critic': ...}} weights; "
+            "use a checkpoint written by `morfic train`."
+        )
     return state

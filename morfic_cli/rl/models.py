@@ -200,8 +200,16 @@ class HyperHead(nn.Module):
     scale 0.1" applied to the head. Shapes: h (N, H), z_m (N, 64) -> V (N, O), O = 1.
     """
 
-    def __init__(self, latent_dim: int, in_dim: int, out_dim: int, rank: int, generator_hidden_dim: int,
-                 scale: float, activation: str) -> None:
+    def __init__(
+        self,
+        latent_dim: int,
+        in_dim: int,
+        out_dim: int,
+        rank: int,
+        generator_hidden_dim: int,
+        scale: float,
+        activation: str,
+    ) -> None:
         super().__init__()
         self.scale, self.rank, self.out_dim = scale, rank, out_dim
         self.basis = nn.Parameter(torch.empty(rank, in_dim))
@@ -324,8 +332,12 @@ class MorficActor(MLPModel):
         if self.morphology_encoder is None:
             raise ValueError("this actor has no morphology encoder (morphology_group is None).")
         m = obs[self.morphology_group]
-        key = (0 if m.is_inference() else m._version, torch.is_grad_enabled(), torch.is_inference_mode_enabled(),
-               tuple(p._version for p in self.morphology_encoder.parameters()))
+        key = (
+            0 if m.is_inference() else m._version,
+            torch.is_grad_enabled(),
+            torch.is_inference_mode_enabled(),
+            tuple(p._version for p in self.morphology_encoder.parameters()),
+        )
         cached = self._z_cache
         if cached is not None and cached[0] is m and cached[1] == key:
             return cached[2]
@@ -446,15 +458,27 @@ class MorficCritic(MLPModel):
             if self.uses_morphology and not self.shared_morphology_encoder
             else None
         )
-        self.modulator_cfg = {"latent_dim": morphology_latent_dim, "generator_hidden_dim": generator_hidden_dim,
-                              "scale": conditioning_scale, "rank": hyper_rank, "activation": activation}
+        self.modulator_cfg = {
+            "latent_dim": morphology_latent_dim,
+            "generator_hidden_dim": generator_hidden_dim,
+            "scale": conditioning_scale,
+            "rank": hyper_rank,
+            "activation": activation,
+        }
         self.modulators: nn.ModuleList | None = None
         self.head: HyperHead | None = None
         linears = [m for m in self.mlp if isinstance(m, nn.Linear)]
         if conditioning == "hyper_head":
             c = self.modulator_cfg
-            self.head = HyperHead(c["latent_dim"], linears[-1].in_features, linears[-1].out_features, c["rank"],
-                                  c["generator_hidden_dim"], c["scale"], c["activation"])
+            self.head = HyperHead(
+                c["latent_dim"],
+                linears[-1].in_features,
+                linears[-1].out_features,
+                c["rank"],
+                c["generator_hidden_dim"],
+                c["scale"],
+                c["activation"],
+            )
         elif conditioning not in ("none", "concat"):
             self.modulators = nn.ModuleList(self.make_modulator(lin) for lin in linears[:-1])
 
@@ -474,8 +498,15 @@ class MorficCritic(MLPModel):
             cls = FiLM if self.conditioning == "film" else AdaLN
             return cls(c["latent_dim"], linear.out_features, c["generator_hidden_dim"], c["scale"], c["activation"])
         if self.conditioning == "hyper":
-            return LowRankAdapter(c["latent_dim"], linear.in_features, linear.out_features, c["rank"],
-                                  c["generator_hidden_dim"], c["scale"], c["activation"])
+            return LowRankAdapter(
+                c["latent_dim"],
+                linear.in_features,
+                linear.out_features,
+                c["rank"],
+                c["generator_hidden_dim"],
+                c["scale"],
+                c["activation"],
+            )
         raise ValueError(f"conditioning '{self.conditioning}' has no modulator; override make_modulator.")
 
     def forward(
@@ -539,8 +570,10 @@ class MorficCritic(MLPModel):
             raise ValueError("this critic has no morphology encoder (conditioning 'none').")
         if self.shared_morphology_encoder:
             if not self._shared_source:
-                raise ValueError("this critic shares the actor's morphology encoder; call "
-                                 "link_morphology_encoder(actor, critic) first.")
+                raise ValueError(
+                    "this critic shares the actor's morphology encoder; call "
+                    "link_morphology_encoder(actor, critic) first."
+                )
             return self._shared_source[0].encode_morphology(obs)
         return self.morphology_encoder(obs[self.morphology_group])  # type: ignore[misc]
 
@@ -584,8 +617,9 @@ def link_morphology_encoder(actor: nn.Module, critic: nn.Module) -> None:
     if encoder is None:
         raise ValueError("the critic shares the actor's morphology encoder, but the actor has none.")
     if critic.modulator_cfg["latent_dim"] != actor.morphology_latent_dim:
-        raise ValueError(f"critic z_m size {critic.modulator_cfg['latent_dim']} != actor z_m size "
-                         f"{actor.morphology_latent_dim}.")
+        raise ValueError(
+            f"critic z_m size {critic.modulator_cfg['latent_dim']} != actor z_m size {actor.morphology_latent_dim}."
+        )
     critic._shared_source = (actor,)
 
 

@@ -175,8 +175,7 @@ class MorficPPO(PPO):
         link_morphology_encoder(actor, critic)  # one f_psi for both (model.shared_morphology_encoder)
         super().__init__(actor, critic, storage, **kwargs)
         #: How the bf16 matrix products run (morfic_cli/rl/precision.py); None without mixed precision.
-        self.bf16_matmul = (bf16_matmul(str(self.device), cpu_bf16_kernels()) if self.use_mixed_precision
-                            else None)
+        self.bf16_matmul = bf16_matmul(str(self.device), cpu_bf16_kernels()) if self.use_mixed_precision else None
         self.adaptation_loss_coef = adaptation_loss_coef
         self.adaptation_learning_rate = (
             adaptation_learning_rate if adaptation_learning_rate is not None else self.learning_rate
@@ -185,9 +184,11 @@ class MorficPPO(PPO):
         fused = {"fused": True} if optimizer is torch.optim.Adam else {}
         if fused:  # rsl-rl's Adam, fused: same update, one kernel for all parameters
             self.optimizer = optimizer(self.optimizer.param_groups[0]["params"], lr=self.learning_rate, **fused)
-        self.adaptation_optimizer = optimizer(
-            raw_models(self)[0].adaptation.parameters(), lr=self.adaptation_learning_rate, **fused
-        ) if self.adapts else None
+        self.adaptation_optimizer = (
+            optimizer(raw_models(self)[0].adaptation.parameters(), lr=self.adaptation_learning_rate, **fused)
+            if self.adapts
+            else None
+        )
 
     @contextlib.contextmanager
     def _precision(self, autocast: bool = True) -> Iterator[None]:
@@ -207,8 +208,11 @@ class MorficPPO(PPO):
         for head in heads:
             head.__class__ = _Float32Linear
         try:
-            region = (torch.autocast(device_type=torch.device(self.device).type, dtype=torch.bfloat16) if autocast
-                      else contextlib.nullcontext())
+            region = (
+                torch.autocast(device_type=torch.device(self.device).type, dtype=torch.bfloat16)
+                if autocast
+                else contextlib.nullcontext()
+            )
             with region, matmul_region(self.bf16_matmul):
                 yield
         finally:
@@ -253,8 +257,11 @@ class MorficPPO(PPO):
     def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
         """PPO's load, plus the adaptation optimiser state when the optimiser is loaded and the checkpoint has it."""
         load_iteration = super().load(loaded_dict, load_cfg, strict)
-        if ((load_cfg is None or load_cfg.get("optimizer")) and "adaptation_optimizer_state_dict" in loaded_dict
-                and self.adaptation_optimizer is not None):
+        if (
+            (load_cfg is None or load_cfg.get("optimizer"))
+            and "adaptation_optimizer_state_dict" in loaded_dict
+            and self.adaptation_optimizer is not None
+        ):
             self.adaptation_optimizer.load_state_dict(loaded_dict["adaptation_optimizer_state_dict"])
         return load_iteration
 

@@ -31,8 +31,17 @@ from torch.utils._python_dispatch import TorchDispatchMode
 NATIVE, FLOAT32 = "native", "float32"
 
 _aten = torch.ops.aten
-_MATMULS = frozenset({_aten.mm.default, _aten.addmm.default, _aten.bmm.default, _aten.baddbmm.default,
-                      _aten.linear.default, _aten.matmul.default, _aten.einsum.default})
+_MATMULS = frozenset(
+    {
+        _aten.mm.default,
+        _aten.addmm.default,
+        _aten.bmm.default,
+        _aten.baddbmm.default,
+        _aten.linear.default,
+        _aten.matmul.default,
+        _aten.einsum.default,
+    }
+)
 """The products autocast runs in bf16 on the CPU, as they reach a dispatch mode: ``linear``, ``matmul`` and
 ``einsum`` whole under ``torch.inference_mode`` (the rollout), decomposed into ``mm`` / ``addmm`` / ``bmm`` /
 ``baddbmm`` where autograd records them (the update, forward and backward). A whole ``einsum`` arrives before

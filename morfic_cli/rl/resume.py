@@ -48,7 +48,8 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
             raise ArtifactNotFoundError(
                 f"{exc} A run killed before its first checkpoint (written every save_interval iterations) leaves "
                 f"nothing to resume: start it afresh with `morfic train --name {name}` and its --variant, --preset, "
-                "--seed and --set.") from exc
+                "--seed and --set."
+            ) from exc
         else:
             raise
     if manifest.kind != "checkpoint" or "model.pt" not in manifest.files:
@@ -58,14 +59,19 @@ def load_resume_point(store: Store, spec: str) -> ResumePoint:
     check_weights(store, spec, manifest)
     state_id = manifest.inputs.get(TRAINER_STATE_ROLE)
     if state_id is not None and store.is_omitted(state_id):
-        raise MorficError(f"{spec} was imported without its trainer state (a weights-only bundle); it evaluates and "
-                          "exports, but cannot be resumed. Import the full bundle (made by `morfic store export "
-                          f"{RUNS_PREFIX}{name} --latest`, without --without-trainer-state, in the store that trained "
-                          "it) to resume it, or start a new run with `morfic train`.")
+        raise MorficError(
+            f"{spec} was imported without its trainer state (a weights-only bundle); it evaluates and "
+            "exports, but cannot be resumed. Import the full bundle (made by `morfic store export "
+            f"{RUNS_PREFIX}{name} --latest`, without --without-trainer-state, in the store that trained "
+            "it) to resume it, or start a new run with `morfic train`."
+        )
     if state_id is not None:
         state = store.read_manifest(state_id)
-        trainer = trainer_state.decode(store.read_file(state.id, trainer_state.JSON_FILE),
-                                       store.read_file(state.id, trainer_state.TENSORS_FILE), f"checkpoint '{spec}'")
+        trainer = trainer_state.decode(
+            store.read_file(state.id, trainer_state.JSON_FILE),
+            store.read_file(state.id, trainer_state.TENSORS_FILE),
+            f"checkpoint '{spec}'",
+        )
     else:
         trainer = _legacy_trainer_state(store, spec, manifest.id, name)
     trainer_state.check_trainer_state(trainer, f"checkpoint '{spec}'", TRAINER_KEYS)  # keys, types, sizes
@@ -87,12 +93,23 @@ def _legacy_trainer_state(store: Store, spec: str, ckpt_id: str, name: str) -> d
         for entry in store.ref_history(legacy):
             states[store.read_manifest(entry.id).inputs.get("checkpoint")] = entry.id
     if ckpt_id not in states:
-        older = [e for e in store.ref_history(RUNS_PREFIX + name) if e.id in states] \
-            if store.has_ref(RUNS_PREFIX + name) else []
-        hint = (f" Its last resumable checkpoint is {RUNS_PREFIX}{name}@{older[-1].version}: `morfic train --resume "
-                f"{RUNS_PREFIX}{name}@{older[-1].version}`." if older else " Start a new run with `morfic train`.")
-        raise MorficError(f"checkpoint '{spec}' has no trainer state in {store.root} (policy bundles of older morfic "
-                          f"versions carry weights only, as does a checkpoint cut short by a kill), so it cannot be "
-                          f"resumed.{hint}")
-    return trainer_state.load_tensors(store.read_file(states[ckpt_id], "trainer.pt"),
-                                      f"the trainer state (trainer.pt, an older format) of checkpoint '{spec}'")
+        older = (
+            [e for e in store.ref_history(RUNS_PREFIX + name) if e.id in states]
+            if store.has_ref(RUNS_PREFIX + name)
+            else []
+        )
+        hint = (
+            f" Its last resumable checkpoint is {RUNS_PREFIX}{name}@{older[-1].version}: `morfic train --resume "
+            f"{RUNS_PREFIX}{name}@{older[-1].version}`."
+            if older
+            else " Start a new run with `morfic train`."
+        )
+        raise MorficError(
+            f"checkpoint '{spec}' has no trainer state in {store.root} (policy bundles of older morfic "
+            f"versions carry weights only, as does a checkpoint cut short by a kill), so it cannot be "
+            f"resumed.{hint}"
+        )
+    return trainer_state.load_tensors(
+        store.read_file(states[ckpt_id], "trainer.pt"),
+        f"the trainer state (trainer.pt, an older format) of checkpoint '{spec}'",
+    )

@@ -53,8 +53,14 @@ if TYPE_CHECKING:
 def git_commit() -> str | None:
     """The commit of the morfic checkout this code runs from, or None outside a git checkout."""
     try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
-                             text=True, timeout=5, check=False)
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=Path(__file__).parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=False,
+        )
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() or None if out.returncode == 0 else None
@@ -74,8 +80,9 @@ class _Stop(Exception):
 class TrainingRun:
     """One training run: env + rsl-rl runner + checkpoints into a sink. Use :func:`new_run` or :func:`resume_run`."""
 
-    def __init__(self, sink: CheckpointSink, cfg: TrainCfg, name: str, device: str = "cpu",
-                 live: tuple[str, Path] | None = None) -> None:
+    def __init__(
+        self, sink: CheckpointSink, cfg: TrainCfg, name: str, device: str = "cpu", live: tuple[str, Path] | None = None
+    ) -> None:
         from morfic_cli.envs.locomotion import LocomotionEnv
         from morfic_cli.rl.live_log import run_log_dir
 
@@ -90,12 +97,22 @@ class TrainingRun:
         self.env = LocomotionEnv(cfg.env, mode="train", seed=cfg.seed + self.dist.rank)
         with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the models on stdout
             self.runner = _SinkRunner(self.env, rsl_rl_cfg(cfg), log_dir=None, device=self.device)
-        replace_logger(self.runner, lambda old: CurveLogger(
-            log_dir="", cfg=old.cfg, env_cfg=old.env_cfg, num_envs=old.num_envs,
-            is_distributed=self.runner.is_distributed, gpu_world_size=self.runner.gpu_world_size,
-            gpu_global_rank=self.runner.gpu_global_rank, device=old.device, dt=self.env.dt,
-            on_iteration=self._on_iteration, live=self.live,
-        ))
+        replace_logger(
+            self.runner,
+            lambda old: CurveLogger(
+                log_dir="",
+                cfg=old.cfg,
+                env_cfg=old.env_cfg,
+                num_envs=old.num_envs,
+                is_distributed=self.runner.is_distributed,
+                gpu_world_size=self.runner.gpu_world_size,
+                gpu_global_rank=self.runner.gpu_global_rank,
+                device=old.device,
+                dt=self.env.dt,
+                on_iteration=self._on_iteration,
+                live=self.live,
+            ),
+        )
         self.rows: list[dict[str, float]] = []
         self.iteration = 0
         self.parent: str | None = None
@@ -166,26 +183,46 @@ class TrainingRun:
         wall = logger.clock()  # after the drawing: the stored time misses only the write below
         saved = alg.save()
         saved.pop("actor_state_dict"), saved.pop("critic_state_dict")
-        trainer = trainer_state.encode({
-            "iteration": self.iteration,
-            "alg": saved,
-            "learning_rate": alg.learning_rate,
-            "env": self.env.state_dict(),
-            "logger": self.runner.logger.state_dict(),
-            "torch_rng": torch.get_rng_state(),
-        })
+        trainer = trainer_state.encode(
+            {
+                "iteration": self.iteration,
+                "alg": saved,
+                "learning_rate": alg.learning_rate,
+                "env": self.env.state_dict(),
+                "logger": self.runner.logger.state_dict(),
+                "torch_rng": torch.get_rng_state(),
+            }
+        )
         meta = {
-            "variant": self.cfg.variant, "seed": self.cfg.seed, "preset": self.cfg.preset, "iteration": self.iteration,
-            "max_iterations": self.cfg.max_iterations, "env_steps": logger.tot_timesteps,
-            "wall_time_s": round(wall, 3), "git_commit": self.git_commit, "finished": finished,
-            "interrupted": interrupted, "parent": self.parent, "device": self.device, "run": self.name,
-            "vx_max": float(self.env.command_ranges.vx[1]), **variant_record(self.cfg),
+            "variant": self.cfg.variant,
+            "seed": self.cfg.seed,
+            "preset": self.cfg.preset,
+            "iteration": self.iteration,
+            "max_iterations": self.cfg.max_iterations,
+            "env_steps": logger.tot_timesteps,
+            "wall_time_s": round(wall, 3),
+            "git_commit": self.git_commit,
+            "finished": finished,
+            "interrupted": interrupted,
+            "parent": self.parent,
+            "device": self.device,
+            "run": self.name,
+            "vx_max": float(self.env.command_ranges.vx[1]),
+            **variant_record(self.cfg),
             **({"bf16_matmul": alg.bf16_matmul} if getattr(alg, "bf16_matmul", None) else {}),
         }
         ckpt, version = self.sink.write(
-            {"model.pt": model, **curves}, train_cfg_to_dict(self.cfg), meta,
-            {TRAINER_STATE_ROLE: (trainer, {"role": "trainer-state"},
-                                  {"iteration": self.iteration, "run": self.name, "format": trainer_state.FORMAT})})
+            {"model.pt": model, **curves},
+            train_cfg_to_dict(self.cfg),
+            meta,
+            {
+                TRAINER_STATE_ROLE: (
+                    trainer,
+                    {"role": "trainer-state"},
+                    {"iteration": self.iteration, "run": self.name, "format": trainer_state.FORMAT},
+                )
+            },
+        )
         self.parent = ckpt
         out = Checkpoint(ckpt, self.sink.ref, version, self.iteration)
         self.checkpoints.append(out)
@@ -200,8 +237,9 @@ class TrainingRun:
     def head(self, ckpt_id: str | None) -> None:
         self.sink.head = ckpt_id
 
-    def _restore(self, ckpt_id: str, model: dict[str, Any], trainer: dict[str, Any],
-                 rows: list[dict[str, float]]) -> None:
+    def _restore(
+        self, ckpt_id: str, model: dict[str, Any], trainer: dict[str, Any], rows: list[dict[str, float]]
+    ) -> None:
         alg = self.runner.alg
         loaded = dict(trainer["alg"], actor_state_dict=model["actor"], critic_state_dict=model["critic"])
         alg.load(loaded, None, True)
@@ -215,8 +253,9 @@ class TrainingRun:
         self._fresh = False
 
 
-def new_run(store: Store, cfg: TrainCfg, name: str, device: str = "cpu",
-            live: tuple[str, Path] | None = None) -> TrainingRun:
+def new_run(
+    store: Store, cfg: TrainCfg, name: str, device: str = "cpu", live: tuple[str, Path] | None = None
+) -> TrainingRun:
     """A fresh run under ``runs/NAME``.
 
     ``live`` = (logger, log root) writes live curves into ``<log root>/NAME`` (:mod:`morfic_cli.rl.live_log`).
@@ -226,13 +265,20 @@ def new_run(store: Store, cfg: TrainCfg, name: str, device: str = "cpu",
     """
     check_device(device)
     if store.has_ref(RUNS_PREFIX + name):
-        raise MorficError(f"run '{RUNS_PREFIX}{name}' already exists in {store.root}; continue it with "
-                          f"`--resume {RUNS_PREFIX}{name}` or choose another --name.")
+        raise MorficError(
+            f"run '{RUNS_PREFIX}{name}' already exists in {store.root}; continue it with "
+            f"`--resume {RUNS_PREFIX}{name}` or choose another --name."
+        )
     return TrainingRun(RunSink(store, name), cfg, name, device, live)
 
 
-def resume_run(store: Store, spec: str, overrides: list[str] | None = None, device: str = "cpu",
-               live: tuple[str, Path] | None = None) -> TrainingRun:
+def resume_run(
+    store: Store,
+    spec: str,
+    overrides: list[str] | None = None,
+    device: str = "cpu",
+    live: tuple[str, Path] | None = None,
+) -> TrainingRun:
     """Continue the run whose checkpoint ``spec`` names (``runs/NAME`` = its latest checkpoint).
 
     ``overrides`` may change e.g. ``max_iterations``; the config otherwise is the checkpoint's.

@@ -88,9 +88,12 @@ def decode(json_bytes: bytes, tensor_bytes: bytes, what: str) -> Any:
     Raises:
         MorficError: Either half is damaged or not a trainer state.
     """
+
     def bad(why: str) -> MorficError:
-        return MorficError(f"the trainer state of {what} is damaged ({why}); resume from an earlier checkpoint "
-                           "(--resume runs/NAME@-1) or start a new run.")
+        return MorficError(
+            f"the trainer state of {what} is damaged ({why}); resume from an earlier checkpoint "
+            "(--resume runs/NAME@-1) or start a new run."
+        )
 
     try:
         doc = json.loads(json_bytes)
@@ -113,7 +116,7 @@ def decode(json_bytes: bytes, tensor_bytes: bytes, what: str) -> Any:
         if not isinstance(value, dict):
             return value
         if len(value) == 1:
-            (key, inner), = value.items()
+            ((key, inner),) = value.items()
             if key == "__tensor__":
                 return tensor(inner)
             if key == "__ndarray__":
@@ -147,12 +150,16 @@ def load_tensors(data: bytes, what: str, map_location: str | torch.device = "cpu
     try:
         return torch.load(io.BytesIO(data), map_location=map_location, weights_only=True)
     except pickle.UnpicklingError:
-        raise MorficError(f"{printable(what)} is refused: it is a pickle of other objects than tensors, and loading "
-                          "it could run code. morfic loads only files of plain tensors, since a bundle may come from "
-                          "anyone; use a checkpoint written by `morfic train`.") from None
+        raise MorficError(
+            f"{printable(what)} is refused: it is a pickle of other objects than tensors, and loading "
+            "it could run code. morfic loads only files of plain tensors, since a bundle may come from "
+            "anyone; use a checkpoint written by `morfic train`."
+        ) from None
     except Exception:  # RuntimeError, EOFError, ...: a damaged file, or none written by torch.save
-        raise MorficError(f"{printable(what)} is not a file of plain tensors (damaged, or not written by "
-                          "torch.save); use a checkpoint written by `morfic train`.") from None
+        raise MorficError(
+            f"{printable(what)} is not a file of plain tensors (damaged, or not written by "
+            "torch.save); use a checkpoint written by `morfic train`."
+        ) from None
 
 
 # ---------------------------------------------------------------------------- the structure morfic train writes
@@ -215,9 +222,11 @@ def _alg_problems(alg: Any) -> list[str]:
         return [f"alg is {_shown(alg)}, not a dict with optimizer_state_dict"]
     for key, opt in alg.items():
         if key.endswith("optimizer_state_dict") and not (
-                isinstance(opt, dict) and isinstance(opt.get("state"), dict)
-                and isinstance(opt.get("param_groups"), list)
-                and all(isinstance(g, dict) and _number(g.get("lr")) for g in opt["param_groups"])):
+            isinstance(opt, dict)
+            and isinstance(opt.get("state"), dict)
+            and isinstance(opt.get("param_groups"), list)
+            and all(isinstance(g, dict) and _number(g.get("lr")) for g in opt["param_groups"])
+        ):
             return [f"alg.{printable(key)} is not an optimiser state (state, param_groups with lr)"]
     return []
 
@@ -228,8 +237,10 @@ def _env_problems(env: Any, max_envs: int) -> list[str]:
     want = {"num_envs", "mode", "counters", "command_vx", "generator", *ENV_PER_ENV}
     if not isinstance(env, dict) or not want <= set(env):
         have = sorted(str(k) for k in env) if isinstance(env, dict) else None
-        return [f"env is {_shown(env) if have is None else f'a dict of {have}'[:200]}, not an env state with "
-                f"{', '.join(sorted(want))}"]
+        return [
+            f"env is {_shown(env) if have is None else f'a dict of {have}'[:200]}, not an env state with "
+            f"{', '.join(sorted(want))}"
+        ]
     n = env["num_envs"]
     if not (_count(n) and 1 <= n <= max_envs):
         return [f"env.num_envs is {_shown(n)}, not an integer in [1, {max_envs}]"]
@@ -250,11 +261,13 @@ def _env_problems(env: Any, max_envs: int) -> list[str]:
         if not isinstance(rows, dict):
             problems.append(f"env.{section} is {_shown(rows)}, not a dict of tensors")
             continue
-        bad = next((k for k, v in rows.items() if not (isinstance(v, torch.Tensor) and v.dim() >= 1
-                                                       and v.shape[0] == n)), None)
+        bad = next(
+            (k for k, v in rows.items() if not (isinstance(v, torch.Tensor) and v.dim() >= 1 and v.shape[0] == n)), None
+        )
         if bad is not None:
-            problems.append(f"env.{section}.{printable(bad)[:40]} is {_shown(rows[bad])}, not one row per env "
-                            f"({n} envs)")
+            problems.append(
+                f"env.{section}.{printable(bad)[:40]} is {_shown(rows[bad])}, not one row per env ({n} envs)"
+            )
     lacking = sorted(set(LocomotionEnv._TENSORS) - set(env["tensors"])) if isinstance(env["tensors"], dict) else []
     if lacking:
         problems.append(f"env.tensors lacks {', '.join(lacking)}")
@@ -262,8 +275,15 @@ def _env_problems(env: Any, max_envs: int) -> list[str]:
 
 
 def _logger_problems(logger: Any) -> list[str]:
-    fields = ("rewbuffer", "lenbuffer", "cur_reward_sum", "cur_episode_length", "tot_timesteps", "tot_time",
-              "wall_time_s")
+    fields = (
+        "rewbuffer",
+        "lenbuffer",
+        "cur_reward_sum",
+        "cur_episode_length",
+        "tot_timesteps",
+        "tot_time",
+        "wall_time_s",
+    )
     if not isinstance(logger, dict) or not set(fields) <= set(logger):
         return [f"logger is {_shown(logger)}, not a dict of {', '.join(fields)}"]
     ok = {
@@ -275,8 +295,11 @@ def _logger_problems(logger: Any) -> list[str]:
         "tot_time": lambda x: _number(x) and x >= 0,
         "wall_time_s": lambda x: _number(x) and x >= 0,
     }
-    return [f"logger.{k} is {_shown(logger[k])}, not what morfic train writes" for k, test in ok.items()
-            if not test(logger[k])]
+    return [
+        f"logger.{k} is {_shown(logger[k])}, not what morfic train writes"
+        for k, test in ok.items()
+        if not test(logger[k])
+    ]
 
 
 def check_trainer_state(state: Any, what: str, keys: Iterable[str]) -> None:
@@ -288,6 +311,8 @@ def check_trainer_state(state: Any, what: str, keys: Iterable[str]) -> None:
     """
     problems = trainer_state_problems(state, keys)
     if problems:
-        raise MorficError(f"the trainer state of {printable(what)} is not one `morfic train` writes ("
-                          f"{'; '.join(problems)}), so it cannot be resumed; resume from another checkpoint "
-                          "(--resume runs/NAME@N) or start a new run with `morfic train`.")
+        raise MorficError(
+            f"the trainer state of {printable(what)} is not one `morfic train` writes ("
+            f"{'; '.join(problems)}), so it cannot be resumed; resume from another checkpoint "
+            "(--resume runs/NAME@N) or start a new run with `morfic train`."
+        )

@@ -53,11 +53,13 @@ class AttentionPool(nn.Module):
     Shapes: description (N, T, D_d), state (N, T, D_s) -> latent (N, slots * value_dim), values (N, T, value_dim).
     """
 
-    def __init__(self, description_dim: int, state_dim: int, slots: int, value_dim: int = 4,
-                 temperature: float = 1.0) -> None:
+    def __init__(
+        self, description_dim: int, state_dim: int, slots: int, value_dim: int = 4, temperature: float = 1.0
+    ) -> None:
         super().__init__()
-        self.mask = nn.Sequential(nn.Linear(description_dim, slots), nn.LayerNorm(slots), nn.ELU(),
-                                  nn.Linear(slots, slots))
+        self.mask = nn.Sequential(
+            nn.Linear(description_dim, slots), nn.LayerNorm(slots), nn.ELU(), nn.Linear(slots, slots)
+        )
         self.value = nn.Linear(state_dim, value_dim)
         self.log_temperature = nn.Parameter(torch.tensor([math.log(temperature - MIN_TEMPERATURE)]))
 
@@ -108,8 +110,15 @@ def _frame(obs: TensorDict, group: str) -> torch.Tensor:
 class UrmaActor(TokenModel):
     """URMA's policy: attention-pooling encoders, the core MLP and the universal per-joint decoder. Output (N, 12)."""
 
-    def __init__(self, obs: TensorDict, obs_groups: dict[str, list[str]], obs_set: str, output_dim: int,
-                 state_group: str = "history", distribution_cfg: dict | None = None) -> None:
+    def __init__(
+        self,
+        obs: TensorDict,
+        obs_groups: dict[str, list[str]],
+        obs_set: str,
+        output_dim: int,
+        state_group: str = "history",
+        distribution_cfg: dict | None = None,
+    ) -> None:
         """Build the actor.
 
         Args:
@@ -125,11 +134,17 @@ class UrmaActor(TokenModel):
         self.state_group = state_group
         self.encoders = _Encoders()
         gain = math.sqrt(2.0)
-        self.core = nn.Sequential(_orthogonal(nn.Linear(LATENT_DIM + ROOT_DIM, 512), gain), nn.LayerNorm(512),
-                                  nn.ELU(), _orthogonal(nn.Linear(512, 256), gain), nn.ELU(),
-                                  _orthogonal(nn.Linear(256, 128), gain))
-        self.description_latent = nn.Sequential(nn.Linear(JOINT_DESCRIPTION_DIM, 128), nn.LayerNorm(128), nn.ELU(),
-                                                nn.Linear(128, 128))
+        self.core = nn.Sequential(
+            _orthogonal(nn.Linear(LATENT_DIM + ROOT_DIM, 512), gain),
+            nn.LayerNorm(512),
+            nn.ELU(),
+            _orthogonal(nn.Linear(512, 256), gain),
+            nn.ELU(),
+            _orthogonal(nn.Linear(256, 128), gain),
+        )
+        self.description_latent = nn.Sequential(
+            nn.Linear(JOINT_DESCRIPTION_DIM, 128), nn.LayerNorm(128), nn.ELU(), nn.Linear(128, 128)
+        )
         self.decoder = nn.Sequential(_orthogonal(nn.Linear(128 + 4 + 128, 128), gain), nn.LayerNorm(128), nn.ELU())
         self.mean = _orthogonal(nn.Linear(128, 1), 0.01)
 
@@ -139,8 +154,9 @@ class UrmaActor(TokenModel):
         latent, joint_values = self.encoders(obs, joint_state)
         core = self.core(torch.cat([latent, general], dim=-1))  # (N, 128)
         description = self.description_latent(obs["joint_description"])  # (N, 12, 128)
-        per_joint = torch.cat([core[:, None].expand(-1, description.shape[1], -1), joint_values.detach(),
-                               description], dim=-1)
+        per_joint = torch.cat(
+            [core[:, None].expand(-1, description.shape[1], -1), joint_values.detach(), description], dim=-1
+        )
         return float32_linear(self.mean, self.decoder(per_joint)).squeeze(-1)
 
     def as_jit(self) -> nn.Module:
@@ -149,17 +165,26 @@ class UrmaActor(TokenModel):
 
     def as_onnx(self, verbose: bool = False) -> nn.Module:
         """Not supported: export's inputs are the history (and the descriptor); URMA also reads the descriptions."""
-        raise MorficError("variant urma cannot be exported: its policy also reads the per-joint and per-foot "
-                          "descriptions and foot states (env.obs.body_tokens), which the exported model's inputs "
-                          "(history, morphology) do not carry; export its weights with `morfic export RUN --to "
-                          "rsl-rl`, or evaluate it with `morfic eval`.")
+        raise MorficError(
+            "variant urma cannot be exported: its policy also reads the per-joint and per-foot "
+            "descriptions and foot states (env.obs.body_tokens), which the exported model's inputs "
+            "(history, morphology) do not carry; export its weights with `morfic export RUN --to "
+            "rsl-rl`, or evaluate it with `morfic eval`."
+        )
 
 
 class UrmaCritic(TokenModel):
     """URMA's value function: its own encoders, then an MLP on the latents, o_t's general part and p_t. (N, 1)."""
 
-    def __init__(self, obs: TensorDict, obs_groups: dict[str, list[str]], obs_set: str, output_dim: int,
-                 state_group: str = "critic", privileged_group: str | None = "privileged") -> None:
+    def __init__(
+        self,
+        obs: TensorDict,
+        obs_groups: dict[str, list[str]],
+        obs_set: str,
+        output_dim: int,
+        state_group: str = "critic",
+        privileged_group: str | None = "privileged",
+    ) -> None:
         """Build the critic.
 
         Args:
@@ -177,9 +202,15 @@ class UrmaCritic(TokenModel):
         extra = obs[privileged_group].shape[-1] if privileged_group is not None else 0
         self.encoders = _Encoders()
         gain = math.sqrt(2.0)
-        self.mlp = nn.Sequential(_orthogonal(nn.Linear(LATENT_DIM + ROOT_DIM + extra, 512), gain), nn.LayerNorm(512),
-                                 nn.ELU(), _orthogonal(nn.Linear(512, 256), gain), nn.ELU(),
-                                 _orthogonal(nn.Linear(256, 128), gain), nn.ELU())
+        self.mlp = nn.Sequential(
+            _orthogonal(nn.Linear(LATENT_DIM + ROOT_DIM + extra, 512), gain),
+            nn.LayerNorm(512),
+            nn.ELU(),
+            _orthogonal(nn.Linear(512, 256), gain),
+            nn.ELU(),
+            _orthogonal(nn.Linear(256, 128), gain),
+            nn.ELU(),
+        )
         self.value = _orthogonal(nn.Linear(128, output_dim), 1.0)
 
     def compute(self, obs: TensorDict) -> torch.Tensor:
@@ -195,6 +226,7 @@ def parameter_count(critic: bool = False, privileged_dim: int = 18) -> int:
 
     A Linear(a, b) has (a + 1) b, a LayerNorm(b) 2 b; each pool has one temperature.
     """
+
     def lin(a: int, b: int) -> int:
         return (a + 1) * b
 
@@ -203,8 +235,14 @@ def parameter_count(critic: bool = False, privileged_dim: int = 18) -> int:
 
     encoders = pool(JOINT_DESCRIPTION_DIM, JOINT_DIM, 64) + pool(FOOT_DESCRIPTION_DIM, FOOT_STATE_DIM, 32)
     if critic:
-        return (encoders + lin(LATENT_DIM + ROOT_DIM + privileged_dim, 512) + 2 * 512 + lin(512, 256)
-                + lin(256, 128) + lin(128, 1))
+        return (
+            encoders
+            + lin(LATENT_DIM + ROOT_DIM + privileged_dim, 512)
+            + 2 * 512
+            + lin(512, 256)
+            + lin(256, 128)
+            + lin(128, 1)
+        )
     core = lin(LATENT_DIM + ROOT_DIM, 512) + 2 * 512 + lin(512, 256) + lin(256, 128)
     description = lin(JOINT_DESCRIPTION_DIM, 128) + 2 * 128 + lin(128, 128)
     decoder = lin(128 + 4 + 128, 128) + 2 * 128 + lin(128, 1)

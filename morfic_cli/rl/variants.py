@@ -122,8 +122,11 @@ class Variant:
     def model_cfgs(self) -> tuple[dict, dict, dict[str, list[str]]]:
         """The rsl-rl ``actor``, ``critic`` and ``obs_groups`` config entries (paper sizes); fresh dicts per call."""
         if self.own_models:
-            return (copy.deepcopy(self.actor_defaults), copy.deepcopy(self.critic_defaults),
-                    copy.deepcopy(self.obs_groups or {}))
+            return (
+                copy.deepcopy(self.actor_defaults),
+                copy.deepcopy(self.critic_defaults),
+                copy.deepcopy(self.obs_groups or {}),
+            )
         actor_cfg = {
             "class_name": self.actor_class,
             "hidden_dims": list(PAPER_TRUNK),
@@ -155,18 +158,36 @@ class Variant:
         }
         actor_cfg.update(copy.deepcopy(self.actor_defaults))
         critic_cfg.update(copy.deepcopy(self.critic_defaults))
-        obs_groups = copy.deepcopy(self.obs_groups) if self.obs_groups is not None else {
-            "actor": ["history", "morphology"] if self.actor_morphology else ["history"],
-            "critic": ["critic", "privileged", "morphology"] if self.critic_morphology else ["critic", "privileged"],
-        }
+        obs_groups = (
+            copy.deepcopy(self.obs_groups)
+            if self.obs_groups is not None
+            else {
+                "actor": ["history", "morphology"] if self.actor_morphology else ["history"],
+                "critic": ["critic", "privileged", "morphology"]
+                if self.critic_morphology
+                else ["critic", "privileged"],
+            }
+        )
         return actor_cfg, critic_cfg, obs_groups
 
 
-def _stock(name: str, label: str, tables: tuple[str, ...], conditioning: str, scale: float = 1.0,
-           trunk: tuple[int, ...] = PAPER_TRUNK, actor_morphology: bool = True) -> Variant:
-    return Variant(name, label, tables, actor_morphology=actor_morphology, critic_morphology=conditioning != "none",
-                   critic_defaults={"conditioning": conditioning, "conditioning_scale": scale,
-                                    "hidden_dims": list(trunk)})
+def _stock(
+    name: str,
+    label: str,
+    tables: tuple[str, ...],
+    conditioning: str,
+    scale: float = 1.0,
+    trunk: tuple[int, ...] = PAPER_TRUNK,
+    actor_morphology: bool = True,
+) -> Variant:
+    return Variant(
+        name,
+        label,
+        tables,
+        actor_morphology=actor_morphology,
+        critic_morphology=conditioning != "none",
+        critic_defaults={"conditioning": conditioning, "conditioning_scale": scale, "hidden_dims": list(trunk)},
+    )
 
 
 _GAUSSIAN = {"class_name": "GaussianDistribution", "init_std": 1.0, "std_type": "scalar"}
@@ -174,22 +195,43 @@ _BOT = {"d_model": 64, "nhead": 2, "num_layers": 8, "dim_feedforward": 128}
 """BodyTransformer's "BoT-Hard" encoder (Sferrazza et al. 2024): 8 layers, d = 64, 2 heads, feed-forward 128."""
 
 
-def _external(name: str, label: str, actor: dict[str, Any], critic: dict[str, Any],
-              obs_groups: dict[str, list[str]], env_overrides: dict[str, Any] | None = None) -> Variant:
+def _external(
+    name: str,
+    label: str,
+    actor: dict[str, Any],
+    critic: dict[str, Any],
+    obs_groups: dict[str, list[str]],
+    env_overrides: dict[str, Any] | None = None,
+) -> Variant:
     """An external baseline: its own token models and observation groups (docs/training.md, "External baselines")."""
-    return Variant(name, label, ("external",), actor_class=actor["class_name"], critic_class=critic["class_name"],
-                   actor_morphology=False, critic_morphology=False, critic_defaults=critic, actor_defaults=actor,
-                   own_models=True, obs_groups=obs_groups, env_overrides=env_overrides or {})
+    return Variant(
+        name,
+        label,
+        ("external",),
+        actor_class=actor["class_name"],
+        critic_class=critic["class_name"],
+        actor_morphology=False,
+        critic_morphology=False,
+        critic_defaults=critic,
+        actor_defaults=actor,
+        own_models=True,
+        obs_groups=obs_groups,
+        env_overrides=env_overrides or {},
+    )
 
 
 _URMA_GROUPS = ["joint_description", "foot_description", "foot_state"]
 
 
 ACTUATION_ENV: dict[str, Any] = {
-    "rand.geometry.enabled": True, "rand.geometry.limits_from_support": True,
-    "rand.actuation.enabled": True, "rand.actuation.mass_scale": [0.8, 4.0],
-    "rand.actuation.kp_factor": [0.8, 3.2], "rand.actuation.kd_factor": [0.6, 5.0],
-    "rand.actuation.torque_factor": [0.8, 2.0], "rand.actuation.curriculum": True,
+    "rand.geometry.enabled": True,
+    "rand.geometry.limits_from_support": True,
+    "rand.actuation.enabled": True,
+    "rand.actuation.mass_scale": [0.8, 4.0],
+    "rand.actuation.kp_factor": [0.8, 3.2],
+    "rand.actuation.kd_factor": [0.6, 5.0],
+    "rand.actuation.torque_factor": [0.8, 2.0],
+    "rand.actuation.curriculum": True,
     "obs.extended_morphology": True,
 }
 """The env of ``film-act`` and ``ppo-act`` (docs/training.md, "Actuation variants"): procedural geometry with the
@@ -197,37 +239,64 @@ support's joint limits, total masses x 0.8-4 (log-uniform, under the morphology 
 limits following the mass and jittered to cover robots/*.toml's own gains, and z_m of the extended descriptor."""
 
 
-STOCK: dict[str, Variant] = {v.name: v for v in (
-    _stock("ppo", "PPO", ("main",), "none", actor_morphology=False),
-    _stock("actor-only", "Actor-only", ("main",), "none"),
-    _stock("concat", "Actor+Critic", ("main",), "concat"),
-    _stock("film", "MorFiC-F", ("main", "ablation"), "film", 0.1),
-    _stock("film-scaled", "MorFiC-F(Scaled)", ("ablation",), "film", 0.1, (1024, 512, 256)),
-    _stock("hyper", "MorFiC-H", ("ablation",), "hyper", 0.1),
-    _stock("adaln", "MorFiC-A", ("ablation",), "adaln"),
-    _external("bot", "BodyTransformer",
-              {"class_name": "morfic_cli.rl.bot:BotActor", **_BOT, "distribution_cfg": dict(_GAUSSIAN)},
-              {"class_name": "morfic_cli.rl.bot:BotCritic", **_BOT, "privileged_group": "privileged"},
-              {"actor": ["history"], "critic": ["critic", "privileged"]}),
-    _external("urma", "URMA",
-              {"class_name": "morfic_cli.rl.urma:UrmaActor", "state_group": "history",
-               "distribution_cfg": dict(_GAUSSIAN)},
-              {"class_name": "morfic_cli.rl.urma:UrmaCritic", "state_group": "critic",
-               "privileged_group": "privileged"},
-              {"actor": ["history", *_URMA_GROUPS], "critic": ["critic", "privileged", *_URMA_GROUPS]},
-              {"obs.body_tokens": True}),
-    # GenLoco (Feng et al. 2022): ppo's networks, trained on procedurally generated robots (docs/training.md)
-    Variant("genloco", "GenLoco", ("external",), actor_morphology=False, critic_morphology=False,
+STOCK: dict[str, Variant] = {
+    v.name: v
+    for v in (
+        _stock("ppo", "PPO", ("main",), "none", actor_morphology=False),
+        _stock("actor-only", "Actor-only", ("main",), "none"),
+        _stock("concat", "Actor+Critic", ("main",), "concat"),
+        _stock("film", "MorFiC-F", ("main", "ablation"), "film", 0.1),
+        _stock("film-scaled", "MorFiC-F(Scaled)", ("ablation",), "film", 0.1, (1024, 512, 256)),
+        _stock("hyper", "MorFiC-H", ("ablation",), "hyper", 0.1),
+        _stock("adaln", "MorFiC-A", ("ablation",), "adaln"),
+        _external(
+            "bot",
+            "BodyTransformer",
+            {"class_name": "morfic_cli.rl.bot:BotActor", **_BOT, "distribution_cfg": dict(_GAUSSIAN)},
+            {"class_name": "morfic_cli.rl.bot:BotCritic", **_BOT, "privileged_group": "privileged"},
+            {"actor": ["history"], "critic": ["critic", "privileged"]},
+        ),
+        _external(
+            "urma",
+            "URMA",
+            {
+                "class_name": "morfic_cli.rl.urma:UrmaActor",
+                "state_group": "history",
+                "distribution_cfg": dict(_GAUSSIAN),
+            },
+            {"class_name": "morfic_cli.rl.urma:UrmaCritic", "state_group": "critic", "privileged_group": "privileged"},
+            {"actor": ["history", *_URMA_GROUPS], "critic": ["critic", "privileged", *_URMA_GROUPS]},
+            {"obs.body_tokens": True},
+        ),
+        # GenLoco (Feng et al. 2022): ppo's networks, trained on procedurally generated robots (docs/training.md)
+        Variant(
+            "genloco",
+            "GenLoco",
+            ("external",),
+            actor_morphology=False,
+            critic_morphology=False,
             critic_defaults={"conditioning": "none", "conditioning_scale": 1.0, "hidden_dims": list(PAPER_TRUNK)},
-            env_overrides={"rand.geometry.enabled": True}),
-    # issue 58: film and ppo on generated, heavier bodies whose gains follow their mass (ACTUATION_ENV)
-    Variant("film-act", "MorFiC-F(act)", ("actuation",),
+            env_overrides={"rand.geometry.enabled": True},
+        ),
+        # issue 58: film and ppo on generated, heavier bodies whose gains follow their mass (ACTUATION_ENV)
+        Variant(
+            "film-act",
+            "MorFiC-F(act)",
+            ("actuation",),
             critic_defaults={"conditioning": "film", "conditioning_scale": 0.1, "hidden_dims": list(PAPER_TRUNK)},
-            env_overrides=dict(ACTUATION_ENV)),
-    Variant("ppo-act", "PPO(act)", ("actuation",), actor_morphology=False, critic_morphology=False,
+            env_overrides=dict(ACTUATION_ENV),
+        ),
+        Variant(
+            "ppo-act",
+            "PPO(act)",
+            ("actuation",),
+            actor_morphology=False,
+            critic_morphology=False,
             critic_defaults={"conditioning": "none", "conditioning_scale": 1.0, "hidden_dims": list(PAPER_TRUNK)},
-            env_overrides=dict(ACTUATION_ENV)),
-)}
+            env_overrides=dict(ACTUATION_ENV),
+        ),
+    )
+}
 """The paper's variants, in the order of its tables (sizes: paper Tables "architecture", "conditioning variants"), then
 the external baselines re-implemented in morfic's pipeline (table ``external``: paper Table "External baselines vs.
 MorFiC"), then the actuation variants of issue 58 (table ``actuation``, in none of the paper's)."""
@@ -357,19 +426,24 @@ def _trust_key(create: bool = False) -> bytes | None:
             fh.write(secrets.token_hex(32) + "\n")
         return _trust_key()
     except OSError as exc:
-        raise MorficError(f"cannot read the key of the allow-list {path} ({exc.strerror}); fix its permissions, or "
-                          "pass --trust-variant to this command.") from exc
+        raise MorficError(
+            f"cannot read the key of the allow-list {path} ({exc.strerror}); fix its permissions, or "
+            "pass --trust-variant to this command."
+        ) from exc
     if _KEY.fullmatch(text):
         return text.encode()
     if create:
-        raise MorficError(f"the key of the allow-list {path} is not one `morfic trust` wrote (64 hex digits); remove "
-                          "it and run `morfic trust` again for each variant you trust.")
+        raise MorficError(
+            f"the key of the allow-list {path} is not one `morfic trust` wrote (64 hex digits); remove "
+            "it and run `morfic trust` again for each variant you trust."
+        )
     return None
 
 
 def _signature(key: bytes, names: list[str]) -> str:
-    return hmac.new(key, "".join(f"{n}\n" for n in ["morfic trusted-variants 1", *names]).encode(),
-                    hashlib.sha256).hexdigest()
+    return hmac.new(
+        key, "".join(f"{n}\n" for n in ["morfic trusted-variants 1", *names]).encode(), hashlib.sha256
+    ).hexdigest()
 
 
 def _allow_list_lines() -> list[str]:
@@ -378,8 +452,10 @@ def _allow_list_lines() -> list[str]:
     except FileNotFoundError:
         return []
     except OSError as exc:
-        raise MorficError(f"cannot read the allow-list of trusted variants {allow_list_path()} ({exc.strerror}); "
-                          "fix its permissions, or pass --trust-variant to this command.") from exc
+        raise MorficError(
+            f"cannot read the allow-list of trusted variants {allow_list_path()} ({exc.strerror}); "
+            "fix its permissions, or pass --trust-variant to this command."
+        ) from exc
 
 
 def read_allow_list() -> tuple[list[str], list[str]]:
@@ -394,7 +470,7 @@ def read_allow_list() -> tuple[list[str], list[str]]:
     """
     lines = [line.strip() for line in _allow_list_lines()]
     names = [n for n in dict.fromkeys(lines) if n and not n.startswith("#")]
-    signed = [line[len(SIGNATURE):] for line in lines if line.startswith(SIGNATURE)]
+    signed = [line[len(SIGNATURE) :] for line in lines if line.startswith(SIGNATURE)]
     key = _trust_key() if names else None
     if key is not None and len(signed) == 1 and hmac.compare_digest(signed[0], _signature(key, names)):
         return names, []
@@ -411,9 +487,12 @@ def _write_allow_list(names: list[str]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     key = _trust_key(create=True)
     assert key is not None  # created, or an error
-    lines = ["# User variants morfic may import when a stored run names them. Written by `morfic trust` "
-             "(docs/extending.md): a line added by hand voids the signature, and with it the list.",
-             SIGNATURE + _signature(key, names), *names]
+    lines = [
+        "# User variants morfic may import when a stored run names them. Written by `morfic trust` "
+        "(docs/extending.md): a line added by hand voids the signature, and with it the list.",
+        SIGNATURE + _signature(key, names),
+        *names,
+    ]
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".trusted-variants-")
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
@@ -485,16 +564,24 @@ def require_trusted(name: str, *, source: str | None = None) -> None:
     """
     if is_trusted(name):
         return
-    how = (f"If you trust that code, pass --trust-variant {name} to this command, or trust it for every command "
-           f"with `morfic trust {name}` (the allow-list {allow_list_path()}).")
+    how = (
+        f"If you trust that code, pass --trust-variant {name} to this command, or trust it for every command "
+        f"with `morfic trust {name}` (the allow-list {allow_list_path()})."
+    )
     if name in read_allow_list()[1]:
-        how += (" The allow-list names it, but morfic ignores that list: `morfic trust` did not sign it (a file from "
-                "elsewhere, or edited by hand); `morfic trust --list` says more.")
+        how += (
+            " The allow-list names it, but morfic ignores that list: `morfic trust` did not sign it (a file from "
+            "elsewhere, or edited by hand); `morfic trust --list` says more."
+        )
     if source is not None:
-        raise UntrustedVariantError(f"run {source} needs the user variant {name}; morfic will not import code named "
-                                    f"by a stored run without --trust-variant {name}. {how}")
-    raise UntrustedVariantError(f"the user variant {name} was neither named on this command line nor trusted; morfic "
-                                f"imports a user's code only with consent. {how}")
+        raise UntrustedVariantError(
+            f"run {source} needs the user variant {name}; morfic will not import code named "
+            f"by a stored run without --trust-variant {name}. {how}"
+        )
+    raise UntrustedVariantError(
+        f"the user variant {name} was neither named on this command line nor trusted; morfic "
+        f"imports a user's code only with consent. {how}"
+    )
 
 
 def resolve_variant(name: str, *, source: str | None = None) -> Variant:
@@ -518,21 +605,26 @@ def resolve_variant(name: str, *, source: str | None = None) -> Variant:
             require_trusted(name, source=source)
             return user_variant(name, points[name].load(), f"{points[name].value}")
         exc = UnknownNameError("variant", name, [*VARIANTS, *points])
-        exc.args = (f"{exc.args[0].rstrip('.')}; or your own critic class by import path, module:Class "
-                    "(docs/extending.md).",)
+        exc.args = (
+            f"{exc.args[0].rstrip('.')}; or your own critic class by import path, module:Class (docs/extending.md).",
+        )
         raise exc
     require_trusted(name, source=source)
     module_name, _, attr = name.partition(":")
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise MorficError(f"variant '{name}': cannot import module '{module_name}' ({exc}). Install the package "
-                          "that provides it (a variant's code travels as its own package: docs/extending.md).") from exc
+        raise MorficError(
+            f"variant '{name}': cannot import module '{module_name}' ({exc}). Install the package "
+            "that provides it (a variant's code travels as its own package: docs/extending.md)."
+        ) from exc
     obj = module
     for part in attr.split("."):
         if not hasattr(obj, part):
-            raise MorficError(f"variant '{name}': module '{module_name}' has no '{attr}'; check the class name, "
-                              "or install the version of the package that defines it.")
+            raise MorficError(
+                f"variant '{name}': module '{module_name}' has no '{attr}'; check the class name, "
+                "or install the version of the package that defines it."
+            )
         obj = getattr(obj, part)
     return user_variant(name, obj, name)
 
@@ -545,21 +637,33 @@ def user_variant(name: str, cls: Any, path: str) -> Variant:
             ``encode_privileged``), or cannot be built as ``cls(obs, obs_groups, "critic", 1, **critic_cfg)``.
     """
     if not isinstance(cls, type):
-        raise MorficError(f"variant '{name}' names {type(cls).__name__} '{path}', not a class; a variant is a "
-                          "critic class (docs/extending.md).")
+        raise MorficError(
+            f"variant '{name}' names {type(cls).__name__} '{path}', not a class; a variant is a "
+            "critic class (docs/extending.md)."
+        )
     import torch
 
-    protocol = ("a critic model: a torch.nn.Module subclass with forward and encode_privileged, built as cls(obs, "
-                "obs_groups, 'critic', 1, **critic_cfg); subclass morfic_cli.rl.models.MorficCritic "
-                "(docs/extending.md, \"The protocol\")")
+    protocol = (
+        "a critic model: a torch.nn.Module subclass with forward and encode_privileged, built as cls(obs, "
+        "obs_groups, 'critic', 1, **critic_cfg); subclass morfic_cli.rl.models.MorficCritic "
+        '(docs/extending.md, "The protocol")'
+    )
     if not issubclass(cls, torch.nn.Module) or not callable(getattr(cls, "encode_privileged", None)):
         raise MorficError(f"variant '{name}': class {cls.__qualname__} is not {protocol}.")
     defaults = getattr(cls, "critic_defaults", {}) or {}
     if not isinstance(defaults, dict):
-        raise MorficError(f"variant '{name}': {cls.__name__}.critic_defaults must be a dict of critic config "
-                          f"entries, got {type(defaults).__name__}.")
-    variant = Variant(name=name, label=str(getattr(cls, "label", cls.__name__)), tables=(),
-                      critic_class=f"{cls.__module__}:{cls.__qualname__}", critic_defaults=dict(defaults), stock=False)
+        raise MorficError(
+            f"variant '{name}': {cls.__name__}.critic_defaults must be a dict of critic config "
+            f"entries, got {type(defaults).__name__}."
+        )
+    variant = Variant(
+        name=name,
+        label=str(getattr(cls, "label", cls.__name__)),
+        tables=(),
+        critic_class=f"{cls.__module__}:{cls.__qualname__}",
+        critic_defaults=dict(defaults),
+        stock=False,
+    )
     critic_cfg = {k: v for k, v in variant.model_cfgs()[1].items() if k != "class_name"}
     try:
         inspect.signature(cls).bind(None, None, "critic", 1, **critic_cfg)

@@ -22,7 +22,15 @@ if TYPE_CHECKING:
 
 #: Bodies whose ground contact ``SimFrame.body_contact_force`` reports, in this order.
 CONTACT_BODIES: tuple[str, ...] = (
-    "base", "FL_thigh", "FR_thigh", "RL_thigh", "RR_thigh", "FL_calf", "FR_calf", "RL_calf", "RR_calf",
+    "base",
+    "FL_thigh",
+    "FR_thigh",
+    "RL_thigh",
+    "RR_thigh",
+    "FL_calf",
+    "FR_calf",
+    "RL_calf",
+    "RR_calf",
 )
 
 
@@ -175,8 +183,9 @@ class SimBackend(Protocol):
         """
         ...
 
-    def set_actuation(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor,
-                      torque_limit: torch.Tensor) -> None:
+    def set_actuation(
+        self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor, torque_limit: torch.Tensor
+    ) -> None:
         """Set some envs' PD gains and torque limits, absolute values (the CPU backend only).
 
         For ``env.rand.actuation`` and the eval mode ``actuation-matched``. Shapes: (k,), (k,), (k,), (k, 3) hip /

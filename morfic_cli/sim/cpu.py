@@ -119,8 +119,14 @@ class SensorLayout:
 
 
 MUTABLE_FIELDS: tuple[str, ...] = (
-    "body_mass", "body_inertia", "jnt_range", "actuator_ctrlrange",  # set_morphology (apply_descriptor)
-    "geom_friction", "geom_solref", "body_ipos", "dof_frictionloss",  # set_dynamics
+    "body_mass",
+    "body_inertia",
+    "jnt_range",
+    "actuator_ctrlrange",  # set_morphology (apply_descriptor)
+    "geom_friction",
+    "geom_solref",
+    "body_ipos",
+    "dof_frictionloss",  # set_dynamics
 )
 """Model fields this backend writes after construction: :meth:`CpuBackend.set_geometry` always restores them."""
 
@@ -301,7 +307,7 @@ class CpuBackend:
     def frame(self) -> SimFrame:
         """The current frame without stepping (see the module docstring for where each field comes from)."""
         nq = self.models[0].nq
-        qpos, qvel = self.state[:, 1:1 + nq], self.state[:, self._qvel0:self._qvel0 + self.models[0].nv]
+        qpos, qvel = self.state[:, 1 : 1 + nq], self.state[:, self._qvel0 : self._qvel0 + self.models[0].nv]
         quat, lin_vel_w = qpos[:, 3:7], qvel[:, 0:3]
         sd, lay = self._sensordata, self.layout
         n = self.num_envs
@@ -318,7 +324,8 @@ class CpuBackend:
             foot_vel_w=self._tensor(sd[:, lay.foot_vel.reshape(-1)].reshape(n, len(LEGS), 3)),
             foot_force_w=self._tensor(sd[:, lay.foot_force.reshape(-1)].reshape(n, len(LEGS), 3)),
             body_contact_force=self._tensor(
-                np.linalg.norm(sd[:, lay.body_force.reshape(-1)].reshape(n, len(CONTACT_BODIES), 3), axis=-1)),
+                np.linalg.norm(sd[:, lay.body_force.reshape(-1)].reshape(n, len(CONTACT_BODIES), 3), axis=-1)
+            ),
             bad=self._tensor(self._bad, torch.bool),
         )
 
@@ -339,8 +346,15 @@ class CpuBackend:
             descriptor=self._tensor(self._descriptor, f64),
         )
 
-    def reset_envs(self, env_ids: torch.Tensor, base_pos: torch.Tensor, base_quat: torch.Tensor,
-                   base_vel: torch.Tensor, joint_pos: torch.Tensor, joint_vel: torch.Tensor) -> None:
+    def reset_envs(
+        self,
+        env_ids: torch.Tensor,
+        base_pos: torch.Tensor,
+        base_quat: torch.Tensor,
+        base_vel: torch.Tensor,
+        joint_pos: torch.Tensor,
+        joint_vel: torch.Tensor,
+    ) -> None:
         """Set the state of some envs; time, actuator activations and warm start are zeroed.
 
         Args:
@@ -362,8 +376,8 @@ class CpuBackend:
         qvel[:, 0:6] = self._rows(base_vel, k, (6,), "base_vel")
         qvel[:, self.info.dof_adr] = self._rows(joint_vel, k, (NUM_JOINTS,), "joint_vel")
         state = np.zeros((k, self.state.shape[1]))
-        state[:, 1:1 + model.nq] = qpos
-        state[:, self._qvel0:self._qvel0 + model.nv] = qvel
+        state[:, 1 : 1 + model.nq] = qpos
+        state[:, self._qvel0 : self._qvel0 + model.nv] = qvel
         self.state[ids] = state
         self._bad[ids] = False
         self._refresh_sensors(ids)
@@ -379,8 +393,10 @@ class CpuBackend:
             MorficError: the backend is in ``full`` mode, or a descriptor is invalid.
         """
         if not self.morphology_mutable:
-            raise MorficError(f"set_morphology needs the template backend; this one simulates "
-                              f"'{self.robot.name}' in full mode with its own morphology.")
+            raise MorficError(
+                f"set_morphology needs the template backend; this one simulates "
+                f"'{self.robot.name}' in full mode with its own morphology."
+            )
         ids = self._ids(env_ids)
         rows = self._rows(descriptors, ids.size, (11,), "descriptors")
         for env, m in zip(ids, rows, strict=True):
@@ -408,8 +424,10 @@ class CpuBackend:
             ValueError: a robot's model differs from the template's in its sizes.
         """
         if not self.morphology_mutable:
-            raise MorficError(f"procedural geometry needs the template backend; this one simulates "
-                              f"'{self.robot.name}' in full mode with its own morphology.")
+            raise MorficError(
+                f"procedural geometry needs the template backend; this one simulates "
+                f"'{self.robot.name}' in full mode with its own morphology."
+            )
         template = build_model(self.robot, floor=True, sim_sensors=True)
         template.opt.timestep = self.physics_dt
         pool = []
@@ -464,8 +482,9 @@ class CpuBackend:
             self.state[env] = self._home_state(env)
             self._bad[env] = False
 
-    def set_actuation(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor,
-                      torque_limit: torch.Tensor) -> None:
+    def set_actuation(
+        self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor, torque_limit: torch.Tensor
+    ) -> None:
         """Set some envs' position-actuator gains and torque limits (absolute values, every leg alike).
 
         Kp is ``actuator_gainprm[0]`` and ``-actuator_biasprm[1]``, Kd ``-actuator_biasprm[2]`` (MuJoCo's position
@@ -485,8 +504,14 @@ class CpuBackend:
         k = ids.size
         kp_, kd_ = self._rows(kp, k, (), "kp"), self._rows(kd, k, (), "kd")
         tau = np.tile(self._rows(torque_limit, k, (3,), "torque_limit"), (1, len(LEGS)))
-        if not (np.isfinite(kp_).all() and np.isfinite(kd_).all() and np.isfinite(tau).all()
-                and (kp_ > 0).all() and (kd_ >= 0).all() and (tau > 0).all()):
+        if not (
+            np.isfinite(kp_).all()
+            and np.isfinite(kd_).all()
+            and np.isfinite(tau).all()
+            and (kp_ > 0).all()
+            and (kd_ >= 0).all()
+            and (tau > 0).all()
+        ):
             raise ValueError("set_actuation needs finite gains and limits, Kp and limits > 0 and Kd >= 0.")
         act = self.info.actuator_ids
         for j, env in enumerate(ids):
@@ -511,14 +536,28 @@ class CpuBackend:
             Joint descriptions (k, 12, 18) and foot descriptions (k, 4, 6), float32 on the backend's device.
         """
         ids = self._ids(env_ids)
-        rows = [body_description(self.models[env], self._scratch, self._env_info[env], self._default_qpos[env],
-                                 np.asarray(self._env_robot[env].velocity_limit, dtype=np.float64)) for env in ids]
+        rows = [
+            body_description(
+                self.models[env],
+                self._scratch,
+                self._env_info[env],
+                self._default_qpos[env],
+                np.asarray(self._env_robot[env].velocity_limit, dtype=np.float64),
+            )
+            for env in ids
+        ]
         joints = np.stack([r[0] for r in rows]) if rows else np.zeros((0, NUM_JOINTS, len(JOINT_FIELDS)))
         feet = np.stack([r[1] for r in rows]) if rows else np.zeros((0, len(LEGS), len(FOOT_FIELDS)))
         return self._tensor(joints), self._tensor(feet)
 
-    def set_dynamics(self, env_ids: torch.Tensor, friction: torch.Tensor, restitution: torch.Tensor,
-                     com_offset: torch.Tensor, joint_friction: torch.Tensor) -> None:
+    def set_dynamics(
+        self,
+        env_ids: torch.Tensor,
+        friction: torch.Tensor,
+        restitution: torch.Tensor,
+        com_offset: torch.Tensor,
+        joint_friction: torch.Tensor,
+    ) -> None:
         """Domain randomisation of contact and joint properties for some envs (module docstring).
 
         Args:
@@ -560,7 +599,7 @@ class CpuBackend:
     def push(self, env_ids: torch.Tensor, delta_vel_xy: torch.Tensor) -> None:
         """Add a planar velocity kick to some envs' bases (world frame). Shapes: (k,), (k, 2) in m/s."""
         ids = self._ids(env_ids)
-        self.state[ids, self._qvel0:self._qvel0 + 2] += self._rows(delta_vel_xy, ids.size, (2,), "delta_vel_xy")
+        self.state[ids, self._qvel0 : self._qvel0 + 2] += self._rows(delta_vel_xy, ids.size, (2,), "delta_vel_xy")
 
     def close(self) -> None:
         """Stop the thread pool and drop the models."""

@@ -70,7 +70,11 @@ class BatchStepper:
         self.nu, self.nv, self.nsensordata = m0.nu, m0.nv, m0.nsensordata
         for m in self.models[1:]:
             if (mujoco.mj_stateSize(m, STATE_SPEC), m.nu, m.nv, m.nsensordata) != (
-                    self.nstate, self.nu, self.nv, self.nsensordata):
+                self.nstate,
+                self.nu,
+                self.nv,
+                self.nsensordata,
+            ):
                 raise ValueError("BatchStepper models must have the same state, control and sensor sizes.")
         nthread = self.num_threads if self.num_threads > 1 else 0
         self._rollout: rollout.Rollout | None = rollout.Rollout(nthread=nthread)
@@ -89,8 +93,11 @@ class BatchStepper:
     def _buffers_for(self, nsteps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if nsteps not in self._buffers:
             n = self.num_envs
-            self._buffers[nsteps] = (np.empty((n, nsteps, self.nu)), np.empty((n, nsteps, self.nstate)),
-                                     np.empty((n, nsteps, self.nsensordata)))
+            self._buffers[nsteps] = (
+                np.empty((n, nsteps, self.nu)),
+                np.empty((n, nsteps, self.nstate)),
+                np.empty((n, nsteps, self.nsensordata)),
+            )
         return self._buffers[nsteps]
 
     def step(self, state: np.ndarray, ctrl: np.ndarray, nsteps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -119,8 +126,17 @@ class BatchStepper:
         for _ in range(nsteps):  # the same float64 additions as MuJoCo's `time += timestep`
             expected = expected + self._dt
         with _collect_warnings() as messages:
-            self._rollout.rollout(self.models, self._datas, initial, control, skip_checks=True, nstep=nsteps,
-                                  initial_warmstart=self._warmstart, state=out_state, sensordata=out_sensor)
+            self._rollout.rollout(
+                self.models,
+                self._datas,
+                initial,
+                control,
+                skip_checks=True,
+                nstep=nsteps,
+                initial_warmstart=self._warmstart,
+                state=out_state,
+                sensordata=out_sensor,
+            )
         self.warnings = messages
         final = out_state[:, -1]
         ok = final[:, 0] == expected
@@ -166,8 +182,15 @@ def home_state(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndarray, 
     return state, data.ctrl.copy()
 
 
-def physics_floor(models: Sequence[mujoco.MjModel], nsteps: int, num_threads: int, *, decimation: int = 4,
-                  ctrl_noise: float = 0.0, seed: int = 0) -> float:
+def physics_floor(
+    models: Sequence[mujoco.MjModel],
+    nsteps: int,
+    num_threads: int,
+    *,
+    decimation: int = 4,
+    ctrl_noise: float = 0.0,
+    seed: int = 0,
+) -> float:
     """Raw physics throughput: every model stepped ``nsteps`` physics steps in C, no env logic.
 
     Each env starts at its ``home`` keyframe holding the keyframe's controls (a standing robot),
@@ -196,8 +219,10 @@ def physics_floor(models: Sequence[mujoco.MjModel], nsteps: int, num_threads: in
         state = np.stack([s for s, _ in homes])
         home_ctrl = np.stack([c for _, c in homes])
         calls = max(1, -(-int(nsteps) // decimation))
-        ctrls = [home_ctrl + ctrl_noise * rng.standard_normal(home_ctrl.shape) if ctrl_noise else home_ctrl
-                 for _ in range(calls + 1)]
+        ctrls = [
+            home_ctrl + ctrl_noise * rng.standard_normal(home_ctrl.shape) if ctrl_noise else home_ctrl
+            for _ in range(calls + 1)
+        ]
         state[:] = stepper.step(state, ctrls[0], decimation)[0]
         start = time.perf_counter()
         for ctrl in ctrls[1:]:

@@ -81,11 +81,20 @@ from morfic_cli.sim.floor import STATE_SPEC
 
 PER_WORLD_FIELDS: tuple[str, ...] = (
     # set_morphology
-    "body_mass", "body_inertia", "jnt_range", "actuator_ctrlrange",
+    "body_mass",
+    "body_inertia",
+    "jnt_range",
+    "actuator_ctrlrange",
     # set_dynamics
-    "geom_friction", "geom_solref", "body_ipos", "dof_frictionloss",
+    "geom_friction",
+    "geom_solref",
+    "body_ipos",
+    "dof_frictionloss",
     # derived constants that set_const recomputes from the fields above
-    "body_subtreemass", "body_invweight0", "dof_invweight0", "actuator_acc0",
+    "body_subtreemass",
+    "body_invweight0",
+    "dof_invweight0",
+    "actuator_acc0",
 )
 """Model fields with one row per world (everything morphology and randomisation change, and what depends on it)."""
 
@@ -119,8 +128,10 @@ def import_warp() -> tuple[Any, Any]:
             wp.config.log_level = wp.LOG_WARNING
         import mujoco_warp as mjw
     except ImportError as exc:
-        raise MorficError(f"the warp simulation backend needs mujoco_warp, which is not installed: {INSTALL_HINT}; "
-                          f"or use the cpu backend ({exc}).") from exc
+        raise MorficError(
+            f"the warp simulation backend needs mujoco_warp, which is not installed: {INSTALL_HINT}; "
+            f"or use the cpu backend ({exc})."
+        ) from exc
     with _native_stderr_to(os.devnull if not torch.cuda.is_available() else None):
         wp.init()  # without a GPU its C library prints a "no CUDA driver" warning: expected, so hidden
     return wp, mjw
@@ -162,8 +173,10 @@ def warp_device(device: str) -> str:
     if dev.type != "cuda":
         raise MorficError(f"unknown device '{device}' for the warp backend; valid devices are: cpu, cuda.")
     if not torch.cuda.is_available():
-        raise MorficError(f"device '{device}': no CUDA device is available to torch on this machine (or torch is a "
-                          "CPU build); use --device cpu, or a GPU machine with a CUDA build of torch.")
+        raise MorficError(
+            f"device '{device}': no CUDA device is available to torch on this machine (or torch is a "
+            "CPU build); use --device cpu, or a GPU machine with a CUDA build of torch."
+        )
     wp, _ = import_warp()
     if not wp.is_cuda_available():
         raise MorficError(f"device '{device}': warp finds no CUDA driver; check `nvidia-smi`, or use --device cpu.")
@@ -181,16 +194,21 @@ def _graphs_supported(wp: Any, device: str) -> bool:
     graphs every step launches its kernels one by one: slower, same results).
     """
     driver = wp.get_cuda_driver_version()
-    return (os.environ.get("MORFIC_WARP_GRAPHS", "1") != "0" and wp.is_mempool_enabled(device)
-            and driver is not None and tuple(driver) >= GRAPH_MIN_DRIVER)
+    return (
+        os.environ.get("MORFIC_WARP_GRAPHS", "1") != "0"
+        and wp.is_mempool_enabled(device)
+        and driver is not None
+        and tuple(driver) >= GRAPH_MIN_DRIVER
+    )
 
 
 def _axis_angle(axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
     """Rotation matrices about unit axes (Rodrigues). Shapes: axis (L, 3), angle (k, L) -> (k, L, 3, 3)."""
     x, y, z = axis.unbind(-1)
     zero = torch.zeros_like(x)
-    cross = torch.stack([torch.stack([zero, -z, y], -1), torch.stack([z, zero, -x], -1),
-                         torch.stack([-y, x, zero], -1)], -2)  # (L, 3, 3)
+    cross = torch.stack(
+        [torch.stack([zero, -z, y], -1), torch.stack([z, zero, -x], -1), torch.stack([-y, x, zero], -1)], -2
+    )  # (L, 3, 3)
     s, c = torch.sin(angle)[..., None, None], torch.cos(angle)[..., None, None]
     eye = torch.eye(3, dtype=axis.dtype, device=axis.device)
     return eye + s * cross + (1.0 - c) * (cross @ cross)
@@ -207,6 +225,7 @@ def _leg_chains(model: mujoco.MjModel, info: TemplateInfo, device: torch.device)
     Raises:
         MorficError: a leg has another joint type than hinges, a body with two joints, or the legs differ in depth.
     """
+
     def f64(arr: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(np.array(arr, dtype=np.float64), device=device)
 
@@ -235,8 +254,12 @@ def _leg_chains(model: mujoco.MjModel, info: TemplateInfo, device: torch.device)
             if any(model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE for j in js):
                 raise MorficError("the warp backend's leg kinematics supports hinge joints only.")
             adr = [int(model.jnt_qposadr[j]) for j in js]
-            joint = (f64(model.jnt_axis[js]), f64(model.jnt_pos[js]),
-                     torch.as_tensor([column[a] for a in adr], device=device), f64(model.qpos0[adr]))
+            joint = (
+                f64(model.jnt_axis[js]),
+                f64(model.jnt_pos[js]),
+                torch.as_tensor([column[a] for a in adr], device=device),
+                f64(model.qpos0[adr]),
+            )
         elif nj != {0}:
             raise MorficError("the warp backend's leg kinematics supports one hinge per leg body.")
         links.append({"pos": f64(model.body_pos[bodies]), "rot": f64(np.stack(rots)), "joint": joint})
@@ -250,9 +273,11 @@ def restitution_to_dampratio(e: torch.Tensor) -> torch.Tensor:
     return torch.where(e > 0, -log_e / torch.sqrt(math.pi**2 + log_e**2), torch.ones_like(e))
 
 
-GEOMETRY_NEEDS_CPU = ("procedural geometry (env.rand.geometry.enabled) runs on the cpu backend only; train it with "
-                      "--set env.sim.backend=cpu (no --device cuda), or turn it off with "
-                      "--set env.rand.geometry.enabled=false.")
+GEOMETRY_NEEDS_CPU = (
+    "procedural geometry (env.rand.geometry.enabled) runs on the cpu backend only; train it with "
+    "--set env.sim.backend=cpu (no --device cuda), or turn it off with "
+    "--set env.rand.geometry.enabled=false."
+)
 
 
 class WarpBackend:
@@ -313,8 +338,7 @@ class WarpBackend:
         self._qpos_adr = torch.tensor(self.info.qpos_adr, device=self.device)
         self._dof_adr = torch.tensor(self.info.dof_adr, device=self.device)
         self._act_ids = torch.tensor(self.info.actuator_ids, device=self.device)
-        self._key_qpos = torch.as_tensor(first.key_qpos[first.key("home").id], dtype=torch.float32,
-                                         device=self.device)
+        self._key_qpos = torch.as_tensor(first.key_qpos[first.key("home").id], dtype=torch.float32, device=self.device)
         self._views()
         self._init_template_tensors(nominal)
         self._const_dirty = False
@@ -375,8 +399,10 @@ class WarpBackend:
         self._home_qpos = home
         """The home state's qpos of every world (default pose, clamped into its limits, at the init height)."""
         lay = self.layout
-        self._cols = {name: t(getattr(lay, name).reshape(-1), torch.long)
-                      for name in ("torque", "foot_pos", "foot_vel", "foot_force", "body_force")}
+        self._cols = {
+            name: t(getattr(lay, name).reshape(-1), torch.long)
+            for name in ("torque", "foot_pos", "foot_vel", "foot_force", "body_force")
+        }
 
     def _views(self) -> None:
         """Zero-copy torch views of the warp arrays this backend reads and writes."""
@@ -399,8 +425,11 @@ class WarpBackend:
             return
         outer = torch.cuda.current_stream(self.device)
         self._stream.wait_stream(outer)
-        with torch.cuda.stream(self._stream), self._wp.ScopedDevice(self._wp_device), \
-                self._wp.ScopedStream(self._wp_stream):
+        with (
+            torch.cuda.stream(self._stream),
+            self._wp.ScopedDevice(self._wp_device),
+            self._wp.ScopedStream(self._wp_stream),
+        ):
             yield
         outer.wait_stream(self._stream)
 
@@ -500,8 +529,15 @@ class WarpBackend:
         self._check(((ids >= 0) & (ids < n)).all(), ValueError, f"env ids must be in [0, {n}).")
         return ids
 
-    def _device_rows(self, value: torch.Tensor, k: int, shape: tuple[int, ...], what: str,
-                     dtype: torch.dtype = torch.float32, exc: type[Exception] = MorficError) -> torch.Tensor:
+    def _device_rows(
+        self,
+        value: torch.Tensor,
+        k: int,
+        shape: tuple[int, ...],
+        what: str,
+        dtype: torch.dtype = torch.float32,
+        exc: type[Exception] = MorficError,
+    ) -> torch.Tensor:
         """``value`` as (k, *shape) rows of ``dtype`` on the device; ``exc`` naming ``what`` for another shape."""
         if tuple(value.shape) != (k, *shape):
             raise exc(f"{what}: expected shape {(k, *shape)}, got {tuple(value.shape)}.")
@@ -562,8 +598,12 @@ class WarpBackend:
         jnt_range[:, self._t_joint_ids] = ranges
         ctrlrange = self._t_ctrlrange.expand(k, -1, -1).clone()
         ctrlrange[:, self._act_ids] = ranges
-        return {"body_mass": mass, "body_inertia": self._t_body_inertia[None] * scale[..., None],
-                "jnt_range": jnt_range, "actuator_ctrlrange": ctrlrange}
+        return {
+            "body_mass": mass,
+            "body_inertia": self._t_body_inertia[None] * scale[..., None],
+            "jnt_range": jnt_range,
+            "actuator_ctrlrange": ctrlrange,
+        }
 
     # ------------------------------------------------------------------------------------------
     # SimBackend
@@ -673,8 +713,15 @@ class WarpBackend:
             descriptor=self._descriptor,
         )
 
-    def reset_envs(self, env_ids: torch.Tensor, base_pos: torch.Tensor, base_quat: torch.Tensor,
-                   base_vel: torch.Tensor, joint_pos: torch.Tensor, joint_vel: torch.Tensor) -> None:
+    def reset_envs(
+        self,
+        env_ids: torch.Tensor,
+        base_pos: torch.Tensor,
+        base_quat: torch.Tensor,
+        base_vel: torch.Tensor,
+        joint_pos: torch.Tensor,
+        joint_vel: torch.Tensor,
+    ) -> None:
         """Set the state of some envs; time and warm start are zeroed, sensors recomputed.
 
         Args:
@@ -733,8 +780,10 @@ class WarpBackend:
             MorficError: the backend is in ``full`` mode, or a descriptor is invalid.
         """
         if not self.morphology_mutable:
-            raise MorficError(f"set_morphology needs the template backend; this one simulates "
-                              f"'{self.robot.name}' in full mode with its own morphology.")
+            raise MorficError(
+                f"set_morphology needs the template backend; this one simulates "
+                f"'{self.robot.name}' in full mode with its own morphology."
+            )
         with self._on_stream():
             ids = self._ids(env_ids)
             m = self._rows64(descriptors, len(ids), (11,), "descriptors")
@@ -770,15 +819,18 @@ class WarpBackend:
         """See :meth:`set_geometry_pool`. Raises MorficError."""
         raise MorficError(GEOMETRY_NEEDS_CPU)
 
-    def set_actuation(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor,
-                      torque_limit: torch.Tensor) -> None:
+    def set_actuation(
+        self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor, torque_limit: torch.Tensor
+    ) -> None:
         """Not supported: per-env gains and torque limits run on the CPU backend only.
 
         (``env.rand.actuation``, eval mode ``actuation-matched``.) Raises MorficError.
         """
-        raise MorficError("per-env gains and torque limits (env.rand.actuation, eval mode actuation-matched) run on "
-                          "the cpu backend only; train with --set env.sim.backend=cpu (no --device cuda), or turn "
-                          "them off with --set env.rand.actuation.enabled=false.")
+        raise MorficError(
+            "per-env gains and torque limits (env.rand.actuation, eval mode actuation-matched) run on "
+            "the cpu backend only; train with --set env.sim.backend=cpu (no --device cuda), or turn "
+            "them off with --set env.rand.actuation.enabled=false."
+        )
 
     def body_description(self, env_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Not supported: URMA's joint and foot descriptions (``env.obs.body_tokens``, variant ``urma``).
@@ -788,11 +840,19 @@ class WarpBackend:
         Raises:
             MorficError: always.
         """
-        raise MorficError("variant urma's joint descriptions (env.obs.body_tokens) need the CPU backend, which keeps "
-                          "one MjModel per env; train it with --device cpu (--set env.sim.backend=cpu).")
+        raise MorficError(
+            "variant urma's joint descriptions (env.obs.body_tokens) need the CPU backend, which keeps "
+            "one MjModel per env; train it with --device cpu (--set env.sim.backend=cpu)."
+        )
 
-    def set_dynamics(self, env_ids: torch.Tensor, friction: torch.Tensor, restitution: torch.Tensor,
-                     com_offset: torch.Tensor, joint_friction: torch.Tensor) -> None:
+    def set_dynamics(
+        self,
+        env_ids: torch.Tensor,
+        friction: torch.Tensor,
+        restitution: torch.Tensor,
+        com_offset: torch.Tensor,
+        joint_friction: torch.Tensor,
+    ) -> None:
         """Domain randomisation of contact and joint properties for some worlds (see :mod:`morfic_cli.sim.cpu`).
 
         Args:
@@ -811,10 +871,16 @@ class WarpBackend:
             mu, e = self._rows64(friction, k, (), "friction"), self._rows64(restitution, k, (), "restitution")
             com = self._rows64(com_offset, k, (3,), "com_offset")
             jf = self._rows64(joint_friction, k, (NUM_JOINTS,), "joint_friction")
-            self._check((torch.isfinite(mu) & (mu >= 0)).all() & (torch.isfinite(jf) & (jf >= 0)).all(),
-                        ValueError, "friction and joint_friction must be finite and >= 0.")
-            self._check((torch.isfinite(e) & (e >= 0) & (e < 1)).all() & torch.isfinite(com).all(),
-                        ValueError, "restitution must be in [0, 1) and com_offset finite.")
+            self._check(
+                (torch.isfinite(mu) & (mu >= 0)).all() & (torch.isfinite(jf) & (jf >= 0)).all(),
+                ValueError,
+                "friction and joint_friction must be finite and >= 0.",
+            )
+            self._check(
+                (torch.isfinite(e) & (e >= 0) & (e < 1)).all() & torch.isfinite(com).all(),
+                ValueError,
+                "restitution must be in [0, 1) and com_offset finite.",
+            )
             f = self.fields
             f["geom_friction"][ids, :, 0] = mu.float()[:, None]
             f["geom_solref"][ids, :, 1] = restitution_to_dampratio(e).float()[:, None]
@@ -843,8 +909,8 @@ class WarpBackend:
         with self._on_stream():
             rows = torch.as_tensor(state["state"], device=self.device).to(torch.float32)
             self._time.copy_(rows[:, 0])
-            self._qpos.copy_(rows[:, 1:1 + nq])
-            self._qvel.copy_(rows[:, 1 + nq:])
+            self._qpos.copy_(rows[:, 1 : 1 + nq])
+            self._qvel.copy_(rows[:, 1 + nq :])
             self._sensordata.copy_(torch.as_tensor(state["sensordata"], device=self.device).to(torch.float32))
 
     def push(self, env_ids: torch.Tensor, delta_vel_xy: torch.Tensor) -> None:
@@ -884,8 +950,9 @@ class WarpBackend:
         with self._on_stream():
             self._set_const()
             lo, hi = self._d_joint_range[..., 0], self._d_joint_range[..., 1]
-            staged = [torch.clamp(self._device_rows(c, self.num_envs, (NUM_JOINTS,), "controls"), lo, hi)
-                      for c in controls]
+            staged = [
+                torch.clamp(self._device_rows(c, self.num_envs, (NUM_JOINTS,), "controls"), lo, hi) for c in controls
+            ]
             self._ctrl[:, self._act_ids] = staged[0]
             self._physics(nsteps)  # warm-up: kernels and graphs
             self._synchronize()

@@ -93,8 +93,10 @@ class Store:
         for path in (self.root, *self.root.parents):
             if path.exists():
                 if not path.is_dir():
-                    raise StoreError(f"store root {self.root}: {path} is a file, not a directory; pass a folder (or a "
-                                     "path that does not exist yet) to --store or MORFIC_STORE.")
+                    raise StoreError(
+                        f"store root {self.root}: {path} is a file, not a directory; pass a folder (or a "
+                        "path that does not exist yet) to --store or MORFIC_STORE."
+                    )
                 break
         self.lock_timeout = default_timeout() if lock_timeout is None else lock_timeout
         self.objects = ObjectDB(self.root)
@@ -170,13 +172,15 @@ class Store:
 
     def omitted_inputs(self, manifest: Manifest) -> dict[str, str]:
         """Role -> id of the inputs of ``manifest`` that a weights-only import left out (empty for a full store)."""
-        return {role: oid for role, oid in manifest.inputs.items()
-                if role in OMITTABLE_ROLES and self.is_omitted(oid)}
+        return {role: oid for role, oid in manifest.inputs.items() if role in OMITTABLE_ROLES and self.is_omitted(oid)}
 
     def omitted_files(self, manifest: Manifest) -> dict[str, str]:
         """File name -> id of the files of ``manifest`` an import left out (weights, logs, curves, figures)."""
-        return {name: entry.id for name, entry in manifest.files.items()
-                if omittable_file(manifest.kind, name) and self.is_omitted(entry.id)}
+        return {
+            name: entry.id
+            for name, entry in manifest.files.items()
+            if omittable_file(manifest.kind, name) and self.is_omitted(entry.id)
+        }
 
     def weights_omitted(self, manifest: Manifest) -> bool:
         """Whether ``manifest``'s weights (``model.pt``) were left out (a run imported from a results-only bundle).
@@ -215,10 +219,16 @@ class Store:
         check_kind(kind)
         with self.writing():
             input_ids = {role: self._input_id(role, spec) for role, spec in (inputs or {}).items()}
-            entries = {check_file_name(name): self._put_entry(name, value)
-                       for name, value in (files or {}).items()}
-            doc = build_manifest(kind, created=utc_now(), morfic_version=__version__, config=config,
-                                 inputs=input_ids, files=entries, meta=meta)
+            entries = {check_file_name(name): self._put_entry(name, value) for name, value in (files or {}).items()}
+            doc = build_manifest(
+                kind,
+                created=utc_now(),
+                morfic_version=__version__,
+                config=config,
+                inputs=input_ids,
+                files=entries,
+                meta=meta,
+            )
             problem = manifest_problem(doc)
             if problem is not None:
                 raise StoreError(f"cannot store this {kind} manifest: {problem}.")
@@ -234,8 +244,10 @@ class Store:
         except ArtifactNotFoundError as exc:
             raise StoreError(f"manifest input '{role}': {exc}") from exc
         if not self.index.has(oid):
-            raise StoreError(f"manifest input '{role}' must be a manifest, but {oid} is a plain object; give the "
-                             "id or ref of a manifest (see `morfic store ls`).")
+            raise StoreError(
+                f"manifest input '{role}' must be a manifest, but {oid} is a plain object; give the "
+                "id or ref of a manifest (see `morfic store ls`)."
+            )
         return oid
 
     def _put_entry(self, name: str, value: bytes | Path) -> FileEntry:
@@ -265,8 +277,10 @@ class Store:
         """Read-only path of file ``name`` of a manifest, for readers that want a path (not rehashed)."""
         entry = self._file_entry(manifest_spec, name)
         if not self.objects.has(entry.id):
-            raise ArtifactNotFoundError(f"file '{name}' ({entry.id}) of manifest {manifest_spec} is missing "
-                                        "from the store; run `morfic store verify`.")
+            raise ArtifactNotFoundError(
+                f"file '{name}' ({entry.id}) of manifest {manifest_spec} is missing "
+                "from the store; run `morfic store verify`."
+            )
         return self.objects.path(entry.id)
 
     def _file_entry(self, manifest_spec: str, name: str) -> FileEntry:
@@ -274,11 +288,13 @@ class Store:
         manifest = self.read_manifest(manifest_spec)
         entry = manifest.file(name)
         if omittable_file(manifest.kind, name) and self.is_omitted(entry.id):
-            raise ArtifactNotFoundError(f"file '{name}' ({entry.id[:12]}) of {manifest_spec} is not in store "
-                                        f"{self.root}: a results-only bundle left it out (results without weights, "
-                                        "rollout logs, rendered figures or other runs' curves); `morfic report` "
-                                        "draws the figures from the tables, and a bundle that holds the file (the "
-                                        "run's weights-only or full bundle) brings it.")
+            raise ArtifactNotFoundError(
+                f"file '{name}' ({entry.id[:12]}) of {manifest_spec} is not in store "
+                f"{self.root}: a results-only bundle left it out (results without weights, "
+                "rollout logs, rendered figures or other runs' curves); `morfic report` "
+                "draws the figures from the tables, and a bundle that holds the file (the "
+                "run's weights-only or full bundle) brings it."
+            )
         return entry
 
     # -- refs ---------------------------------------------------------------------------------
@@ -299,8 +315,9 @@ class Store:
         with self.writing():
             target = self.resolve(oid)
             if not self.index.has(target):
-                raise StoreError(f"refs name manifests, but {target} is not one; give the id of a manifest "
-                                 "(see `morfic store ls`).")
+                raise StoreError(
+                    f"refs name manifests, but {target} is not one; give the id of a manifest (see `morfic store ls`)."
+                )
             return self.refs.append(name, target, utc_now(), expect=expect)
 
     def publish(self, kind: str, ref: str | None = None, **kwargs: Any) -> Published:
@@ -359,13 +376,16 @@ class Store:
             if self.objects.has(hexid):
                 return hexid
             if self.is_omitted(hexid):
-                raise ArtifactNotFoundError(f"artifact {hexid} is not in store {self.root}: a weights-only bundle "
-                                            "left it out (a trainer state), or a results-only one (a trainer state, "
-                                            "weights, a rollout log or a figure); import the full bundle to get it.")
+                raise ArtifactNotFoundError(
+                    f"artifact {hexid} is not in store {self.root}: a weights-only bundle "
+                    "left it out (a trainer state), or a results-only one (a trainer state, "
+                    "weights, a rollout log or a figure); import the full bundle to get it."
+                )
             raise self._not_found(text)
         if len(hexid) < MIN_PREFIX or len(hexid) > 64:
-            raise ArtifactNotFoundError(f"id prefix '{text}' is too short: give at least {MIN_PREFIX} hex "
-                                        "characters (see `morfic store ls`).")
+            raise ArtifactNotFoundError(
+                f"id prefix '{text}' is too short: give at least {MIN_PREFIX} hex characters (see `morfic store ls`)."
+            )
         matches = self.objects.find_prefix(hexid)
         if len(matches) == 1:
             return matches[0]
@@ -373,8 +393,9 @@ class Store:
             raise self._not_found(text)
         shown = ", ".join(f"{m} ({self._kind_of(m)})" for m in matches[:10])
         more = f" and {len(matches) - 10} more" if len(matches) > 10 else ""
-        raise ArtifactNotFoundError(f"id prefix '{text}' is ambiguous: it matches {len(matches)} objects: "
-                                    f"{shown}{more}. Give more characters.")
+        raise ArtifactNotFoundError(
+            f"id prefix '{text}' is ambiguous: it matches {len(matches)} objects: {shown}{more}. Give more characters."
+        )
 
     def _kind_of(self, oid: str) -> str:
         manifest = load_manifest_if_any(self, oid, strict=False)
@@ -382,12 +403,16 @@ class Store:
 
     def _not_found(self, spec: str) -> ArtifactNotFoundError:
         if not self.root.is_dir():
-            return ArtifactNotFoundError(f"no artifact '{spec}': the store {self.root} does not exist yet "
-                                         "(pass --store or set MORFIC_STORE); try `morfic store ls`.")
+            return ArtifactNotFoundError(
+                f"no artifact '{spec}': the store {self.root} does not exist yet "
+                "(pass --store or set MORFIC_STORE); try `morfic store ls`."
+            )
         close = difflib.get_close_matches(spec.split("@")[0], self.refs.names(), n=3)
         hint = f" Did you mean: {', '.join(close)}?" if close else ""
-        return ArtifactNotFoundError(f"no artifact '{spec}' in store {self.root} (not a ref, a ref@version, "
-                                     f"an id or a unique id prefix); try `morfic store ls`.{hint}")
+        return ArtifactNotFoundError(
+            f"no artifact '{spec}' in store {self.root} (not a ref, a ref@version, "
+            f"an id or a unique id prefix); try `morfic store ls`.{hint}"
+        )
 
     # -- listing ------------------------------------------------------------------------------
 
@@ -422,8 +447,14 @@ class Store:
         except StoreError:
             return {"ref": label, "id": oid, "kind": None, "created": None, "files": None, "size": None}
         absent = self.omitted_files(manifest)  # left out by a results-only import: not held, not counted
-        return {"ref": label, "id": oid, "kind": manifest.kind, "created": manifest.created,
-                "files": len(manifest.files), "size": sum(f.size for n, f in manifest.files.items() if n not in absent)}
+        return {
+            "ref": label,
+            "id": oid,
+            "kind": manifest.kind,
+            "created": manifest.created,
+            "files": len(manifest.files),
+            "size": sum(f.size for n, f in manifest.files.items() if n not in absent),
+        }
 
     def _ref_labels(self) -> dict[str, list[str]]:
         """Id -> every ref label naming it: current names first (sorted), then ``name@N`` (newest first)."""
@@ -452,8 +483,13 @@ class Store:
         if manifest is None:
             return {"id": oid, "kind": None, "size": self.objects.size(oid), "refs": refs}
         omitted, files = self.omitted_inputs(manifest), self.omitted_files(manifest)
-        return {"id": oid, "refs": refs, **manifest.to_dict(), **({"omitted": omitted} if omitted else {}),
-                **({"omitted_files": files} if files else {})}
+        return {
+            "id": oid,
+            "refs": refs,
+            **manifest.to_dict(),
+            **({"omitted": omitted} if omitted else {}),
+            **({"omitted_files": files} if files else {}),
+        }
 
     # -- maintenance --------------------------------------------------------------------------
 
@@ -475,17 +511,24 @@ class Store:
         with self._lock.exclusive():
             return collect_garbage(self, dry_run=dry_run)
 
-    def export_tar(self, refs: list[str], out: Path, *, latest: bool = False,
-                   without_trainer_state: bool = False, results_only: bool = False) -> ExportReport:
+    def export_tar(
+        self,
+        refs: list[str],
+        out: Path,
+        *,
+        latest: bool = False,
+        without_trainer_state: bool = False,
+        results_only: bool = False,
+    ) -> ExportReport:
         """Write the closure of ``refs`` (every version, or only the current one with ``latest``) to the tar ``out``.
 
         ``without_trainer_state``: a weights-only bundle; ``results_only``: ``refs`` are runs, and the bundle holds
         their results without weights or logs (see :func:`morfic_cli.store.transfer.export_tar`).
         """
-        return export_tar(self, refs, Path(out), latest=latest, without_trainer_state=without_trainer_state,
-                          results_only=results_only)
+        return export_tar(
+            self, refs, Path(out), latest=latest, without_trainer_state=without_trainer_state, results_only=results_only
+        )
 
     def import_tar(self, path: Path, *, append: AppendRule = False) -> ImportReport:
         """Import a tar made by :meth:`export_tar`; idempotent (see :class:`ImportReport`; ``append``: there)."""
         return import_tar(self, Path(path), append=append)
-

@@ -112,8 +112,10 @@ def load_manifest_if_any(store: Store, oid: str, *, strict: bool) -> Manifest | 
         return parse_manifest(oid, store.objects.get_bytes(oid))
     except StoreError as exc:
         if indexed and strict:
-            raise StoreError(f"manifest {oid} cannot be read ({exc}); refusing to decide what is "
-                             "reachable. Run `morfic store verify` and repair the store first.") from exc
+            raise StoreError(
+                f"manifest {oid} cannot be read ({exc}); refusing to decide what is "
+                "reachable. Run `morfic store verify` and repair the store first."
+            ) from exc
         return None
 
 
@@ -213,9 +215,11 @@ def walk(store: Store, roots: Iterable[str], *, strict: bool = True, leave_out: 
     if strict and damaged:
         listed = ", ".join(f"{oid} ({why})" for oid, why in sorted(damaged.items())[:10])
         more = f" and {len(damaged) - 10} more" if len(damaged) > 10 else ""
-        raise StoreError(f"{len(damaged)} manifest(s) reachable from refs cannot be read: {listed}{more}; what "
-                         "they name is unknown, so refusing to delete or export anything. Run `morfic store "
-                         "verify`, restore them (`morfic store import` of an export that holds them), then retry.")
+        raise StoreError(
+            f"{len(damaged)} manifest(s) reachable from refs cannot be read: {listed}{more}; what "
+            "they name is unknown, so refusing to delete or export anything. Run `morfic store "
+            "verify`, restore them (`morfic store import` of an export that holds them), then retry."
+        )
     return Walk(ids=seen - set(absent), absent=absent, absent_files=absent_files)
 
 
@@ -336,8 +340,10 @@ def _verify_manifest_links(store: Store, manifest: Manifest, report: VerifyRepor
         elif not store.objects.has(entry.id):
             report.problems.append(f"manifest {manifest.id}: file '{name}' object {entry.id} is missing")
         elif store.objects.size(entry.id) != entry.size:
-            report.problems.append(f"manifest {manifest.id}: file '{name}' size {entry.size} does not "
-                                   f"match its object ({store.objects.size(entry.id)} bytes)")
+            report.problems.append(
+                f"manifest {manifest.id}: file '{name}' size {entry.size} does not "
+                f"match its object ({store.objects.size(entry.id)} bytes)"
+            )
     for role, oid in manifest.inputs.items():
         if role in OMITTABLE_ROLES and store.is_omitted(oid):
             report.omitted += 1
@@ -364,5 +370,6 @@ def _verify_refs(store: Store, report: VerifyReport) -> None:
             if not store.objects.has(entry.id):
                 report.problems.append(f"ref '{name}@{entry.version}' points at missing object {entry.id}")
             elif not store.index.has(entry.id):
-                report.problems.append(f"ref '{name}@{entry.version}' points at {entry.id}, which is not "
-                                       "an indexed manifest")
+                report.problems.append(
+                    f"ref '{name}@{entry.version}' points at {entry.id}, which is not an indexed manifest"
+                )

@@ -60,26 +60,41 @@ def _plan(manifest: Manifest, wanted: list[str], out: Path, force: bool) -> list
     if clash is not None:
         first = next(n for n, o in names.items() if o == clash[0])
         second = next(n for n, o in names.items() if o == clash[1] and n != first)
-        raise MorficError(f"files '{first}' and '{second}' of artifact {manifest.id[:12]} would both be written to "
-                          f"{clash[0]!r} (names equal but for case, or a file where the other needs a folder); "
-                          "nothing was written. morfic never stores such an artifact: fetch one of them with --file "
-                          "NAME.")
+        raise MorficError(
+            f"files '{first}' and '{second}' of artifact {manifest.id[:12]} would both be written to "
+            f"{clash[0]!r} (names equal but for case, or a file where the other needs a folder); "
+            "nothing was written. morfic never stores such an artifact: fetch one of them with --file "
+            "NAME."
+        )
     plan = [(name, safe_join(out, names[name])) for name in wanted]
     base = out.resolve()
-    blocked = next((parent for _, path in plan for parent in path.parents
-                    if parent != base and base in parent.parents and (parent.is_file() or parent.is_symlink())), None)
+    blocked = next(
+        (
+            parent
+            for _, path in plan
+            for parent in path.parents
+            if parent != base and base in parent.parents and (parent.is_file() or parent.is_symlink())
+        ),
+        None,
+    )
     if blocked is not None:
-        raise MorficError(f"{printable(blocked)} is a file, where store get needs a folder; nothing was written. "
-                          "Choose another --out.")
+        raise MorficError(
+            f"{printable(blocked)} is a file, where store get needs a folder; nothing was written. "
+            "Choose another --out."
+        )
     there = [path for _, path in plan if path.exists() or path.is_symlink()]
     folders = [p for p in there if p.is_dir() and not p.is_symlink()]
     if folders:
-        raise MorficError(f"{printable(folders[0])} is a folder, where store get would write a file; nothing was "
-                          "written. Choose another --out.")
+        raise MorficError(
+            f"{printable(folders[0])} is a folder, where store get would write a file; nothing was "
+            "written. Choose another --out."
+        )
     if there and not force:
         shown = ", ".join(printable(p) for p in there[:3]) + (f" and {len(there) - 3} more" if len(there) > 3 else "")
-        raise MorficError(f"{shown} exist{'s' if len(there) == 1 else ''}; nothing was written. Pass --force to "
-                          "replace them, or choose another --out.")
+        raise MorficError(
+            f"{shown} exist{'s' if len(there) == 1 else ''}; nothing was written. Pass --force to "
+            "replace them, or choose another --out."
+        )
     return plan
 
 
@@ -96,8 +111,9 @@ def get_files(store, spec: str, out: Path, names: list[str] | None = None, *, fo
     manifest = store.read_manifest(spec)
     wanted = list(dict.fromkeys(names)) if names else sorted(manifest.files)
     if not wanted:
-        raise MorficError(f"{manifest.kind} artifact '{printable(spec)}' holds no files; see `morfic store show "
-                          f"{printable(spec)}`.")
+        raise MorficError(
+            f"{manifest.kind} artifact '{printable(spec)}' holds no files; see `morfic store show {printable(spec)}`."
+        )
     entries = {name: manifest.file(name) for name in wanted}  # unknown names fail before anything is written
     if out.exists() and not out.is_dir():
         raise MorficError(f"--out {out} is a file; give a directory (it is created if missing).")
@@ -121,4 +137,3 @@ def get_files(store, spec: str, out: Path, names: list[str] | None = None, *, fo
     except OSError as exc:
         raise MorficError(f"cannot write to {out}: {exc.strerror or exc}.") from exc
     return got
-

@@ -51,8 +51,10 @@ def default_timeout() -> float:
     except ValueError:
         value = -1.0
     if not 0 < value < float("inf"):
-        raise StoreError(f"{TIMEOUT_ENV}={raw[:40]!r} is not a number of seconds; set it to how long to wait for a "
-                         f"busy store lock (e.g. {TIMEOUT_ENV}=600), or unset it for {DEFAULT_TIMEOUT_S:.0f} s.")
+        raise StoreError(
+            f"{TIMEOUT_ENV}={raw[:40]!r} is not a number of seconds; set it to how long to wait for a "
+            f"busy store lock (e.g. {TIMEOUT_ENV}=600), or unset it for {DEFAULT_TIMEOUT_S:.0f} s."
+        )
     return value
 
 
@@ -61,8 +63,9 @@ def _open_lock_file(path: Path) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         return os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
-        raise StoreError(f"cannot open the lock file {path}: {exc.strerror or exc}; "
-                         "check that the store directory is writable.") from exc
+        raise StoreError(
+            f"cannot open the lock file {path}: {exc.strerror or exc}; check that the store directory is writable."
+        ) from exc
 
 
 def _acquire(fd: int, path: Path, *, exclusive: bool, timeout: float) -> None:
@@ -79,8 +82,11 @@ def _acquire(fd: int, path: Path, *, exclusive: bool, timeout: float) -> None:
                 raise StoreError(f"cannot lock {path}: {exc.strerror or exc}.") from exc
         if time.monotonic() >= deadline:
             kind = "exclusive" if exclusive else "shared"
-            holder = ("a writer: a training's checkpoint, an import, ..." if exclusive
-                      else "`morfic store gc`") if path.name == "store.lock" else "another writer"
+            holder = (
+                ("a writer: a training's checkpoint, an import, ..." if exclusive else "`morfic store gc`")
+                if path.name == "store.lock"
+                else "another writer"
+            )
             raise LockTimeoutError(
                 f"timed out after {timeout:g} s waiting for the {kind} lock {path}: another morfic "
                 f"process is using the store ({holder}). Wait for it to finish and retry (or wait longer: "
@@ -142,8 +148,10 @@ class StoreLock:
         """Hold the lock exclusively (gc). Refused inside a shared block of the same instance."""
         with self._mutex:
             if self._mode == "shared":
-                raise StoreError("cannot run gc inside `store.writing()`: the write holds the store "
-                                 "lock shared; run gc after the write has finished.")
+                raise StoreError(
+                    "cannot run gc inside `store.writing()`: the write holds the store "
+                    "lock shared; run gc after the write has finished."
+                )
             if self._depth == 0:
                 self._take(exclusive=True)
             self._depth += 1

@@ -120,8 +120,9 @@ class Manifest:
         """
         if name not in self.files:
             have = ", ".join(sorted(self.files)) or "none"
-            raise ArtifactNotFoundError(f"{self.kind} manifest {self.id[:12]} has no file '{name}'; "
-                                        f"its files are: {have}.")
+            raise ArtifactNotFoundError(
+                f"{self.kind} manifest {self.id[:12]} has no file '{name}'; its files are: {have}."
+            )
         return self.files[name]
 
     def referenced_ids(self) -> list[str]:
@@ -143,8 +144,10 @@ def canonical_json(doc: Any) -> bytes:
     try:
         text = json.dumps(doc, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
     except (TypeError, ValueError) as exc:
-        raise StoreError(f"cannot store this manifest as canonical JSON: {exc} (config and meta must "
-                         "hold only dicts with str keys, lists, str, int, finite float, bool, None).") from exc
+        raise StoreError(
+            f"cannot store this manifest as canonical JSON: {exc} (config and meta must "
+            "hold only dicts with str keys, lists, str, int, finite float, bool, None)."
+        ) from exc
     return text.encode("ascii")
 
 
@@ -207,11 +210,15 @@ def plain_name_problem(name: object) -> str | None:
     if bad is not None and bad.startswith("."):
         return f"has the hidden part {ascii(bad[:40])} (starts with '.')"
     if bad is not None:
-        return (f"has the part {ascii(bad[:40])}, which starts with or holds another character than ASCII letters, "
-                "digits and '_' (then also '.', '+', '-')")
+        return (
+            f"has the part {ascii(bad[:40])}, which starts with or holds another character than ASCII letters, "
+            "digits and '_' (then also '.', '+', '-')"
+        )
     if name.lower().endswith(CODE_SUFFIXES):
-        return (f"ends in {name[name.rfind('.'):]!r}, a file Python runs or imports from a folder on its path; no "
-                "artifact holds code")
+        return (
+            f"ends in {name[name.rfind('.') :]!r}, a file Python runs or imports from a folder on its path; no "
+            "artifact holds code"
+        )
     return None
 
 
@@ -244,9 +251,11 @@ def check_file_name(name: str) -> str:
     """
     problem = plain_name_problem(name)
     if problem is not None:
-        raise StoreError(f"invalid manifest file name {ascii(str(name)[:80])}: it {problem}; use a relative name "
-                         "like 'curves.csv' or 'figures/ev.png' (ASCII letters, digits, '.', '_', '+', '-'; no "
-                         "leading '/' or '.', no '.' or '..' parts).")
+        raise StoreError(
+            f"invalid manifest file name {ascii(str(name)[:80])}: it {problem}; use a relative name "
+            "like 'curves.csv' or 'figures/ev.png' (ASCII letters, digits, '.', '_', '+', '-'; no "
+            "leading '/' or '.', no '.' or '..' parts)."
+        )
     return name
 
 
@@ -265,8 +274,10 @@ def safe_join(folder: Path, name: str) -> Path:
     try:
         path.resolve().relative_to(base)
     except ValueError:
-        raise StoreError(f"manifest file name {name!r} leads outside {folder} (through a symlink?); "
-                         "remove the link or write to an empty folder.") from None
+        raise StoreError(
+            f"manifest file name {name!r} leads outside {folder} (through a symlink?); "
+            "remove the link or write to an empty folder."
+        ) from None
     return path
 
 
@@ -286,8 +297,10 @@ def build_manifest(
             raise StoreError(f"manifest {what} must be a dict, not {type(value).__name__}.")
     clash = clashing_names(files or {})
     if clash is not None:
-        raise StoreError(f"manifest files {clash[0]!r} and {clash[1]!r} cannot both be files of one folder (equal but "
-                         "for case, or one a folder of the other); rename one.")
+        raise StoreError(
+            f"manifest files {clash[0]!r} and {clash[1]!r} cannot both be files of one folder (equal but "
+            "for case, or one a folder of the other); rename one."
+        )
     return {
         "schema": SCHEMA_VERSION,
         "kind": check_kind(kind),
@@ -307,13 +320,17 @@ def parse_manifest(oid: str, data: bytes) -> Manifest:
         StoreError: The object is not a manifest (not canonical JSON of the schema), or a manifest
             whose content breaks the schema (the message names the field).
     """
-    not_manifest = StoreError(f"object {oid} is not a manifest (a {len(data)}-byte blob); give the id "
-                              "or ref of a manifest, see `morfic store ls`.")
+    not_manifest = StoreError(
+        f"object {oid} is not a manifest (a {len(data)}-byte blob); give the id "
+        "or ref of a manifest, see `morfic store ls`."
+    )
     if not data.startswith(MANIFEST_MAGIC):
         raise not_manifest
     if len(data) > MAX_MANIFEST_BYTES:
-        raise StoreError(f"manifest {oid} is {len(data)} bytes, more than the {MAX_MANIFEST_BYTES} a manifest "
-                         "may have; it was not written by morfic.")
+        raise StoreError(
+            f"manifest {oid} is {len(data)} bytes, more than the {MAX_MANIFEST_BYTES} a manifest "
+            "may have; it was not written by morfic."
+        )
     try:
         doc = json.loads(data, parse_constant=_refuse_constant)
     except (ValueError, RecursionError):
@@ -321,14 +338,17 @@ def parse_manifest(oid: str, data: bytes) -> Manifest:
     if not isinstance(doc, dict) or set(doc) != MANIFEST_KEYS:
         raise not_manifest
     if doc["schema"] != SCHEMA_VERSION or isinstance(doc["schema"], bool):
-        raise StoreError(f"manifest {oid} has schema {str(doc['schema'])[:40]!r}; this morfic reads schema "
-                         f"{SCHEMA_VERSION}. Upgrade morfic to read it.")
+        raise StoreError(
+            f"manifest {oid} has schema {str(doc['schema'])[:40]!r}; this morfic reads schema "
+            f"{SCHEMA_VERSION}. Upgrade morfic to read it."
+        )
     problem = manifest_problem(doc)
     if problem is None and canonical_json(doc) != bytes(data):
         problem = "its bytes are not the canonical JSON of its content"
     if problem is not None:
-        raise StoreError(f"manifest {oid} is invalid: {problem}. It was not written by morfic; drop it "
-                         "(or the bundle it came from).")
+        raise StoreError(
+            f"manifest {oid} is invalid: {problem}. It was not written by morfic; drop it (or the bundle it came from)."
+        )
     return _from_doc(oid, doc)
 
 
@@ -369,7 +389,7 @@ def manifest_problem(doc: dict[str, Any]) -> str | None:
         if problem is not None:
             return f"file name {name[:80]!r} {problem}"
         if not (isinstance(entry, dict) and set(entry) == {"id", "size"}):
-            return f"file '{name}' is not {{\"id\": ..., \"size\": ...}}"
+            return f'file \'{name}\' is not {{"id": ..., "size": ...}}'
         if not (isinstance(entry["id"], str) and is_object_id(entry["id"])):
             return f"file '{name}' id is not a full object id"
         size = entry["size"]
@@ -390,9 +410,17 @@ def _is_timestamp(text: Any) -> bool:
 
 def _from_doc(oid: str, doc: dict[str, Any]) -> Manifest:
     files = {n: FileEntry(id=f["id"], size=f["size"]) for n, f in doc["files"].items()}
-    return Manifest(id=oid, kind=doc["kind"], schema=doc["schema"], morfic_version=doc["morfic_version"],
-                    created=doc["created"], config=doc["config"], inputs=dict(doc["inputs"]), files=files,
-                    meta=doc["meta"])
+    return Manifest(
+        id=oid,
+        kind=doc["kind"],
+        schema=doc["schema"],
+        morfic_version=doc["morfic_version"],
+        created=doc["created"],
+        config=doc["config"],
+        inputs=dict(doc["inputs"]),
+        files=files,
+        meta=doc["meta"],
+    )
 
 
 class ManifestIndex:

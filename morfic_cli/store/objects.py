@@ -56,11 +56,15 @@ def store_os_error(exc: OSError, action: str, root: Path) -> StoreError:
         root: The store root, named in the message.
     """
     if exc.errno in (errno.ENOSPC, errno.EDQUOT):
-        return StoreError(f"disk full while {action} in store {root}: free some space (or point --store "
-                          "at another disk) and retry; the store is unchanged and consistent.")
+        return StoreError(
+            f"disk full while {action} in store {root}: free some space (or point --store "
+            "at another disk) and retry; the store is unchanged and consistent."
+        )
     if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        return StoreError(f"permission denied while {action} in store {root}: {exc.strerror}; "
-                          "check that the store directory is writable.")
+        return StoreError(
+            f"permission denied while {action} in store {root}: {exc.strerror}; "
+            "check that the store directory is writable."
+        )
     return StoreError(f"error while {action} in store {root}: {exc.strerror or exc}.")
 
 
@@ -147,8 +151,10 @@ class ObjectDB:
             StoreError: ``oid`` is not a full 64-hex id.
         """
         if not is_object_id(oid):
-            raise StoreError(f"'{oid}' is not a full object id (64 lower-case hex characters); "
-                             "use store.resolve() for refs and prefixes.")
+            raise StoreError(
+                f"'{oid}' is not a full object id (64 lower-case hex characters); "
+                "use store.resolve() for refs and prefixes."
+            )
         return self.dir / oid[:2] / oid[2:]
 
     def has(self, oid: str) -> bool:
@@ -193,8 +199,10 @@ class ObjectDB:
         """
         data = self._existing(oid).read_bytes()
         if verify and hashlib.sha256(data).hexdigest() != oid:
-            raise StoreError(f"object {oid} is corrupt (its bytes no longer hash to its id); "
-                             "run `morfic store verify` and restore it from an export.")
+            raise StoreError(
+                f"object {oid} is corrupt (its bytes no longer hash to its id); "
+                "run `morfic store verify` and restore it from an export."
+            )
         return data
 
     def read_head(self, oid: str, n: int) -> bytes:
@@ -247,8 +255,7 @@ class ObjectDB:
     def _existing(self, oid: str) -> Path:
         path = self.path(oid)
         if not path.is_file():
-            raise ArtifactNotFoundError(f"object {oid} is not in store {self.root}; "
-                                        "try `morfic store ls`.")
+            raise ArtifactNotFoundError(f"object {oid} is not in store {self.root}; try `morfic store ls`.")
         return path
 
     def intact(self, oid: str, size: int | None = None) -> bool:
@@ -305,8 +312,7 @@ class ObjectDB:
         try:
             oid = _write_fd(fd, chunks)
             if expected is not None and oid != expected:
-                raise StoreError(f"object {expected} is corrupt: its bytes hash to {oid}; nothing "
-                                 "was stored.")
+                raise StoreError(f"object {expected} is corrupt: its bytes hash to {oid}; nothing was stored.")
             size = os.stat(tmp).st_size
             if not self.intact(oid, size):
                 os.chmod(tmp, 0o444)

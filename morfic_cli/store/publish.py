@@ -37,8 +37,15 @@ class Published:
     reused: bool = False
 
 
-def find_manifest(store: Store, kind: str, config: dict[str, Any], inputs: dict[str, str] | None = None,
-                  *, inputs_subset: dict[str, str] | None = None, files: Iterable[str] = ()) -> str | None:
+def find_manifest(
+    store: Store,
+    kind: str,
+    config: dict[str, Any],
+    inputs: dict[str, str] | None = None,
+    *,
+    inputs_subset: dict[str, str] | None = None,
+    files: Iterable[str] = (),
+) -> str | None:
     """The newest manifest of ``kind`` with exactly this config (and inputs, or at least ``inputs_subset``).
 
     This is how a step knows the store already holds its result: same config and inputs give the same result.
@@ -57,9 +64,17 @@ def find_manifest(store: Store, kind: str, config: dict[str, Any], inputs: dict[
     return found
 
 
-def publish(store: Store, kind: str, ref: str | None = None, *, config: dict[str, Any] | None = None,
-            inputs: dict[str, str] | None = None, files: Files | Callable[[], Files] | None = None,
-            meta: dict[str, Any] | None = None, reuse: bool = False) -> Published:
+def publish(
+    store: Store,
+    kind: str,
+    ref: str | None = None,
+    *,
+    config: dict[str, Any] | None = None,
+    inputs: dict[str, str] | None = None,
+    files: Files | Callable[[], Files] | None = None,
+    meta: dict[str, Any] | None = None,
+    reuse: bool = False,
+) -> Published:
     """Store a result as one ``kind`` manifest and advance ``ref`` to it, under one writer lock.
 
     Args:

@@ -75,9 +75,11 @@ def check_ref_name(name: str) -> str:
         StoreError: Invalid name; the message says what a valid one looks like.
     """
     if not is_ref_name(name):
-        raise StoreError(f"invalid ref name '{name}': use segments of letters, digits, '.', '_' and '-' "
-                         "separated by '/', e.g. 'runs/film-cpu-s0' (no '..', no '@', at most "
-                         f"{MAX_REF_LENGTH} characters).")
+        raise StoreError(
+            f"invalid ref name '{name}': use segments of letters, digits, '.', '_' and '-' "
+            "separated by '/', e.g. 'runs/film-cpu-s0' (no '..', no '@', at most "
+            f"{MAX_REF_LENGTH} characters)."
+        )
     return name
 
 
@@ -95,8 +97,10 @@ def split_spec(spec: str) -> tuple[str, int | None]:
     except ValueError:
         number = 0
     if number == 0 or not version.lstrip("-").isdigit():
-        raise StoreError(f"invalid ref version in '{spec}': use name@N for version N (1 is the first) or "
-                         "name@-K for K updates before the current one (name@-1 is the previous).")
+        raise StoreError(
+            f"invalid ref version in '{spec}': use name@N for version N (1 is the first) or "
+            "name@-K for K updates before the current one (name@-1 is the previous)."
+        )
     return name, number
 
 
@@ -148,9 +152,12 @@ def decode_history(name: str, data: bytes) -> list[RefEntry]:
             not a UTC timestamp, a broken chain (an edited, dropped or reordered line), or a missing last
             newline (a truncated file).
     """
+
     def damaged(number: int, why: str) -> StoreError:
-        return StoreError(f"ref '{name}' is damaged (line {number}: {why}); run `morfic store verify`, and "
-                          "re-import the ref from an export if it was tampered with.")
+        return StoreError(
+            f"ref '{name}' is damaged (line {number}: {why}); run `morfic store verify`, and "
+            "re-import the ref from an export if it was tampered with."
+        )
 
     entries: list[RefEntry] = []
     if data and not data.endswith(b"\n"):
@@ -172,8 +179,7 @@ def decode_history(name: str, data: bytes) -> list[RefEntry]:
         if prev is not None or (entries and entries[-1].prev is not None):
             expected = entry_hash(entries[-1]) if entries else None
             if prev != expected:
-                raise damaged(number, "its hash chain is broken: a line before it was edited, dropped or "
-                                      "reordered")
+                raise damaged(number, "its hash chain is broken: a line before it was edited, dropped or reordered")
         entry = RefEntry(version=version, id=oid, time=time, prev=prev)
         if encode_entry(entry) != line:
             raise damaged(number, "not in canonical form")
@@ -218,8 +224,9 @@ class RefMovedError(StoreError):
         self.name, self.expected, self.current = name, expected, current
         now = f"is at version {current.version} ({current.id[:12]})" if current is not None else "does not exist"
         was = f"at {expected[:12]}" if expected is not None else "not to exist yet"
-        super().__init__(f"ref '{name}' {now}, but this writer expected it {was}: another process updated it; "
-                         "nothing was written.")
+        super().__init__(
+            f"ref '{name}' {now}, but this writer expected it {was}: another process updated it; nothing was written."
+        )
 
 
 #: ``expect`` of :meth:`RefDB.append` that checks nothing (a plain append).
@@ -340,8 +347,10 @@ class RefDB:
         if version < 1:
             return f"ref '{name}' has an unreadable head file heads/{name}"
         if version > len(history):
-            return (f"ref '{name}' was truncated: its head is version {version} but the history has "
-                    f"{len(history)} version(s)")
+            return (
+                f"ref '{name}' was truncated: its head is version {version} but the history has "
+                f"{len(history)} version(s)"
+            )
         if version < len(history) - 1 or entry_hash(history[version - 1]) != digest:
             return f"ref '{name}' was rewritten: version {version} does not match the head recorded for it"
         return None
@@ -349,12 +358,16 @@ class RefDB:
     def _check_no_conflict(self, name: str, path: Path) -> None:
         """Refuse ``a/b`` when ref ``a`` exists, and ``a`` when refs ``a/...`` exist (like git)."""
         if path.is_dir():
-            raise StoreError(f"cannot create ref '{name}': refs named '{name}/...' exist, and a name "
-                             "cannot be both a ref and a folder of refs; choose another name.")
+            raise StoreError(
+                f"cannot create ref '{name}': refs named '{name}/...' exist, and a name "
+                "cannot be both a ref and a folder of refs; choose another name."
+            )
         for parent in path.parents:
             if parent == self.dir:
                 break
             if parent.is_file():
                 other = parent.relative_to(self.dir).as_posix()
-                raise StoreError(f"cannot create ref '{name}': ref '{other}' exists, and a name cannot "
-                                 "be both a ref and a folder of refs; choose another name.")
+                raise StoreError(
+                    f"cannot create ref '{name}': ref '{other}' exists, and a name cannot "
+                    "be both a ref and a folder of refs; choose another name."
+                )

@@ -41,10 +41,12 @@ RUN_FILE = "model.pt"
 
 
 def _not_a_run(name: str, manifest: Manifest) -> StoreError:
-    return StoreError(f"--results-only exports runs or results, and '{name}' is neither (it is a {manifest.kind} "
-                      "artifact): name the runs (runs/NAME, see `morfic store ls --kind checkpoint`) and the export "
-                      "finds the evals and diagnoses made from them, e.g. `morfic store export runs/film-cpu-s0 "
-                      "--results-only --out bundles/`.")
+    return StoreError(
+        f"--results-only exports runs or results, and '{name}' is neither (it is a {manifest.kind} "
+        "artifact): name the runs (runs/NAME, see `morfic store ls --kind checkpoint`) and the export "
+        "finds the evals and diagnoses made from them, e.g. `morfic store export runs/film-cpu-s0 "
+        "--results-only --out bundles/`."
+    )
 
 
 def results_histories(store: Store, runs: list[str]) -> dict[str, list[RefEntry]]:
@@ -90,11 +92,13 @@ def results_histories(store: Store, runs: list[str]) -> dict[str, list[RefEntry]
                 last = i
                 found |= hits
         if last is not None:
-            out[ref] = history[:last + 1]
+            out[ref] = history[: last + 1]
     bare = sorted(name for name in runs if name not in results and out[name][0].id not in found)
     if bare:
-        raise StoreError(f"{bare[0]} has no eval, diagnosis or check in store {store.root}, so a results-only "
-                         f"bundle of it would hold no results; evaluate and diagnose it first (`morfic eval "
-                         f"{bare[0]}`, `morfic diagnose {bare[0]}`, or `morfic reproduce`), or export it without "
-                         "--results-only.")
+        raise StoreError(
+            f"{bare[0]} has no eval, diagnosis or check in store {store.root}, so a results-only "
+            f"bundle of it would hold no results; evaluate and diagnose it first (`morfic eval "
+            f"{bare[0]}`, `morfic diagnose {bare[0]}`, or `morfic reproduce`), or export it without "
+            "--results-only."
+        )
     return out

@@ -37,8 +37,13 @@ class RunSink:
         """``runs/NAME``."""
         return RUNS_PREFIX + self.name
 
-    def write(self, files: dict[str, bytes], config: dict[str, Any], meta: dict[str, Any],
-              inputs: dict[str, tuple[dict[str, bytes], dict[str, Any], dict[str, Any]]]) -> tuple[str, int]:
+    def write(
+        self,
+        files: dict[str, bytes],
+        config: dict[str, Any],
+        meta: dict[str, Any],
+        inputs: dict[str, tuple[dict[str, bytes], dict[str, Any], dict[str, Any]]],
+    ) -> tuple[str, int]:
         """Write each input as a ``checkpoint`` manifest, the checkpoint naming them, then advance the ref.
 
         Returns:
@@ -49,8 +54,10 @@ class RunSink:
         """
         iteration = meta.get("iteration")
         with self._stopped_on_lock_timeout(iteration), self.store.writing():
-            ids = {role: self.store.put_manifest("checkpoint", config=c, files=f, meta=m)
-                   for role, (f, c, m) in inputs.items()}
+            ids = {
+                role: self.store.put_manifest("checkpoint", config=c, files=f, meta=m)
+                for role, (f, c, m) in inputs.items()
+            }
             ckpt = self.store.put_manifest("checkpoint", config=config, meta=meta, inputs=ids, files=files)
             try:  # the one visible step, unless another process wrote this run meanwhile
                 version = self.store.set_ref(self.ref, ckpt, expect=self.head)
@@ -70,13 +77,18 @@ class RunSink:
             except MorficError:
                 other = None
             at = f" at iteration {other}" if other is not None else ""
-            now = (f"was created by another process ({exc.current.id[:12]}{at})" if self.head is None else
-                   f"was advanced by another process (version {exc.current.version} is {exc.current.id[:12]}{at}, "
-                   f"not this training's last checkpoint {self.head[:12]})")
-        return (f"run '{ref}' {now} while this training ran: two trainings cannot write one run, so this one "
-                f"stops without recording its checkpoint at iteration {iteration} (gc removes it); the ref keeps "
-                f"the other training's checkpoints (`morfic store show {ref} --history`). Give each training its own "
-                f"--name; `morfic train --resume {ref}` continues from the ref's current version.")
+            now = (
+                f"was created by another process ({exc.current.id[:12]}{at})"
+                if self.head is None
+                else f"was advanced by another process (version {exc.current.version} is {exc.current.id[:12]}{at}, "
+                f"not this training's last checkpoint {self.head[:12]})"
+            )
+        return (
+            f"run '{ref}' {now} while this training ran: two trainings cannot write one run, so this one "
+            f"stops without recording its checkpoint at iteration {iteration} (gc removes it); the ref keeps "
+            f"the other training's checkpoints (`morfic store show {ref} --history`). Give each training its own "
+            f"--name; `morfic train --resume {ref}` continues from the ref's current version."
+        )
 
     @contextlib.contextmanager
     def _stopped_on_lock_timeout(self, iteration: Any) -> Iterator[None]:
@@ -85,8 +97,12 @@ class RunSink:
             yield
         except LockTimeoutError as exc:
             ref = self.ref
-            last = (f"`morfic train --resume {ref}` continues from its last checkpoint" if self.head is not None else
-                    f"it has no checkpoint yet: start it again with `morfic train --name {self.name}` (and its "
-                    "--variant, --preset, --seed and --set)")
-            raise MorficError(f"{exc} This training stopped at iteration {iteration} without writing that "
-                              f"checkpoint; {last}.") from exc
+            last = (
+                f"`morfic train --resume {ref}` continues from its last checkpoint"
+                if self.head is not None
+                else f"it has no checkpoint yet: start it again with `morfic train --name {self.name}` (and its "
+                "--variant, --preset, --seed and --set)"
+            )
+            raise MorficError(
+                f"{exc} This training stopped at iteration {iteration} without writing that checkpoint; {last}."
+            ) from exc

@@ -110,8 +110,12 @@ NOTHING = LeaveOut()
 """A full export."""
 WEIGHTS_ONLY = LeaveOut(roles=OMITTABLE_ROLES)
 """``--without-trainer-state``: the weights and everything else, no trainer states (evaluates, cannot resume)."""
-RESULTS_ONLY = LeaveOut(roles=OMITTABLE_ROLES, files=frozenset({"model.pt", "rollout.mcap", "obs.npz", "curve.png"}),
-                        foreign_files=frozenset({"curve.csv"}), figures=True)
+RESULTS_ONLY = LeaveOut(
+    roles=OMITTABLE_ROLES,
+    files=frozenset({"model.pt", "rollout.mcap", "obs.npz", "curve.png"}),
+    foreign_files=frozenset({"curve.csv"}),
+    figures=True,
+)
 """``--results-only``: tables, configs and the runs' own curve tables (:meth:`LeaveOut.keeping` their
 checkpoints); no trainer states, weights, rollout logs, rendered figures (``curve.png`` included) or other
 checkpoints' curves."""

@@ -181,8 +181,10 @@ def export_path(out_dir: Path, refs: list[str], name: str | None = None, *, forc
     else:
         stem = name[:-4] if name.endswith(".tar") else name
         if not _TAR_NAME.fullmatch(stem):
-            raise StoreError(f"--name {name!r} is not a file name: use letters, digits, '.', '_', '+' and '-' (not "
-                             "first: '.'), no '/' or spaces, e.g. --name film-cpu (writes film-cpu.tar).")
+            raise StoreError(
+                f"--name {name!r} is not a file name: use letters, digits, '.', '_', '+' and '-' (not "
+                "first: '.'), no '/' or spaces, e.g. --name film-cpu (writes film-cpu.tar)."
+            )
         file_name = stem + ".tar"
     path = Path(out_dir) / file_name
     if path.is_dir():
@@ -192,8 +194,15 @@ def export_path(out_dir: Path, refs: list[str], name: str | None = None, *, forc
     return path
 
 
-def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False,
-               without_trainer_state: bool = False, results_only: bool = False) -> ExportReport:
+def export_tar(
+    store: Store,
+    refs: list[str],
+    out: Path,
+    *,
+    latest: bool = False,
+    without_trainer_state: bool = False,
+    results_only: bool = False,
+) -> ExportReport:
     """Write the closure of ``refs`` (objects and ref histories) to the tar file ``out``.
 
     With ``latest``, only each ref's current version goes in, as a one-version history (version 1 in the
@@ -247,8 +256,10 @@ def export_tar(store: Store, refs: list[str], out: Path, *, latest: bool = False
         ids = sorted(reached.ids)
         missing = [oid for oid in ids if not store.objects.has(oid)]
         if missing:
-            raise StoreError(f"cannot export: {len(missing)} reachable object(s) are missing (first: "
-                             f"{missing[0]}); run `morfic store verify`.")
+            raise StoreError(
+                f"cannot export: {len(missing)} reachable object(s) are missing (first: "
+                f"{missing[0]}); run `morfic store verify`."
+            )
         report.omitted = dict(sorted(reached.absent.items()))
         report.omitted_files = dict(sorted(reached.absent_files.items()))
         _write_tar(store, out, names, histories, ids, report)
@@ -262,8 +273,14 @@ def _umask() -> int:
     return mask
 
 
-def _write_tar(store: Store, out: Path, names: list[str], histories: dict[str, list[RefEntry]],
-               ids: list[str], report: ExportReport) -> None:
+def _write_tar(
+    store: Store,
+    out: Path,
+    names: list[str],
+    histories: dict[str, list[RefEntry]],
+    ids: list[str],
+    report: ExportReport,
+) -> None:
     """Write the tar to a temp file next to ``out`` and rename it into place."""
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
@@ -324,8 +341,7 @@ def _classify(tar: tarfile.TarFile, path: Path) -> _Members:
         if not member.isfile():
             raise StoreError(f"{path} is not a morfic export: member {shown} is not a regular file.")
         if member.sparse is not None or member.size < 0:  # a sparse file's holes read as zeros: a bomb in a plain tar
-            raise StoreError(f"{path} is not a morfic export: member {shown} is a sparse file or has a negative "
-                             "size.")
+            raise StoreError(f"{path} is not a morfic export: member {shown} is a sparse file or has a negative size.")
         if name in names:
             raise StoreError(f"{path} is not a morfic export: member {shown} appears twice.")
         names.add(name)
@@ -353,7 +369,7 @@ def _shown(name: str) -> str:
 
 def _object_id_of(name: str) -> str | None:
     """The id of an ``objects/ab/cdef...`` member name, or ``None``."""
-    oid = name[len("objects/"):].replace("/", "", 1)
+    oid = name[len("objects/") :].replace("/", "", 1)
     return oid if is_object_id(oid) and name == object_relpath(oid) else None
 
 
@@ -375,8 +391,11 @@ MIN_EXPANDED_BYTES = 64 << 20
 #: member headers point backwards or loop.
 MAX_READ_PASSES = 8
 
-_COMPRESSED = ((b"\x1f\x8b", "gzip", lambda fh: gzip.GzipFile(fileobj=fh, mode="rb")),
-               (b"BZh", "bzip2", bz2.BZ2File), (b"\xfd7zXZ\x00", "xz", lzma.LZMAFile))
+_COMPRESSED = (
+    (b"\x1f\x8b", "gzip", lambda fh: gzip.GzipFile(fileobj=fh, mode="rb")),
+    (b"BZh", "bzip2", bz2.BZ2File),
+    (b"\xfd7zXZ\x00", "xz", lzma.LZMAFile),
+)
 
 _READ_ERRORS = (tarfile.TarError, EOFError, zlib.error, lzma.LZMAError, gzip.BadGzipFile, ValueError)
 """What a hostile or damaged tar makes :mod:`tarfile` raise while reading (ValueError: e.g. a bad sparse map)."""
@@ -398,22 +417,28 @@ class _BoundedReader:
     def _spend(self, n: int) -> None:
         self._budget -= n
         if self._budget < 0:
-            raise StoreError(f"{self._path} makes import read it more than {MAX_READ_PASSES} times over (its tar "
-                             "headers point backwards or loop); it was not made by `morfic store export`, nothing "
-                             "was imported. Re-export it.")
+            raise StoreError(
+                f"{self._path} makes import read it more than {MAX_READ_PASSES} times over (its tar "
+                "headers point backwards or loop); it was not made by `morfic store export`, nothing "
+                "was imported. Re-export it."
+            )
 
     def _bomb(self) -> StoreError:
-        return StoreError(f"{self._path} is {self._kind}-compressed and expands to more than {self._limit} bytes, "
-                          f"over {MAX_EXPANSION} times its {self._size} bytes (a compression bomb?); nothing was "
-                          "imported. `morfic store export` writes plain tars: decompress a bundle you trust first "
-                          "and import the .tar (a plain tar has no such limit).")
+        return StoreError(
+            f"{self._path} is {self._kind}-compressed and expands to more than {self._limit} bytes, "
+            f"over {MAX_EXPANSION} times its {self._size} bytes (a compression bomb?); nothing was "
+            "imported. `morfic store export` writes plain tars: decompress a bundle you trust first "
+            "and import the .tar (a plain tar has no such limit)."
+        )
 
     def read(self, size: int | None = -1) -> bytes:
         if size is None or size < 0:  # (tarfile always asks for a size)
             size = max((self._limit if self._limit is not None else self._size) - self._pos + 1, 0)
         elif size > MAX_SMALL_MEMBER + tarfile.BLOCKSIZE:  # import reads 1 MiB chunks; tarfile reads headers whole
-            raise StoreError(f"{self._path} has a tar header of more than {MAX_SMALL_MEMBER} bytes; it was not made "
-                             "by `morfic store export`, nothing was imported.")
+            raise StoreError(
+                f"{self._path} has a tar header of more than {MAX_SMALL_MEMBER} bytes; it was not made "
+                "by `morfic store export`, nothing was imported."
+            )
         data = self._stream.read(size)
         self._pos += len(data)
         self._spend(len(data))
@@ -477,8 +502,9 @@ def _open_tar(path: Path) -> Iterator[tarfile.TarFile]:
             limit = None if opener is None else max(MIN_EXPANDED_BYTES, MAX_EXPANSION * size)
             tar = _ForwardTarFile(fileobj=_BoundedReader(stream, path, size, limit, kind), mode="r")
         except (*_READ_ERRORS, OSError) as exc:
-            raise StoreError(f"{path} is not a readable tar file ({exc}); make one with `morfic store export`.") \
-                from exc
+            raise StoreError(
+                f"{path} is not a readable tar file ({exc}); make one with `morfic store export`."
+            ) from exc
         with tar:
             yield tar
     finally:
@@ -560,19 +586,20 @@ def import_tar(store: Store, path: Path, *, append: AppendRule = False) -> Impor
     return report
 
 
-def _checked_stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
-                   append: AppendRule = False) -> _Plan:
+def _checked_stage(
+    store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None, append: AppendRule = False
+) -> _Plan:
     try:
         return _stage(store, tar, path, staging, append)
     except _READ_ERRORS as exc:
-        raise StoreError(f"{path} is damaged or truncated ({exc}); nothing was imported. Copy the whole file "
-                         "again, or re-export it.") from exc
+        raise StoreError(
+            f"{path} is damaged or truncated ({exc}); nothing was imported. Copy the whole file again, or re-export it."
+        ) from exc
     except OSError as exc:
         raise store_os_error(exc, f"reading {path}", store.root) from exc
 
 
-def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
-           append: AppendRule = False) -> _Plan:
+def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None, append: AppendRule = False) -> _Plan:
     """Read and check the whole tar; stage the objects this store lacks or has corrupt (none without ``staging``)."""
     members = _classify(tar, path)
     header = _read_header(tar, members, path)
@@ -594,27 +621,35 @@ def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
             tmp, actual, size = store.objects.stage(_chunks(fh), staging)
             plan.staged[oid] = tmp
         if actual != oid or size != member.size:
-            raise StoreError(f"object {oid} in {path} is corrupt (its bytes hash to {actual}); nothing was "
-                             "imported. Re-export it from an intact store.")
+            raise StoreError(
+                f"object {oid} in {path} is corrupt (its bytes hash to {actual}); nothing was "
+                "imported. Re-export it from an intact store."
+            )
         sizes[oid] = size
     if header["objects"] != len(sizes):
-        raise StoreError(f"{path} is incomplete: its header lists {header['objects']} objects, it holds "
-                         f"{len(sizes)}; nothing was imported. Re-export it.")
+        raise StoreError(
+            f"{path} is incomplete: its header lists {header['objects']} objects, it holds "
+            f"{len(sizes)}; nothing was imported. Re-export it."
+        )
     exported = set(members.manifests)
     omitted: dict[str, str] = header["omitted"]
     omitted_files: dict[str, str] = header["omitted_files"]
     both = sorted((set(omitted) | set(omitted_files)) & (exported | set(sizes)))
     if both:
-        raise StoreError(f"{path} is inconsistent: its header lists {both[0]} as left out, yet it holds it; "
-                         "nothing was imported. Re-export it.")
+        raise StoreError(
+            f"{path} is inconsistent: its header lists {both[0]} as left out, yet it holds it; "
+            "nothing was imported. Re-export it."
+        )
     named: set[str] = set()
     for oid in sorted(exported):
         named |= _check_manifest(store, oid, plan, sizes, exported, omitted, omitted_files)
     unnamed = sorted((set(omitted) | set(omitted_files)) - named)
     if unnamed:
         what = ("trainer state", "input") if unnamed[0] in omitted else (omitted_files[unnamed[0]], "file")
-        raise StoreError(f"{path} is inconsistent: its header lists {unnamed[0]} as a left-out {what[0]}, but "
-                         f"no manifest in it names that {what[1]}; nothing was imported. Re-export it.")
+        raise StoreError(
+            f"{path} is inconsistent: its header lists {unnamed[0]} as a left-out {what[0]}, but "
+            f"no manifest in it names that {what[1]}; nothing was imported. Re-export it."
+        )
     plan.manifests = sorted(exported)
     plan.omitted = sorted(omitted)
     plan.omitted_files = sorted(omitted_files)
@@ -625,12 +660,16 @@ def _stage(store: Store, tar: tarfile.TarFile, path: Path, staging: Path | None,
             raise StoreError(f"ref '{name}' in {path} has an empty history; nothing was imported.")
         for entry in history:
             if entry.id not in exported and not store.index.has(entry.id):
-                raise StoreError(f"ref '{name}@{entry.version}' in {path} points at {entry.id}, which is not a "
-                                 "manifest in the export; nothing was imported. Re-export it.")
+                raise StoreError(
+                    f"ref '{name}@{entry.version}' in {path} points at {entry.id}, which is not a "
+                    "manifest in the export; nothing was imported. Re-export it."
+                )
         plan.histories[name] = history
     if sorted(plan.histories) != header["refs"]:
-        raise StoreError(f"{path} is inconsistent: its header lists refs {header['refs'][:5]}, it holds "
-                         f"{sorted(plan.histories)[:5]}; nothing was imported. Re-export it.")
+        raise StoreError(
+            f"{path} is inconsistent: its header lists refs {header['refs'][:5]}, it holds "
+            f"{sorted(plan.histories)[:5]}; nothing was imported. Re-export it."
+        )
     _check_ref_folders(store, sorted(plan.histories), path)
     for name, history in plan.histories.items():
         if not _appends(append, name):
@@ -643,14 +682,17 @@ def _check_ref_folders(store: Store, names: list[str], path: Path) -> None:
     taken = set(names)
     for name in names:
         parts = name.split("/")
-        clash = next((p for p in ("/".join(parts[:i]) for i in range(1, len(parts)))
-                      if p in taken or store.refs.exists(p)), None)
+        clash = next(
+            (p for p in ("/".join(parts[:i]) for i in range(1, len(parts))) if p in taken or store.refs.exists(p)), None
+        )
         if clash is None and store.refs.path(name).is_dir():
             clash = next(n for n in store.refs.names() if n.startswith(name + "/"))
         if clash is not None:
-            raise StoreError(f"{path} holds ref '{name}', but ref '{clash}' exists here or in it, and a name cannot "
-                             "be both a ref and a folder of refs; nothing was imported. Rename the local ref, or "
-                             "import into another store.")
+            raise StoreError(
+                f"{path} holds ref '{name}', but ref '{clash}' exists here or in it, and a name cannot "
+                "be both a ref and a folder of refs; nothing was imported. Rename the local ref, or "
+                "import into another store."
+            )
 
 
 def _appended(local: list[RefEntry], incoming: list[RefEntry]) -> list[RefEntry]:
@@ -665,8 +707,10 @@ def _appended(local: list[RefEntry], incoming: list[RefEntry]) -> list[RefEntry]
 
 def _read_small(tar: tarfile.TarFile, member: tarfile.TarInfo, what: str, path: Path) -> bytes:
     if member.size > MAX_SMALL_MEMBER:
-        raise StoreError(f"{what} in {path} is {member.size} bytes, more than {MAX_SMALL_MEMBER}; it was not "
-                         "made by `morfic store export`.")
+        raise StoreError(
+            f"{what} in {path} is {member.size} bytes, more than {MAX_SMALL_MEMBER}; it was not "
+            "made by `morfic store export`."
+        )
     fh = tar.extractfile(member)
     assert fh is not None
     return fh.read()
@@ -674,8 +718,10 @@ def _read_small(tar: tarfile.TarFile, member: tarfile.TarInfo, what: str, path: 
 
 def _read_header(tar: tarfile.TarFile, members: _Members, path: Path) -> dict:
     assert members.header is not None
-    bad = StoreError(f"{path} has an invalid {HEADER}; it was not made by `morfic store export` (or by a "
-                     "newer morfic: upgrade morfic).")
+    bad = StoreError(
+        f"{path} has an invalid {HEADER}; it was not made by `morfic store export` (or by a "
+        "newer morfic: upgrade morfic)."
+    )
     try:
         header = json.loads(_read_small(tar, members.header, HEADER, path), parse_constant=_no_constant)
     except (ValueError, RecursionError):  # RecursionError: JSON nested too deep
@@ -692,16 +738,20 @@ def _read_header(tar: tarfile.TarFile, members: _Members, path: Path) -> dict:
     if not isinstance(header["morfic_version"], str) or len(header["morfic_version"]) > 100:
         raise bad
     header["refs"] = sorted(refs)
-    header["omitted"] = _read_omitted(header.get("omitted", {}), bad, path, OMITTABLE_ROLES.__contains__, "input",
-                                      ", ".join(sorted(OMITTABLE_ROLES)))
-    header["omitted_files"] = _read_omitted(header.get("omitted_files", {}), bad, path, _omittable_label, "file",
-                                            _OMITTABLE_FILES_TEXT)
+    header["omitted"] = _read_omitted(
+        header.get("omitted", {}), bad, path, OMITTABLE_ROLES.__contains__, "input", ", ".join(sorted(OMITTABLE_ROLES))
+    )
+    header["omitted_files"] = _read_omitted(
+        header.get("omitted_files", {}), bad, path, _omittable_label, "file", _OMITTABLE_FILES_TEXT
+    )
     return header
 
 
-_OMITTABLE_FILES_TEXT = (f"{', '.join(sorted(OMITTABLE_FILES))} and rendered figures "
-                         f"({'/'.join(s.lstrip('.') for s in FIGURE_SUFFIXES)} of {', '.join(sorted(FIGURE_KINDS))} "
-                         "artifacts)")
+_OMITTABLE_FILES_TEXT = (
+    f"{', '.join(sorted(OMITTABLE_FILES))} and rendered figures "
+    f"({'/'.join(s.lstrip('.') for s in FIGURE_SUFFIXES)} of {', '.join(sorted(FIGURE_KINDS))} "
+    "artifacts)"
+)
 """What a bundle may leave out of a manifest's files, for messages."""
 
 
@@ -713,8 +763,9 @@ def _omittable_label(label: str) -> bool:
     return label in OMITTABLE_FILES or (is_figure(label) and plain_name_problem(label) is None)
 
 
-def _read_omitted(omitted: object, bad: StoreError, path: Path, allowed: Callable[[str], bool], what: str,
-                  allowed_text: str) -> dict[str, str]:
+def _read_omitted(
+    omitted: object, bad: StoreError, path: Path, allowed: Callable[[str], bool], what: str, allowed_text: str
+) -> dict[str, str]:
     """The header's ``omitted`` (id -> role) or ``omitted_files`` (id -> file name) map, checked.
 
     Full ids, and only the roles or file names (``allowed``, described by ``allowed_text``) a bundle may leave out.
@@ -724,9 +775,11 @@ def _read_omitted(omitted: object, bad: StoreError, path: Path, allowed: Callabl
     for oid, label in omitted.items():
         if not isinstance(label, str) or not allowed(label):
             shown = label[:40] if isinstance(label, str) else type(label).__name__
-            raise StoreError(f"{path} leaves out {what} {oid} as {shown!r}, but a bundle may only leave out "
-                             f"{allowed_text} {what}s; nothing was imported. Export it again with everything it "
-                             "needs.")
+            raise StoreError(
+                f"{path} leaves out {what} {oid} as {shown!r}, but a bundle may only leave out "
+                f"{allowed_text} {what}s; nothing was imported. Export it again with everything it "
+                "needs."
+            )
     return dict(omitted)
 
 
@@ -743,8 +796,15 @@ def _hash_stream(chunks: Iterator[bytes]) -> tuple[str, int]:
     return digest.hexdigest(), size
 
 
-def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], exported: set[str],
-                    omitted: dict[str, str], omitted_files: dict[str, str]) -> set[str]:
+def _check_manifest(
+    store: Store,
+    oid: str,
+    plan: _Plan,
+    sizes: dict[str, int],
+    exported: set[str],
+    omitted: dict[str, str],
+    omitted_files: dict[str, str],
+) -> set[str]:
     """Parse an exported manifest strictly and check that everything it names is there, with the right size.
 
     An input may instead be declared left out (``omitted``), under its own role, which must be ``trainer_state``;
@@ -757,67 +817,88 @@ def _check_manifest(store: Store, oid: str, plan: _Plan, sizes: dict[str, int], 
     elif oid in plan.contents:
         data = plan.contents[oid]
     elif oid in sizes:
-        raise StoreError(f"manifest {oid} in the export is {sizes[oid]} bytes, more than the {MAX_MANIFEST_BYTES} a "
-                         "manifest may have; nothing was imported.")
+        raise StoreError(
+            f"manifest {oid} in the export is {sizes[oid]} bytes, more than the {MAX_MANIFEST_BYTES} a "
+            "manifest may have; nothing was imported."
+        )
     elif store.objects.intact(oid):
         data = store.objects.get_bytes(oid)
     else:
-        raise StoreError(f"the export lists manifest {oid} but does not contain it; nothing was imported. "
-                         "Re-export it.")
+        raise StoreError(
+            f"the export lists manifest {oid} but does not contain it; nothing was imported. Re-export it."
+        )
     manifest = parse_manifest(oid, data)
     try:  # a variant names code that commands would import: refuse any string that is not a well-formed name
         named = stored_variants(manifest.config, manifest.meta)  # stock ones too: the store knows no registry
     except MorficError as exc:
-        raise StoreError(f"manifest {oid} in the export names a variant that is not well-formed ({exc}); nothing was "
-                         "imported. morfic records a stock name, an entry-point name or module.path:Class: the bundle "
-                         "was not made by morfic, or was edited.") from None
+        raise StoreError(
+            f"manifest {oid} in the export names a variant that is not well-formed ({exc}); nothing was "
+            "imported. morfic records a stock name, an entry-point name or module.path:Class: the bundle "
+            "was not made by morfic, or was edited."
+        ) from None
     if named:
         plan.variants[oid] = named
     if manifest.kind == "checkpoint" and "model.pt" in manifest.files:  # a run: commands rebuild models from it
         problem = stored_cfg_problem(manifest.config)
         if problem is not None:
-            raise StoreError(f"manifest {oid} in the export is a run's checkpoint with an invalid config "
-                             f"({printable(problem)}); nothing was imported. `morfic train` never writes one: the "
-                             "bundle was not made by morfic, or was edited.")
+            raise StoreError(
+                f"manifest {oid} in the export is a run's checkpoint with an invalid config "
+                f"({printable(problem)}); nothing was imported. `morfic train` never writes one: the "
+                "bundle was not made by morfic, or was edited."
+            )
     clash = clashing_names(manifest.files)
     if clash is not None:
-        raise StoreError(f"manifest {oid} in the export names the files {ascii(clash[0][:80])} and "
-                         f"{ascii(clash[1][:80])}, which cannot both be files of one folder (equal but for case, or "
-                         "one a folder of the other); nothing was imported. The bundle was not made by morfic.")
+        raise StoreError(
+            f"manifest {oid} in the export names the files {ascii(clash[0][:80])} and "
+            f"{ascii(clash[1][:80])}, which cannot both be files of one folder (equal but for case, or "
+            "one a folder of the other); nothing was imported. The bundle was not made by morfic."
+        )
     named: set[str] = set()
     for name, entry in manifest.files.items():
         problem = plain_name_problem(name)  # e.g. .config/morfic/trusted-variants, sitecustomize.py, x.pth
         if problem is not None:
-            raise StoreError(f"manifest {oid} in the export names the file {ascii(name[:80])}: it {problem}; nothing "
-                             "was imported. morfic writes only plain file names (docs/concepts.md, \"File names\"): "
-                             "the bundle was not made by morfic, or was edited.")
+            raise StoreError(
+                f"manifest {oid} in the export names the file {ascii(name[:80])}: it {problem}; nothing "
+                'was imported. morfic writes only plain file names (docs/concepts.md, "File names"): '
+                "the bundle was not made by morfic, or was edited."
+            )
         size = sizes.get(entry.id)
         if size is None and store.objects.intact(entry.id):
             size = store.objects.size(entry.id)
         if entry.id in omitted_files:
             if not omittable_file(manifest.kind, name):
-                raise StoreError(f"manifest {oid} in the export names the left-out file {entry.id} as '{name}' (a "
-                                 f"{manifest.kind} artifact), but only {_OMITTABLE_FILES_TEXT} files may be left "
-                                 "out; nothing was imported. Export it again with everything it needs.")
+                raise StoreError(
+                    f"manifest {oid} in the export names the left-out file {entry.id} as '{name}' (a "
+                    f"{manifest.kind} artifact), but only {_OMITTABLE_FILES_TEXT} files may be left "
+                    "out; nothing was imported. Export it again with everything it needs."
+                )
             named.add(entry.id)
             if size is None:
                 continue
         if size is None:
-            raise StoreError(f"the export is incomplete: manifest {oid} names {entry.id} (file '{name}'), which "
-                             "is neither in the export nor intact in this store; nothing was imported. Re-export it.")
+            raise StoreError(
+                f"the export is incomplete: manifest {oid} names {entry.id} (file '{name}'), which "
+                "is neither in the export nor intact in this store; nothing was imported. Re-export it."
+            )
         if size != entry.size:
-            raise StoreError(f"manifest {oid} declares file '{name}' as {entry.size} bytes, but its object has "
-                             f"{size}; nothing was imported. It was not made by morfic.")
+            raise StoreError(
+                f"manifest {oid} declares file '{name}' as {entry.size} bytes, but its object has "
+                f"{size}; nothing was imported. It was not made by morfic."
+            )
     for role, input_id in manifest.inputs.items():
         if input_id in omitted:
             if omitted[input_id] != role:
-                raise StoreError(f"manifest {oid} in the export names the left-out input {input_id} as '{role}', "
-                                 f"but only its {omitted[input_id]} may be left out; nothing was imported. Export it "
-                                 "again with everything it needs.")
+                raise StoreError(
+                    f"manifest {oid} in the export names the left-out input {input_id} as '{role}', "
+                    f"but only its {omitted[input_id]} may be left out; nothing was imported. Export it "
+                    "again with everything it needs."
+                )
             named.add(input_id)
         elif input_id not in exported and not store.index.has(input_id):
-            raise StoreError(f"the export is incomplete: manifest {oid} input '{role}' {input_id} is not a "
-                             "manifest in the export or in this store; nothing was imported. Re-export it.")
+            raise StoreError(
+                f"the export is incomplete: manifest {oid} input '{role}' {input_id} is not a "
+                "manifest in the export or in this store; nothing was imported. Re-export it."
+            )
     return named
 
 
@@ -825,8 +906,10 @@ def _commit(store: Store, plan: _Plan, report: ImportReport, append: AppendRule 
     """Make a checked import visible: objects, then index markers, then refs (rolled back on failure)."""
     with store.refs.locked():
         previous = {name: store.refs.history(name) for name in plan.histories}
-        plan.histories = {name: _appended(previous[name], hist) if _appends(append, name) else hist
-                          for name, hist in plan.histories.items()}
+        plan.histories = {
+            name: _appended(previous[name], hist) if _appends(append, name) else hist
+            for name, hist in plan.histories.items()
+        }
         statuses = {name: merge_status(name, previous[name], hist) for name, hist in sorted(plan.histories.items())}
         try:
             for oid, tmp in sorted(plan.staged.items()):

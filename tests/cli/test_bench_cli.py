@@ -49,8 +49,9 @@ def test_bench_on_cuda_without_cuda_is_an_error(run_cli):
 
 def test_bench_env_on_warp_cpu_is_stored_with_its_device(run_cli):
     pytest.importorskip("mujoco_warp", reason="mujoco_warp is not installed (pip install 'morfic[gpu]')")
-    code, out, err = run_cli("bench", "env", "--backend", "warp", "--device", "cpu", "--envs", "4", "--steps", "2",
-                             "--format", "json")
+    code, out, err = run_cli(
+        "bench", "env", "--backend", "warp", "--device", "cpu", "--envs", "4", "--steps", "2", "--format", "json"
+    )
     assert code == 0, err
     row = json.loads(out)
     assert (row["backend"], row["device"]) == ("warp", "cpu")
@@ -95,13 +96,28 @@ def test_bench_compare_needs_a_known_commit(run_cli):
 
 @pytest.mark.slow
 def test_bench_compare_times_both_sides_in_alternation(run_cli):
-    code, out, err = run_cli("bench", "train", "--preset", "smoke", "--iterations", "1", "--compare", "HEAD",
-                             "--rounds", "2", "--format", "json", "-q")
+    code, out, err = run_cli(
+        "bench",
+        "train",
+        "--preset",
+        "smoke",
+        "--iterations",
+        "1",
+        "--compare",
+        "HEAD",
+        "--rounds",
+        "2",
+        "--format",
+        "json",
+        "-q",
+    )
     assert code == 0, err
     result = json.loads(out)
     assert result["rounds"] == 2 and len(result["this_runs"]) == len(result["ref_runs"]) == 2
-    ratios = sorted(a["s_per_iteration"] / b["s_per_iteration"] for a, b in zip(result["this_runs"],
-                                                                                 result["ref_runs"], strict=True))
+    ratios = sorted(
+        a["s_per_iteration"] / b["s_per_iteration"]
+        for a, b in zip(result["this_runs"], result["ref_runs"], strict=True)
+    )
     assert result["s_per_iteration_ratio"] == pytest.approx(sum(ratios) / 2, abs=1e-4)  # median of two = mean
     assert result["ratio_spread"] == pytest.approx(ratios, abs=1e-4)
 
@@ -110,8 +126,19 @@ def test_bench_train_applies_set_and_records_the_precision(run_cli):
     from morfic_cli.rl.precision import bf16_matmul, cpu_bf16_kernels
 
     for mixed in (True, False):
-        code, out, err = run_cli("bench", "train", "--preset", "smoke", "--iterations", "1", "--set",
-                                 f"ppo.use_mixed_precision={str(mixed).lower()}", "--format", "json", "-q")
+        code, out, err = run_cli(
+            "bench",
+            "train",
+            "--preset",
+            "smoke",
+            "--iterations",
+            "1",
+            "--set",
+            f"ppo.use_mixed_precision={str(mixed).lower()}",
+            "--format",
+            "json",
+            "-q",
+        )
         assert code == 0, err
         row = json.loads(out)
         assert row["mixed_precision"] is mixed and row["bf16_kernels"] is cpu_bf16_kernels()

@@ -9,8 +9,18 @@ import sys
 import pytest
 
 SUBCOMMANDS = [
-    "train", "eval", "play", "diagnose", "compare-baselines", "distance", "export",
-    "report", "reproduce", "store", "robots", "bench",
+    "train",
+    "eval",
+    "play",
+    "diagnose",
+    "compare-baselines",
+    "distance",
+    "export",
+    "report",
+    "reproduce",
+    "store",
+    "robots",
+    "bench",
 ]
 
 
@@ -82,8 +92,9 @@ def test_help_does_not_import_torch_or_mujoco():
 
 
 def test_console_script_entry_point_runs():
-    proc = subprocess.run([sys.executable, "-m", "morfic_cli", "robots", "ls", "--format", "json"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "morfic_cli", "robots", "ls", "--format", "json"], capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stderr
     from morfic_cli.morphology.robots import list_robots
 

@@ -56,9 +56,14 @@ def test_out_given_a_file_is_an_error_for_every_directory_out(run_cli, tmp_path)
     store = Store(os.environ["MORFIC_STORE"])
     store.set_ref("runs/x", store.put_manifest("checkpoint", files={"model.pt": b"w"}))
     argv = {
-        "eval": ["eval", "runs/x"], "diagnose": ["diagnose", "runs/x"], "export": ["export", "runs/x"],
-        "report": ["report"], "reproduce": ["reproduce"], "store get": ["store", "get", "runs/x"],
-        "store export": ["store", "export", "runs/x"], "critic-study": ["critic-study", "--actor", "runs/x"],
+        "eval": ["eval", "runs/x"],
+        "diagnose": ["diagnose", "runs/x"],
+        "export": ["export", "runs/x"],
+        "report": ["report"],
+        "reproduce": ["reproduce"],
+        "store get": ["store", "get", "runs/x"],
+        "store export": ["store", "export", "runs/x"],
+        "critic-study": ["critic-study", "--actor", "runs/x"],
     }
     assert set(argv) == {n for n, c in _commands().items() if _option(c, "--out")}
     for name, args in argv.items():
@@ -75,10 +80,18 @@ def _is_json(text: str) -> bool:
     return True
 
 
-@pytest.mark.parametrize("argv", [
-    ["robots", "ls"], ["robots", "show", "go2"], ["distance", "--robots", "go1"], ["store", "ls"],
-    ["store", "show", "runs/x"], ["store", "show", "runs/x", "--history"], ["store", "gc"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["robots", "ls"],
+        ["robots", "show", "go2"],
+        ["distance", "--robots", "go1"],
+        ["store", "ls"],
+        ["store", "show", "runs/x"],
+        ["store", "show", "runs/x", "--history"],
+        ["store", "gc"],
+    ],
+)
 def test_format_table_prints_no_json(argv):
     store = Store(os.environ["MORFIC_STORE"])
     store.set_ref("runs/x", store.put_manifest("checkpoint", config={"a": {"b": 1}}, files={"model.pt": b"w"}))
@@ -93,8 +106,15 @@ def test_format_table_prints_no_json(argv):
 def test_an_object_as_a_table_is_a_key_value_table(capsys):
     from morfic_cli.cli._render import emit_object
 
-    emit_object({"ref": "runs/x@1", "files": {"model.pt": 3}, "inputs": ["history", "morphology"],
-                 "hint": "pip install 'morfic[gpu]'"}, OutputFormat.table)
+    emit_object(
+        {
+            "ref": "runs/x@1",
+            "files": {"model.pt": 3},
+            "inputs": ["history", "morphology"],
+            "hint": "pip install 'morfic[gpu]'",
+        },
+        OutputFormat.table,
+    )
     out = capsys.readouterr().out
     assert not _is_json(out.strip()) and "files.model.pt" in out and "history, morphology" in out
     assert "morfic[gpu]" in out  # rich markup does not eat the brackets
@@ -114,8 +134,10 @@ def test_help_reads_well(monkeypatch):
 def test_a_flag_at_the_start_of_a_source_line_continues_the_sentence(monkeypatch):
     from morfic_cli.cli import unwrap_help
 
-    assert unwrap_help("Intro.\n\n  Runs are grouped;\n  --with-paper adds [x].\n  - an item\n  Example: morfic a\n") \
+    assert (
+        unwrap_help("Intro.\n\n  Runs are grouped;\n  --with-paper adds [x].\n  - an item\n  Example: morfic a\n")
         == "Intro.\n\nRuns are grouped; --with-paper adds \\[x].\n- an item\nExample: morfic a"
+    )
     monkeypatch.setenv("COLUMNS", "250")
     out = runner.invoke(app, ["compare-baselines", "--help"]).stdout
     assert "aggregated over seeds, plus training compute. --with-paper adds" in out

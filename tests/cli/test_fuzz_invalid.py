@@ -222,8 +222,14 @@ def test_the_table_is_big_enough():
 @pytest.mark.parametrize("row", ROWS, ids=[" ".join(r) or "-" for r in ROWS])
 def test_invalid_invocation_is_refused_before_any_work(workspace, run_cli, monkeypatch, row):
     monkeypatch.setenv("MORFIC_STORE", str(workspace / "store"))
-    subs = {"{FILE}": workspace / "a-file.txt", "{DIR}": workspace / "a-dir", "{T}": workspace,
-            "{TRUNC}": workspace / "trunc.tar", "{EVIL}": workspace / "evil.tar", "{TAR}": workspace / "good.tar"}
+    subs = {
+        "{FILE}": workspace / "a-file.txt",
+        "{DIR}": workspace / "a-dir",
+        "{T}": workspace,
+        "{TRUNC}": workspace / "trunc.tar",
+        "{EVIL}": workspace / "evil.tar",
+        "{TAR}": workspace / "good.tar",
+    }
     argv = []
     for arg in row:
         for key, value in subs.items():

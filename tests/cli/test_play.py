@@ -39,8 +39,12 @@ def _decoder(channel: dict):
     from mcap.records import Schema
     from mcap_protobuf.decoder import DecoderFactory
 
-    schema = Schema(id=channel["id"], name=channel["schemaName"], encoding=channel["schemaEncoding"],
-                    data=base64.b64decode(channel["schema"]))
+    schema = Schema(
+        id=channel["id"],
+        name=channel["schemaName"],
+        encoding=channel["schemaEncoding"],
+        data=base64.b64decode(channel["schema"]),
+    )
     return DecoderFactory().decoder_for(channel["encoding"], schema)
 
 
@@ -51,8 +55,7 @@ async def _watch(port: int, want: dict[str, int], timeout_s: float) -> tuple[str
     async def run():
         for _ in range(600):  # the server starts after the policy's first step
             try:
-                ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS,
-                                              max_size=None)
+                ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, max_size=None)
                 break
             except OSError:
                 await asyncio.sleep(0.1)
@@ -67,8 +70,14 @@ async def _watch(port: int, want: dict[str, int], timeout_s: float) -> tuple[str
                     if op["op"] == "advertise":
                         channels += op["channels"]
                         subs = {c["id"]: c for c in channels}
-                        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                            {"id": c["id"], "channelId": c["id"]} for c in op["channels"]]}))
+                        await ws.send(
+                            json.dumps(
+                                {
+                                    "op": "subscribe",
+                                    "subscriptions": [{"id": c["id"], "channelId": c["id"]} for c in op["channels"]],
+                                }
+                            )
+                        )
                     continue
                 opcode, sub_id, _log_time = struct.unpack_from("<BIQ", frame)
                 assert opcode == 1  # message data
@@ -84,12 +93,31 @@ def test_play_serves_the_scene_and_numbers_over_foxglove_websocket(smoke_store, 
 
     port, record = _free_port(), tmp_path / "session.mcap"
     env = {**os.environ, "MORFIC_STORE": str(smoke_store), "OMP_NUM_THREADS": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "morfic_cli", "play", "runs/film-s0", "--robot", "go1",
-                             "--envs", "2", "--port", str(port), "--record", str(record)],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "morfic_cli",
+            "play",
+            "runs/film-s0",
+            "--robot",
+            "go1",
+            "--envs",
+            "2",
+            "--port",
+            str(port),
+            "--record",
+            str(record),
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
-        subprotocol, channels, got = asyncio.run(_watch(port, {"/rollout/step": 3, "/tf": 3, "/tf_static": 1,
-                                                               "/scene": 1}, 240))
+        subprotocol, channels, got = asyncio.run(
+            _watch(port, {"/rollout/step": 3, "/tf": 3, "/tf_static": 1, "/scene": 1}, 240)
+        )
     finally:
         proc.send_signal(signal.SIGINT)  # Ctrl-C
         try:
@@ -103,7 +131,8 @@ def test_play_serves_the_scene_and_numbers_over_foxglove_websocket(smoke_store, 
         ("/rollout/step", "morfic.RolloutStep", "protobuf", "protobuf"),
         ("/scene", "foxglove.SceneUpdate", "protobuf", "protobuf"),
         ("/tf", "foxglove.FrameTransforms", "protobuf", "protobuf"),
-        ("/tf_static", "foxglove.FrameTransforms", "protobuf", "protobuf")}
+        ("/tf_static", "foxglove.FrameTransforms", "protobuf", "protobuf"),
+    }
     step = got["/rollout/step"][0]
     assert len(step.envs) == 2 and len(step.envs[0].joint_pos) == 12 and step.envs[0].command[0] == 1.0
     moving = {t.child_frame_id for t in got["/tf"][-1].transforms}

@@ -21,16 +21,28 @@ def test_quiet_phases_do_nothing():
         assert bar.bar is None
 
 
-def test_eval_video_rendering_is_a_phase_that_counts_frames(run_cli, smoke_runs, tmp_path, monkeypatch,
-                                                            gl_backend):
+def test_eval_video_rendering_is_a_phase_that_counts_frames(run_cli, smoke_runs, tmp_path, monkeypatch, gl_backend):
     """`eval --video` renders for minutes in software GL after the rollouts' bar is full: a bar of its own, in frames.
 
     4 steps rendered every 2nd step = 2 frames; the rollouts' bar (4 steps) is shown complete above it.
     """
     smoke_runs.store(tmp_path / "store")
     monkeypatch.setenv("MORFIC_STORE", str(tmp_path / "store"))
-    code, _, err = run_cli("eval", "runs/film-s0", "--robots", "go2", "--envs", "2", "--steps", "4",
-                           "--command-vx", "1.0", "--video", "--format", "json")
+    code, _, err = run_cli(
+        "eval",
+        "runs/film-s0",
+        "--robots",
+        "go2",
+        "--envs",
+        "2",
+        "--steps",
+        "4",
+        "--command-vx",
+        "1.0",
+        "--video",
+        "--format",
+        "json",
+    )
     assert code == 0, err
     lines = [" ".join(line.split()) for line in err.splitlines()]
     assert any(line.startswith("eval go2 descriptor vx=1") and line.endswith("4/4 0:00:00") for line in lines), err

@@ -11,15 +11,22 @@ from morfic_cli.cli.reproduce import _summary, files_summary
 
 
 def _result(out: Path) -> SimpleNamespace:
-    files = [out / "report.md", out / "report.pdf", *(out / "figures" / f"fig{i}.png" for i in range(150)),
-             *(out / "figures" / f"fig{i}.pdf" for i in range(60)), *(out / f"table{i}.csv" for i in range(8))]
+    files = [
+        out / "report.md",
+        out / "report.pdf",
+        *(out / "figures" / f"fig{i}.png" for i in range(150)),
+        *(out / "figures" / f"fig{i}.pdf" for i in range(60)),
+        *(out / f"table{i}.csv" for i in range(8)),
+    ]
     report = SimpleNamespace(ref="reports/shipped", id="ab" * 32, out_files=files, pdf_error=None)
     return SimpleNamespace(report=report, work_done=3, steps=[None] * 10, seconds=12.34)
 
 
 def test_files_summary_counts_by_type():
-    assert files_summary([Path("a.png"), Path("b.png"), Path("c.md"), Path("README")]) == \
-        "4 files: 2 .png, 1 (no extension), 1 .md"
+    assert (
+        files_summary([Path("a.png"), Path("b.png"), Path("c.md"), Path("README")])
+        == "4 files: 2 .png, 1 (no extension), 1 .md"
+    )
     assert files_summary([]) == "0 files"
 
 
@@ -45,9 +52,26 @@ def test_json_keeps_every_path(capsys, tmp_path):
 def _runs(*pairs: tuple[str, int]):
     from morfic_cli.report.gather import RunInfo, StoreData
 
-    return StoreData(runs=[RunInfo(spec=f"runs/{v}-cpu-s{s}", name=f"{v}-cpu-s{s}", checkpoint="c", variant=v,
-                                   seed=s, preset="cpu", iteration=1, max_iterations=1, env_steps=1, wall_time_s=1.0,
-                                   device="cpu", finished=True, created="") for v, s in pairs])
+    return StoreData(
+        runs=[
+            RunInfo(
+                spec=f"runs/{v}-cpu-s{s}",
+                name=f"{v}-cpu-s{s}",
+                checkpoint="c",
+                variant=v,
+                seed=s,
+                preset="cpu",
+                iteration=1,
+                max_iterations=1,
+                env_steps=1,
+                wall_time_s=1.0,
+                device="cpu",
+                finished=True,
+                created="",
+            )
+            for v, s in pairs
+        ]
+    )
 
 
 def test_a_one_seed_report_says_first_why_it_cannot_tell_and_how_to_get_the_answer():

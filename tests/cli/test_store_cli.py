@@ -63,7 +63,10 @@ def test_ls_json_rows(filled):
     assert "1 unnamed artifact(s) not listed (1 B held here;" in result.stderr and "--all lists them" in result.stderr
     result = _invoke("ls", "--all", "--format", "json")
     assert {r["id"]: r["ref"] for r in json.loads(result.stdout)} == {
-        filled["ckpt"]: None, filled["old"]: "runs/film-s0@1", filled["new"]: "runs/film-s0"}
+        filled["ckpt"]: None,
+        filled["old"]: "runs/film-s0@1",
+        filled["new"]: "runs/film-s0",
+    }
     assert "unnamed" not in result.stderr
     runs = _invoke("ls", "--kind", "checkpoint", "--format", "json")
     assert json.loads(runs.stdout) == [] and "1 unnamed artifact(s)" in runs.stderr
@@ -97,7 +100,9 @@ def test_show_manifest_and_versions(filled):
     assert json.loads(_invoke("show", filled["ckpt"][:8], "-f", "json").stdout)["kind"] == "checkpoint"
     history = json.loads(_invoke("show", "runs/film-s0", "--history", "-f", "json").stdout)
     assert [(h["version"], h["id"], h["current"]) for h in history] == [
-        (1, filled["old"], False), (2, filled["new"], True)]
+        (1, filled["old"], False),
+        (2, filled["new"], True),
+    ]
 
 
 def test_verify_and_gc(filled, store):
@@ -120,9 +125,18 @@ def test_export_import_round_trip(filled, tmp_path):
     with tarfile.open(tar) as t:
         objects = [m for m in t.getmembers() if m.name.startswith("objects/")]
     # 3 manifests (checkpoint, both run versions) and 3 files (model.pt, c.csv twice)
-    assert json.loads(result.stdout) == {"path": str(tar), "refs": ["runs/film-s0"], "objects": 6,
-                                         "bytes": sum(m.size for m in objects), "omitted": [],
-                                         "omitted_files": []} and len(objects) == 6
+    assert (
+        json.loads(result.stdout)
+        == {
+            "path": str(tar),
+            "refs": ["runs/film-s0"],
+            "objects": 6,
+            "bytes": sum(m.size for m in objects),
+            "omitted": [],
+            "omitted_files": [],
+        }
+        and len(objects) == 6
+    )
     dst = tmp_path / "dst"
     rows = json.loads(_invoke("import", str(tar), "--store", str(dst), "-f", "json").stdout)
     assert rows == [{"bundle": "film-s0.tar", "ref": "runs/film-s0", "status": "created"}]
@@ -138,12 +152,22 @@ def test_export_names_the_tar_after_the_refs_and_prints_its_path(filled, store, 
     table = _invoke("export", "runs/film-s0", "runs/film-s1", "--out", str(out)).stdout
     assert table == f"{out / 'film-s0+film-s1.tar'}\n"  # --format table: the path alone
     assert (out / "film-s0+film-s1.tar").is_file()
-    many = json.loads(_invoke("export", "runs/film-s0", "runs/film-s1", "tables/distance", "diagnoses/calibration",
-                              "--out", str(out), "-f", "json").stdout)
+    many = json.loads(
+        _invoke(
+            "export",
+            "runs/film-s0",
+            "runs/film-s1",
+            "tables/distance",
+            "diagnoses/calibration",
+            "--out",
+            str(out),
+            "-f",
+            "json",
+        ).stdout
+    )
     assert many["path"] == str(out / "calibration+3-more.tar")  # sorted: diagnoses/ first
     assert many["refs"] == ["diagnoses/calibration", "runs/film-s0", "runs/film-s1", "tables/distance"]
-    named = json.loads(_invoke("export", "runs/film-s0", "--out", str(out), "--name", "film.tar", "-f",
-                               "json").stdout)
+    named = json.loads(_invoke("export", "runs/film-s0", "--out", str(out), "--name", "film.tar", "-f", "json").stdout)
     assert named["path"] == str(out / "film.tar")
     assert sorted(p.name for p in out.iterdir()) == ["calibration+3-more.tar", "film-s0+film-s1.tar", "film.tar"]
 
@@ -225,11 +249,22 @@ def test_import_of_several_tars_imports_each_and_names_the_bad_one(run_cli, fill
     bad = out / "bad.tar"
     bad.write_bytes((out / "film-s1.tar").read_bytes()[:700])  # truncated
     dst = tmp_path / "dst"
-    code, stdout, err = run_cli("store", "import", str(out / "film-s0.tar"), str(bad), str(out / "film-s1.tar"),
-                                "--store", str(dst), "-f", "json")
+    code, stdout, err = run_cli(
+        "store",
+        "import",
+        str(out / "film-s0.tar"),
+        str(bad),
+        str(out / "film-s1.tar"),
+        "--store",
+        str(dst),
+        "-f",
+        "json",
+    )
     assert code == 1
-    assert json.loads(stdout) == [{"bundle": "film-s0.tar", "ref": "runs/film-s0", "status": "created"},
-                                  {"bundle": "film-s1.tar", "ref": "runs/film-s1", "status": "created"}]
+    assert json.loads(stdout) == [
+        {"bundle": "film-s0.tar", "ref": "runs/film-s0", "status": "created"},
+        {"bundle": "film-s1.tar", "ref": "runs/film-s1", "status": "created"},
+    ]
     lines = err.splitlines()
     assert lines[0].startswith("film-s0.tar: imported ") and "1 ref(s)" in lines[0]
     assert lines[1].startswith("Error: ") and "bad.tar" in lines[1] and "nothing was imported" in lines[1]
@@ -238,8 +273,9 @@ def test_import_of_several_tars_imports_each_and_names_the_bad_one(run_cli, fill
     dst_store = Store(dst)
     assert dst_store.resolve("runs/film-s0") == filled["new"] and dst_store.resolve("runs/film-s1") == filled["ckpt"]
     assert sorted(dst_store.list_refs()) == ["runs/film-s0", "runs/film-s1"] and dst_store.verify().ok
-    code, stdout, err = run_cli("store", "import", str(out / "film-s0.tar"), str(out / "film-s1.tar"),
-                                "--store", str(dst), "-f", "json")  # again: nothing new, exit 0
+    code, stdout, err = run_cli(
+        "store", "import", str(out / "film-s0.tar"), str(out / "film-s1.tar"), "--store", str(dst), "-f", "json"
+    )  # again: nothing new, exit 0
     assert code == 0 and [r["status"] for r in json.loads(stdout)] == ["unchanged", "unchanged"]
 
 
@@ -262,8 +298,11 @@ def test_bundles_of_two_stores_with_a_shared_ref_import_together_with_append(run
     code, stdout, err = run_cli("store", "import", "--append", *map(str, tars), "--store", str(dst), "-f", "json")
     assert code == 0, err
     assert {(r["bundle"], r["ref"]): r["status"] for r in json.loads(stdout)} == {
-        ("b1.tar", "diagnoses/calibration"): "unchanged", ("b1.tar", "runs/film-s1"): "unchanged",
-        ("b2.tar", "diagnoses/calibration"): "extended", ("b2.tar", "runs/film-s2"): "created"}
+        ("b1.tar", "diagnoses/calibration"): "unchanged",
+        ("b1.tar", "runs/film-s1"): "unchanged",
+        ("b2.tar", "diagnoses/calibration"): "extended",
+        ("b2.tar", "runs/film-s2"): "created",
+    }
     dst_store = Store(dst)
     assert [(e.version, e.id) for e in dst_store.ref_history("diagnoses/calibration")] == [(1, ids[0]), (2, ids[1])]
     assert dst_store.verify().ok
@@ -297,8 +336,11 @@ def test_get_writes_each_file_byte_identical_to_its_object(run_cli, filled, stor
 
 
 def test_get_names_a_rollout_after_what_it_recorded(run_cli, store, tmp_path):
-    mid = store.put_manifest("rollout", files={"rollout.mcap": b"mcap bytes"},
-                             meta={"robot": "go1", "mode": "descriptor", "command": [2, 0.0, 0.0]})
+    mid = store.put_manifest(
+        "rollout",
+        files={"rollout.mcap": b"mcap bytes"},
+        meta={"robot": "go1", "mode": "descriptor", "command": [2, 0.0, 0.0]},
+    )
     code, _, err = run_cli("store", "get", mid, "--out", str(tmp_path / "r"))
     assert code == 0, err
     assert (tmp_path / "r" / "go1-descriptor-vx2.0.mcap").read_bytes() == b"mcap bytes"
@@ -317,5 +359,8 @@ def test_get_prints_each_whole_path_in_the_table(filled, store, tmp_path):
     table = _invoke("get", "runs/film-s0", "--out", str(out)).stdout  # 80 columns: the path cell folds
     cells = [line.split("│")[2].strip() for line in table.splitlines() if line.count("│") == 5]
     assert "…" not in table and "".join(cells) == str(out / "c.csv")
-    assert (out / "c.csv").read_bytes() == store.object_path(store.read_manifest("runs/film-s0").files["c.csv"].id) \
-        .read_bytes() == b"2"
+    assert (
+        (out / "c.csv").read_bytes()
+        == store.object_path(store.read_manifest("runs/film-s0").files["c.csv"].id).read_bytes()
+        == b"2"
+    )

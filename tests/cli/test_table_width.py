@@ -31,10 +31,22 @@ def console(monkeypatch):
 
 
 LS_ROWS = [
-    {"ref": "diagnoses/fixed-rollout/film-scaled-cpu-s0", "id": "7cc932adfd3a" + "0" * 52, "kind": "diagnosis",
-     "created": "2026-12-01T21:26:01Z", "files": 3, "size": 8_200_000},
-    {"ref": "runs/film-scaled-cpu-s0", "id": "ba6f9f58eae2" + "1" * 52, "kind": "checkpoint",
-     "created": "2026-12-03T17:53:15Z", "files": 1, "size": 1_100},
+    {
+        "ref": "diagnoses/fixed-rollout/film-scaled-cpu-s0",
+        "id": "7cc932adfd3a" + "0" * 52,
+        "kind": "diagnosis",
+        "created": "2026-12-01T21:26:01Z",
+        "files": 3,
+        "size": 8_200_000,
+    },
+    {
+        "ref": "runs/film-scaled-cpu-s0",
+        "id": "ba6f9f58eae2" + "1" * 52,
+        "kind": "checkpoint",
+        "created": "2026-12-03T17:53:15Z",
+        "files": 1,
+        "size": 1_100,
+    },
 ]
 
 
@@ -98,18 +110,52 @@ def test_eval_table_at_80_columns_shows_robot_and_mode_whole(console, run_cli, t
     code, _, err = run_cli("store", "import", str(BUNDLE), "--store", store)
     assert code == 0, err
     con = console(80)
-    code, _, err = run_cli("eval", "runs/film-cpu-s0", "--robots", "aliengo,mini_cheetah", "--mode", "both",
-                           "--envs", "2", "--steps", "5", "--scene-envs", "0", "-q", "--store", store)
+    code, _, err = run_cli(
+        "eval",
+        "runs/film-cpu-s0",
+        "--robots",
+        "aliengo,mini_cheetah",
+        "--mode",
+        "both",
+        "--envs",
+        "2",
+        "--steps",
+        "5",
+        "--scene-envs",
+        "0",
+        "-q",
+        "--store",
+        store,
+    )
     assert code == 0, err
     text = con.text()
     assert "…" not in text and max(len(line) for line in text.splitlines()) <= 80
     rows = [[c.strip() for c in line.split("│")[1:-1]] for line in text.splitlines() if line.startswith("│")]
-    assert [r[:2] for r in rows] == [["aliengo", "descriptor"], ["aliengo", "full"],
-                                     ["mini_cheetah", "descriptor"], ["mini_cheetah", "full"]]
+    assert [r[:2] for r in rows] == [
+        ["aliengo", "descriptor"],
+        ["aliengo", "full"],
+        ["mini_cheetah", "descriptor"],
+        ["mini_cheetah", "full"],
+    ]
     note = " ".join(text.split()).split("left out at this terminal width: ")[1]
     assert note.endswith("peak, track (--format json or csv has every column)"), note  # d too if need be
-    code, out, err = run_cli("eval", "runs/film-cpu-s0", "--robots", "aliengo", "--envs", "2", "--steps", "5",
-                             "--scene-envs", "0", "-q", "--store", store, "--format", "json")
+    code, out, err = run_cli(
+        "eval",
+        "runs/film-cpu-s0",
+        "--robots",
+        "aliengo",
+        "--envs",
+        "2",
+        "--steps",
+        "5",
+        "--scene-envs",
+        "0",
+        "-q",
+        "--store",
+        store,
+        "--format",
+        "json",
+    )
     assert code == 0, err
     (row,) = json.loads(out)
     assert row["robot"] == "aliengo" and row["mode"] == "descriptor"
@@ -121,9 +167,20 @@ def test_diagnose_table_keeps_the_metrics_whole_at_80_columns_with_a_long_run_na
     from morfic_cli.cli.diagnose import CALIBRATION_TABLE
 
     run = "custom_variant.GatedCritic-smoke-s0"
-    rows = [{"run": run, "variant": "custom_variant:GatedCritic", "robot": robot, "d": 0.25, "ev": -1.234,
-             "cell": "0.412/1.038/0.611", "flip": 0.421, "cos_grad": -0.125, "n_samples": 12345}
-            for robot in ("go2", "mini_cheetah")]
+    rows = [
+        {
+            "run": run,
+            "variant": "custom_variant:GatedCritic",
+            "robot": robot,
+            "d": 0.25,
+            "ev": -1.234,
+            "cell": "0.412/1.038/0.611",
+            "flip": 0.421,
+            "cos_grad": -0.125,
+            "n_samples": 12345,
+        }
+        for robot in ("go2", "mini_cheetah")
+    ]
     con = console(80)
     emit_rows(rows, OutputFormat.table, CALIBRATION_TABLE, title="critic calibration")
     text = con.text()

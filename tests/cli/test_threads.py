@@ -20,8 +20,10 @@ def test_passive_unless_the_user_chose_a_policy():
 
 
 def test_the_entry_point_sets_it_before_torch_is_imported():
-    code = ("import os, sys; os.environ.pop('OMP_WAIT_POLICY', None); from morfic_cli.cli import main\n"
-            "try:\n    main(['--version'])\nexcept SystemExit:\n    pass\n"
-            "print(os.environ.get('OMP_WAIT_POLICY'), 'torch' in sys.modules)")
+    code = (
+        "import os, sys; os.environ.pop('OMP_WAIT_POLICY', None); from morfic_cli.cli import main\n"
+        "try:\n    main(['--version'])\nexcept SystemExit:\n    pass\n"
+        "print(os.environ.get('OMP_WAIT_POLICY'), 'torch' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split()[-2:] == ["PASSIVE", "False"]

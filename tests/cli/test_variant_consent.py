@@ -19,8 +19,10 @@ from morfic_cli.store import Store
 
 SENTINEL = "sentinel_consent:Critic"
 RUN = "runs/x"
-REFUSED = (f"Error: run {RUN} needs the user variant {SENTINEL}; morfic will not import code named by a stored run "
-           f"without --trust-variant {SENTINEL}")
+REFUSED = (
+    f"Error: run {RUN} needs the user variant {SENTINEL}; morfic will not import code named by a stored run "
+    f"without --trust-variant {SENTINEL}"
+)
 
 
 @pytest.fixture
@@ -33,7 +35,8 @@ def sentinel(tmp_path, monkeypatch):
         "import pathlib\n"
         f"pathlib.Path({str(marker)!r}).write_text('imported')\n"
         "from morfic_cli.rl.models import MorficCritic\n\n\n"
-        "class Critic(MorficCritic):\n    critic_defaults = {'conditioning': 'film'}\n")
+        "class Critic(MorficCritic):\n    critic_defaults = {'conditioning': 'film'}\n"
+    )
     monkeypatch.syspath_prepend(str(mods))
     monkeypatch.delitem(sys.modules, "sentinel_consent", raising=False)
     return marker
@@ -46,8 +49,13 @@ def imported(marker: Path) -> bool:
 def run_bundle(tmp_path: Path, variant: str, ref: str = RUN) -> Path:
     """A bundle of one finished checkpoint run (``ref``) whose config and meta name ``variant``."""
     src = Store(tmp_path / "src")
-    src.publish("checkpoint", ref, config={"variant": variant}, meta={"variant": variant, "finished": True},
-                files={"model.pt": b"not weights"})
+    src.publish(
+        "checkpoint",
+        ref,
+        config={"variant": variant},
+        meta={"variant": variant, "finished": True},
+        files={"model.pt": b"not weights"},
+    )
     out = tmp_path / "x.tar"
     src.export_tar([ref], out)
     return out
@@ -101,8 +109,9 @@ def test_trust_variant_or_the_allow_list_lets_the_same_run_load(run_cli, sentine
     code, _, err = run_cli(*LOADERS["eval"])
     assert imported(sentinel) and "needs the user variant" not in err
     code, _, err = run_cli("store", "import", str(tar))
-    assert f"needs the user variant {SENTINEL} (code morfic imports to rebuild the models) for {RUN}; trusted here" \
-        in err
+    assert (
+        f"needs the user variant {SENTINEL} (code morfic imports to rebuild the models) for {RUN}; trusted here" in err
+    )
     assert run_cli("trust", "--remove", SENTINEL)[0] == 0
     sys.modules.pop("sentinel_consent")
     sentinel.unlink()
@@ -134,18 +143,36 @@ def test_the_allow_list_is_in_the_config_folder_not_the_store(run_cli, tmp_path,
     assert code == 1 and err.startswith("Error: --remove needs the variants")
 
 
-@pytest.mark.parametrize(("argv", "needle"), [
-    (["eval", RUN, "--trust-variant", "pkg..mod:C"], "--trust-variant: variant 'pkg..mod:C' is not an import path"),
-    (["eval", RUN, "--trust-variant", "film"], "--trust-variant film: film is a stock variant"),
-    (["diagnose", RUN, "--trust-variant", "a:b c"], "--trust-variant: variant 'a:b c' is not an import path"),
-])
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["eval", RUN, "--trust-variant", "pkg..mod:C"], "--trust-variant: variant 'pkg..mod:C' is not an import path"),
+        (["eval", RUN, "--trust-variant", "film"], "--trust-variant film: film is a stock variant"),
+        (["diagnose", RUN, "--trust-variant", "a:b c"], "--trust-variant: variant 'a:b c' is not an import path"),
+    ],
+)
 def test_a_bad_trust_variant_is_an_error_before_any_work(run_cli, argv, needle):
     code, _, err = run_cli(*argv)
     assert code == 1 and err.startswith(f"Error: {needle}")
 
 
-BAD_NAMES = [".rel:Critic", "..up:Critic", "pkg..mod:Critic", "pkg:", ":Critic", "pkg:Cri tic", "pkg:C\n",
-             "pkg:C\x1b[2J", "pkg/mod:C", "a:b:c", "x" * 300 + ":C", 42, None, "film xl", "-film"]
+BAD_NAMES = [
+    ".rel:Critic",
+    "..up:Critic",
+    "pkg..mod:Critic",
+    "pkg:",
+    ":Critic",
+    "pkg:Cri tic",
+    "pkg:C\n",
+    "pkg:C\x1b[2J",
+    "pkg/mod:C",
+    "a:b:c",
+    "x" * 300 + ":C",
+    42,
+    None,
+    "film xl",
+    "-film",
+]
 
 
 @pytest.mark.parametrize("where", ["config", "meta"])
@@ -154,16 +181,20 @@ def test_import_refuses_a_variant_that_is_not_well_formed(run_cli, tmp_path, whe
     model = b"weights"
     fields = {"config": {"variant": "film"}, "meta": {"variant": "film"}}
     fields[where] = {"variant": bad}
-    manifest = manifest_bytes(kind="checkpoint", files={"model.pt": {"id": oid_of(model), "size": len(model)}},
-                              **fields)
-    tar = write_bundle(tmp_path / "bad.tar", blobs=[model], manifests=[manifest],
-                       refs={RUN: history_bytes([oid_of(manifest)])})
+    manifest = manifest_bytes(
+        kind="checkpoint", files={"model.pt": {"id": oid_of(model), "size": len(model)}}, **fields
+    )
+    tar = write_bundle(
+        tmp_path / "bad.tar", blobs=[model], manifests=[manifest], refs={RUN: history_bytes([oid_of(manifest)])}
+    )
     store = tmp_path / "store"
     before = listing(store)
     code, out, err = run_cli("store", "import", str(tar))
     assert code == 1, err
-    assert err.startswith(f"Error: manifest {oid_of(manifest)} in the export names a variant that is not "
-                          "well-formed") and "nothing was imported" in err
+    assert (
+        err.startswith(f"Error: manifest {oid_of(manifest)} in the export names a variant that is not well-formed")
+        and "nothing was imported" in err
+    )
     assert "\x1b" not in err and len(err.splitlines()) == 1
     assert listing(store) == before
 
@@ -171,8 +202,13 @@ def test_import_refuses_a_variant_that_is_not_well_formed(run_cli, tmp_path, whe
 def test_a_well_formed_user_variant_in_a_study_list_imports(run_cli, tmp_path):
     """A critic study's `variants` list is checked the same way and names no code to import (no line)."""
     src = Store(tmp_path / "src")
-    src.publish("diagnosis", "diagnoses/critic-study", config={"variants": ["film", "my_lab.critics:Gated"]},
-                meta={"variants": ["film", "my_lab.critics:Gated"]}, files={"critic_study.csv": b"x\n"})
+    src.publish(
+        "diagnosis",
+        "diagnoses/critic-study",
+        config={"variants": ["film", "my_lab.critics:Gated"]},
+        meta={"variants": ["film", "my_lab.critics:Gated"]},
+        files={"critic_study.csv": b"x\n"},
+    )
     src.export_tar(["diagnoses/critic-study"], tmp_path / "s.tar")
     code, _, err = run_cli("store", "import", str(tmp_path / "s.tar"))
     assert code == 0, err
@@ -210,8 +246,10 @@ def test_a_trusted_name_that_is_not_a_critic_class_is_an_error(run_cli, tmp_path
     for argv in (LOADERS["eval"], LOADERS["diagnose"], LOADERS["train --resume"]):
         code, _, err = run_cli(*argv, "--trust-variant", name)
         assert code == 1 and "Traceback" not in err and err.count("\n") == 1, err
-        assert err.startswith(f"Error: variant '{name}': class Critic is not a critic model: a torch.nn.Module "
-                              "subclass with forward and encode_privileged"), err
+        assert err.startswith(
+            f"Error: variant '{name}': class Critic is not a critic model: a torch.nn.Module "
+            "subclass with forward and encode_privileged"
+        ), err
 
 
 def test_the_example_variant_installs_as_its_own_package(tmp_path):
@@ -226,25 +264,50 @@ def test_the_example_variant_installs_as_its_own_package(tmp_path):
     repo = Path(__file__).resolve().parents[2]
     shutil.copytree(repo / "examples", tmp_path / "src")
     site = tmp_path / "site"
-    proc = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "--no-index",
-                           "--quiet", "--target", str(site), str(tmp_path / "src")], capture_output=True, text=True,
-                          timeout=300, check=False)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--no-deps",
+            "--no-build-isolation",
+            "--no-index",
+            "--quiet",
+            "--target",
+            str(site),
+            str(tmp_path / "src"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert proc.returncode == 0, proc.stderr
     assert (site / "custom_variant.py").read_bytes() == (repo / "examples" / "custom_variant.py").read_bytes()
-    script = (f"import site; site.addsitedir({str(site)!r})\n"
-              "from morfic_cli.rl import variants as V\n"
-              "from morfic_cli.rl.config import smoke_preset\n"
-              "from morfic_cli.rl.build import build_models\n"
-              "name = 'custom_variant:GatedCritic'\n"
-              "try:\n    V.resolve_variant(name)\nexcept V.UntrustedVariantError:\n    print('refused')\n"
-              "with V.consent_scope([name]):\n"
-              "    cfg = smoke_preset(name)\n"
-              "    actor, critic = build_models(cfg)\n"
-              "    label = V.resolve_variant(name).label\n"
-              "print(type(critic).__name__, type(critic).__module__, label)\n")
+    script = (
+        f"import site; site.addsitedir({str(site)!r})\n"
+        "from morfic_cli.rl import variants as V\n"
+        "from morfic_cli.rl.config import smoke_preset\n"
+        "from morfic_cli.rl.build import build_models\n"
+        "name = 'custom_variant:GatedCritic'\n"
+        "try:\n    V.resolve_variant(name)\nexcept V.UntrustedVariantError:\n    print('refused')\n"
+        "with V.consent_scope([name]):\n"
+        "    cfg = smoke_preset(name)\n"
+        "    actor, critic = build_models(cfg)\n"
+        "    label = V.resolve_variant(name).label\n"
+        "print(type(critic).__name__, type(critic).__module__, label)\n"
+    )
     env = {k: v for k, v in __import__("os").environ.items() if k != "PYTHONPATH"}
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=False,
-                          cwd=tmp_path, env={**env, "OMP_NUM_THREADS": "1"})
+    proc = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        cwd=tmp_path,
+        env={**env, "OMP_NUM_THREADS": "1"},
+    )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["refused", "GatedCritic", "custom_variant", "Gated"]
 

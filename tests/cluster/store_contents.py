@@ -70,10 +70,12 @@ def comparable(root: Path) -> dict[str, Any]:
                     files[name] = _csv(store.read_file(oid, name))
                 else:
                     files[name] = "present"
-            cache[oid] = {"kind": m.kind, "config": json.loads(_HEX64.sub("<id>", json.dumps(m.config))),
-                          "files": files,
-                          "inputs": sorted(((_HEX64.sub("<id>", role), describe(i)) for role, i in m.inputs.items()),
-                                           key=repr)}
+            cache[oid] = {
+                "kind": m.kind,
+                "config": json.loads(_HEX64.sub("<id>", json.dumps(m.config))),
+                "files": files,
+                "inputs": sorted(((_HEX64.sub("<id>", role), describe(i)) for role, i in m.inputs.items()), key=repr),
+            }
         return cache[oid]
 
     return {name: [describe(e.id) for e in store.ref_history(name)] for name in store.list_refs()}

@@ -22,8 +22,12 @@ def test_plan_jobs_is_the_pipeline_in_dependency_order(tmp_path):
     jobs = plan_jobs(_pipeline(tmp_path, seeds=2))
     keys = [j.key for j in jobs]
     runs = ["runs/film-smoke-s0", "runs/film-smoke-s1", "runs/ppo-smoke-s0", "runs/ppo-smoke-s1"]
-    assert keys == ([f"train {r}" for r in runs] + [f"eval {r}" for r in runs] + [f"diagnose {r}" for r in runs]
-                    + ["fixed-rollout aliengo", "fixed-rollout mini_cheetah"])
+    assert keys == (
+        [f"train {r}" for r in runs]
+        + [f"eval {r}" for r in runs]
+        + [f"diagnose {r}" for r in runs]
+        + ["fixed-rollout aliengo", "fixed-rollout mini_cheetah"]
+    )
     assert [j.seed for j in jobs[:4]] == [0, 1, 0, 1] and jobs[2].variant == "ppo"
     assert next(j for j in jobs if j.key == "eval runs/ppo-smoke-s1").needs == ("runs/ppo-smoke-s1",)
     assert jobs[-1].needs == tuple(runs)  # every critic is scored on the frozen actor's rollout
@@ -95,18 +99,22 @@ def test_append_import_adds_each_jobs_version_to_a_shared_ref(tmp_path):
 def test_executor_ray_without_ray_says_what_to_install(run_cli, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
     store = tmp_path / "store"
-    code, _, err = run_cli("reproduce", "--preset", "smoke", "--variants", "film", "--executor", "ray",
-                           "--store", str(store))
+    code, _, err = run_cli(
+        "reproduce", "--preset", "smoke", "--variants", "film", "--executor", "ray", "--store", str(store)
+    )
     assert code == 1
     assert err.startswith("Error:") and "pip install 'morfic[cluster]'" in err
     assert not store.exists()
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--address", "127.0.0.1:6379"], "use it with --executor ray"),
-    (["--executor", "ray", "--address", "nohost"], "is not HOST:PORT"),
-    (["--executor", "ray", "--retries", "-1"], "--retries must be 0 or more"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--address", "127.0.0.1:6379"], "use it with --executor ray"),
+        (["--executor", "ray", "--address", "nohost"], "is not HOST:PORT"),
+        (["--executor", "ray", "--retries", "-1"], "--retries must be 0 or more"),
+    ],
+)
 def test_bad_executor_options_are_error_lines(run_cli, tmp_path, args, message):
     store = tmp_path / "store"
     code, _, err = run_cli("reproduce", "--preset", "smoke", "--variants", "film", *args, "--store", str(store))
@@ -121,7 +129,18 @@ def test_an_address_where_nothing_listens_is_an_error_line(run_cli, tmp_path):
     with socket.socket() as s:  # a port that was free a moment ago
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    code, _, err = run_cli("reproduce", "--preset", "smoke", "--variants", "film", "--executor", "ray",
-                           "--address", f"127.0.0.1:{port}", "--store", str(tmp_path / "store"))
+    code, _, err = run_cli(
+        "reproduce",
+        "--preset",
+        "smoke",
+        "--variants",
+        "film",
+        "--executor",
+        "ray",
+        "--address",
+        f"127.0.0.1:{port}",
+        "--store",
+        str(tmp_path / "store"),
+    )
     assert code == 1 and "\nError: cannot reach a Ray cluster at --address 127.0.0.1:" in err, err
     assert not (tmp_path / "store" / "refs").exists()

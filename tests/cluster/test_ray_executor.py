@@ -43,10 +43,28 @@ class Cluster:
         ray_bin = str(Path(sys.executable).with_name("ray"))
         self.log = open(self.tmp / "head.log", "w")  # noqa: SIM115
         self.head = subprocess.Popen(
-            self.ns([ray_bin, "start", "--head", "--num-cpus", "2", "--node-ip-address", "127.0.0.1", "--port",
-                     str(PORT), "--temp-dir", str(self.tmp / "ray"), "--include-dashboard=false",
-                     "--disable-usage-stats", "--block"]),
-            stdout=self.log, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+            self.ns(
+                [
+                    ray_bin,
+                    "start",
+                    "--head",
+                    "--num-cpus",
+                    "2",
+                    "--node-ip-address",
+                    "127.0.0.1",
+                    "--port",
+                    str(PORT),
+                    "--temp-dir",
+                    str(self.tmp / "ray"),
+                    "--include-dashboard=false",
+                    "--disable-usage-stats",
+                    "--block",
+                ]
+            ),
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, "OMP_NUM_THREADS": "1"},
+        )
         deadline = time.monotonic() + 180
         while "Ray runtime started" not in (self.tmp / "head.log").read_text():
             if self.head.poll() is not None or time.monotonic() > deadline:
@@ -59,8 +77,13 @@ class Cluster:
         return ["nsenter", "-t", str(self.holder.pid), "-U", "-n", "--preserve-credentials", *args]
 
     def morfic(self, *args: str, store: Path, **kw) -> subprocess.Popen:
-        return subprocess.Popen(self.ns([*MORFIC, *args, "--store", str(store)]), stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True, **kw)
+        return subprocess.Popen(
+            self.ns([*MORFIC, *args, "--store", str(store)]),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            **kw,
+        )
 
     def stop(self) -> None:
         """SIGTERM to ``ray start --block`` stops every process of the cluster; then the namespace."""
@@ -110,10 +133,18 @@ def test_ray_store_matches_local(cluster, stores):
     assert "on " in err and "127.0.0.1" in err  # each job says where it ran
     a, b = comparable(local), comparable(ray_store)
     assert sorted(a) == sorted(b)
-    assert sorted(a) == ["diagnoses/calibration", "diagnoses/fixed-rollout/aliengo",
-                         "diagnoses/fixed-rollout/mini_cheetah", "evals/film-smoke-s0", "evals/ppo-smoke-s0",
-                         "reports/smoke", "runs/film-smoke-s0", "runs/ppo-smoke-s0", "tables/compare-baselines",
-                         "tables/morphology-support"]
+    assert sorted(a) == [
+        "diagnoses/calibration",
+        "diagnoses/fixed-rollout/aliengo",
+        "diagnoses/fixed-rollout/mini_cheetah",
+        "evals/film-smoke-s0",
+        "evals/ppo-smoke-s0",
+        "reports/smoke",
+        "runs/film-smoke-s0",
+        "runs/ppo-smoke-s0",
+        "tables/compare-baselines",
+        "tables/morphology-support",
+    ]
     assert [len(v["files"]["model.pt"]) for v in b["runs/film-smoke-s0"]] == [64, 64]  # weights by id, 2 checkpoints
     assert differences(a, b) == []
     _verify(cluster, ray_store)

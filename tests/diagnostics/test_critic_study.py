@@ -25,17 +25,43 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 ACTORS = ("runs/film-smoke-s0", "runs/film-smoke-s1", "runs/concat-smoke-s0")
 # --trunc-eps 0.8 -> H_eps = ceil(ln 0.8 / ln 0.99) = 23, so 30 steps leave the window t <= 7. 5 training envs:
 # 3 fitted, 1 validation, 1 held out ('train').
-TINY = ("--train-envs", "5", "--held-out", "1", "--val-envs", "1", "--target-envs", "2", "--steps", "30",
-        "--trunc-eps", "0.8", "--max-epochs", "30", "--patience", "2", "--minibatch", "8", "--stride", "2",
-        "--seeds", "2", "--robots", "go2,aliengo", "--command-vx", "1.0")
+TINY = (
+    "--train-envs",
+    "5",
+    "--held-out",
+    "1",
+    "--val-envs",
+    "1",
+    "--target-envs",
+    "2",
+    "--steps",
+    "30",
+    "--trunc-eps",
+    "0.8",
+    "--max-epochs",
+    "30",
+    "--patience",
+    "2",
+    "--minibatch",
+    "8",
+    "--stride",
+    "2",
+    "--seeds",
+    "2",
+    "--robots",
+    "go2,aliengo",
+    "--command-vx",
+    "1.0",
+)
 
 
 @pytest.fixture(scope="module")
 def smoke_store(smoke_runs):
     """film and concat seed 0 (reproduce's fixed-rollout actor), then film seed 1: the session's template, copied
     per test."""
-    return smoke_runs.template((("film", "concat"), 0, "{variant}-smoke-s{seed}"),
-                               (("film",), 1, "{variant}-smoke-s{seed}"))
+    return smoke_runs.template(
+        (("film", "concat"), 0, "{variant}-smoke-s{seed}"), (("film",), 1, "{variant}-smoke-s{seed}")
+    )
 
 
 @pytest.fixture
@@ -49,8 +75,20 @@ def _csv(store, manifest_id, name):
 
 def test_study_over_actors_rows_files_and_verdicts(run_cli, store, tmp_path):
     out = tmp_path / "out"
-    code, stdout, stderr = run_cli("critic-study", *TINY, "--actors", ",".join(ACTORS), "--min-ev", "-1000",
-                                   "--variants", "film,actor-only,concat", "--out", str(out), "--format", "json")
+    code, stdout, stderr = run_cli(
+        "critic-study",
+        *TINY,
+        "--actors",
+        ",".join(ACTORS),
+        "--min-ev",
+        "-1000",
+        "--variants",
+        "film,actor-only,concat",
+        "--out",
+        str(out),
+        "--format",
+        "json",
+    )
     assert code == 0, stderr
     rows = json.loads(stdout)
     # 1 command x (train + 2 robots) x 3 critics (actor-only folded into ppo) = 9 cells, each over 3 actors
@@ -62,7 +100,8 @@ def test_study_over_actors_rows_files_and_verdicts(run_cli, store, tmp_path):
     assert set(manifest.files) == {"critic_study.csv", "summary.csv", "verdicts.csv", "fits.csv", "critic_study.png"}
     names = [a.removeprefix("runs/") for a in ACTORS]
     assert set(manifest.inputs) == {f"actor/{n}" for n in names} | {
-        f"rollout/{n}/1/{r}" for n in names for r in ("train", "go2", "aliengo")}
+        f"rollout/{n}/1/{r}" for n in names for r in ("train", "go2", "aliengo")
+    }
     study = _csv(store, manifest.id, "critic_study.csv")
     assert len(study) == 3 * 3 * 3 * 2  # actors x critics x robots x fit seeds
     # the train rows are the held-out env: 1 env x window t <= 7 = 8 samples; a target robot has 2 envs x 8
@@ -83,8 +122,12 @@ def test_study_over_actors_rows_files_and_verdicts(run_cli, store, tmp_path):
     assert all(r["converged"] == "True" for r in study)  # --min-ev -1000: every fit that stopped is kept
     # a cell: each actor's two fits averaged first, then the three actors -> n 3, the t interval over them
     cell = next(r for r in rows if (r["robot"], r["variant"]) == ("aliengo", "film"))
-    per_actor = [statistics.mean(float(r["ev"]) for r in study if (r["actor"], r["robot"], r["variant"]) ==
-                                 (n, "aliengo", "film")) for n in names]
+    per_actor = [
+        statistics.mean(
+            float(r["ev"]) for r in study if (r["actor"], r["robot"], r["variant"]) == (n, "aliengo", "film")
+        )
+        for n in names
+    ]
     mean, lo, hi = stats.mean_interval(per_actor)
     assert cell["n"] == 3 and cell["ev_mean"] == pytest.approx(mean) and cell["ev_lo"] == pytest.approx(lo)
     verdicts = _csv(store, manifest.id, "verdicts.csv")
@@ -92,16 +135,37 @@ def test_study_over_actors_rows_files_and_verdicts(run_cli, store, tmp_path):
     assert (out / "verdicts.csv").exists() and (out / "critic_study.png").read_bytes()[:4] == b"\x89PNG"
     assert "claim (a) at 1 m/s" in stderr and "claim (c) at 1 m/s" in stderr and "all 18 fits converged" in stderr
     # a second call reuses the stored rollouts and refits: same rows
-    code, stdout2, _ = run_cli("critic-study", *TINY, "--actors", ",".join(ACTORS), "--min-ev", "-1000",
-                               "--variants", "film,ppo,concat", "--format", "json", "-q")
+    code, stdout2, _ = run_cli(
+        "critic-study",
+        *TINY,
+        "--actors",
+        ",".join(ACTORS),
+        "--min-ev",
+        "-1000",
+        "--variants",
+        "film,ppo,concat",
+        "--format",
+        "json",
+        "-q",
+    )
     assert code == 0
     assert json.loads(stdout2) == rows
     # a threshold between the fits' validation EVs flags those below it: left out of the cells, counted
     kept_ev = {k: float(c[int(c[0]["best_epoch"]) - 1]["val_ev"]) for k, c in by_fit.items()}  # the kept epoch's
     assert kept_ev == {k: float(r["val_ev"]) for r in study for k in [(r["actor"], r["variant"], r["fit_seed"])]}
     threshold = sorted(kept_ev.values())[len(kept_ev) // 2]
-    code, stdout3, stderr3 = run_cli("critic-study", *TINY, "--actors", ",".join(ACTORS), "--min-ev", str(threshold),
-                                     "--variants", "film,ppo,concat", "--format", "json")
+    code, stdout3, stderr3 = run_cli(
+        "critic-study",
+        *TINY,
+        "--actors",
+        ",".join(ACTORS),
+        "--min-ev",
+        str(threshold),
+        "--variants",
+        "film,ppo,concat",
+        "--format",
+        "json",
+    )
     assert code == 0, stderr3
     flagged = {k for k, ev in kept_ev.items() if ev < threshold}
     assert 0 < len(flagged) < len(by_fit)
@@ -156,7 +220,8 @@ def test_reproduce_runs_the_study_once(store):
     # the study's actors: film seeds 0-2, actor-only and concat seed 0 of the preset, those reproduced or stored
     assert manifest.config["actors"] == list(ACTORS)
     assert {k: v for k, v in manifest.inputs.items() if k.startswith("actor/")} == {
-        f"actor/{a.removeprefix('runs/')}": store.resolve(a) for a in ACTORS}
+        f"actor/{a.removeprefix('runs/')}": store.resolve(a) for a in ACTORS
+    }
     assert manifest.config["seeds"] == 2 and manifest.config["commands"] == [2.0]
     second = Pipeline(store, cfg).critic_study()
     assert (second.status, second.id) == ("skipped", first.id)
@@ -186,11 +251,24 @@ def test_bad_input_is_an_error(run_cli, store, argv, needle):
 
 def _samples(reward: np.ndarray, obs_value: np.ndarray) -> Samples:
     t, n = reward.shape
-    obs = {"critic": np.broadcast_to(obs_value[:, :, None, None], (t, n, 16, 48)).astype(np.float32),
-           "privileged": np.zeros((t, n, 18), np.float32), "morphology": np.zeros((t, n, 11), np.float32)}
+    obs = {
+        "critic": np.broadcast_to(obs_value[:, :, None, None], (t, n, 16, 48)).astype(np.float32),
+        "privileged": np.zeros((t, n, 18), np.float32),
+        "morphology": np.zeros((t, n, 11), np.float32),
+    }
     zeros = np.zeros((t, n), bool)
-    return Samples("go2", "train", obs, np.zeros((t, n, 12), np.float32), reward.astype(np.float32),
-                   np.zeros((t, n), np.float32), zeros, zeros, "id", False)
+    return Samples(
+        "go2",
+        "train",
+        obs,
+        np.zeros((t, n, 12), np.float32),
+        reward.astype(np.float32),
+        np.zeros((t, n), np.float32),
+        zeros,
+        zeros,
+        "id",
+        False,
+    )
 
 
 def test_fit_data_window_stride_and_standardisation():
@@ -229,8 +307,10 @@ def _constant_data(g: list[float]) -> cs.FitData:
     from tensordict import TensorDict
 
     n = len(g)
-    obs = TensorDict({"critic": torch.zeros(n, 16, 48), "privileged": torch.zeros(n, 18),
-                      "morphology": torch.zeros(n, 11)}, batch_size=[n])
+    obs = TensorDict(
+        {"critic": torch.zeros(n, 16, 48), "privileged": torch.zeros(n, 18), "morphology": torch.zeros(n, 11)},
+        batch_size=[n],
+    )
     G = torch.tensor(g)
     return cs.FitData(obs, G, float(G.mean()), float(G.std(correction=0)))
 
@@ -250,10 +330,16 @@ def test_a_fit_that_cannot_explain_the_validation_envs_is_flagged():
     # the critic keeps its best epoch's weights: its validation loss now is that epoch's
     pred = fit.critic(val.obs).reshape(-1).detach()
     assert float(torch.nn.functional.mse_loss(pred, val.target_as(data))) == pytest.approx(
-        fit.val_losses[fit.best_epoch - 1], rel=1e-5)
+        fit.val_losses[fit.best_epoch - 1], rel=1e-5
+    )
     # a fit the cap cuts short is not converged whatever its EV
-    short = cs.fit_critic(cs.build_critic(smoke_preset("film"), "ppo", seed=0), data,
-                          cs.StudyCfg(max_epochs=2, patience=5, minibatch=8, min_ev=-1.0), 0, val)
+    short = cs.fit_critic(
+        cs.build_critic(smoke_preset("film"), "ppo", seed=0),
+        data,
+        cs.StudyCfg(max_epochs=2, patience=5, minibatch=8, min_ev=-1.0),
+        0,
+        val,
+    )
     assert (len(short.losses), short.stopped_early, short.converged) == (2, False, False)
 
 
@@ -266,19 +352,40 @@ def dataclasses_replace_min_ev(fit: cs.Fit, min_ev: float) -> cs.Fit:
 def test_averaging_within_actor_then_across_actors_leaves_flagged_fits_out():
     # actor A: fits 0.2, 0.4 -> 0.3; B: 0.5 and a flagged 9.0 -> 0.5; C: 0.1, 0.3 -> 0.2; D: every fit flagged.
     # Over actors: mean(0.3, 0.5, 0.2) = 1/3, n 3 (pooling the kept fits would give 0.3), 3 fits left out.
-    fits = {"A": [(0.2, True), (0.4, True)], "B": [(0.5, True), (9.0, False)], "C": [(0.1, True), (0.3, True)],
-            "D": [(7.0, False)]}
-    rows = [{"command_vx": 1.0, "robot": "aliengo", "variant": "film", "fit_seed": k, "multiplicative": True,
-             "actor": actor, "converged": str(ok), "ev": ev, "nvb": 0.0, "abs_nvb": 0.0, "nve": 1.0, "flip": 0.1,
-             "cos_grad": 0.5} for actor, vals in fits.items() for k, (ev, ok) in enumerate(vals)]
+    fits = {
+        "A": [(0.2, True), (0.4, True)],
+        "B": [(0.5, True), (9.0, False)],
+        "C": [(0.1, True), (0.3, True)],
+        "D": [(7.0, False)],
+    }
+    rows = [
+        {
+            "command_vx": 1.0,
+            "robot": "aliengo",
+            "variant": "film",
+            "fit_seed": k,
+            "multiplicative": True,
+            "actor": actor,
+            "converged": str(ok),
+            "ev": ev,
+            "nvb": 0.0,
+            "abs_nvb": 0.0,
+            "nve": 1.0,
+            "flip": 0.1,
+            "cos_grad": 0.5,
+        }
+        for actor, vals in fits.items()
+        for k, (ev, ok) in enumerate(vals)
+    ]
     assert ss.study_unit(rows) == ss.ACTOR
     assert ss.unit_values(rows, "ev") == pytest.approx([0.3, 0.5, 0.2])
     cell = next(c for c in ss.cell_summary(rows) if c["metric"] == "ev")
     # t interval over the 3 actor means: s = sqrt(((0.3-1/3)^2 + (0.5-1/3)^2 + (0.2-1/3)^2) / 2) = 0.152753,
     # half-width t(0.975, 2) * s / sqrt(3) = 4.302653 * 0.0881917 = 0.379458
     assert (cell["mean"], cell["n"], cell["n_fits"], cell["n_flagged"]) == (pytest.approx(1 / 3), 3, 5, 2)
-    assert cell["lo"] == pytest.approx(1 / 3 - 0.379458, abs=1e-6) and cell["hi"] == pytest.approx(1 / 3 + 0.379458,
-                                                                                                  abs=1e-6)
+    assert cell["lo"] == pytest.approx(1 / 3 - 0.379458, abs=1e-6) and cell["hi"] == pytest.approx(
+        1 / 3 + 0.379458, abs=1e-6
+    )
     assert ss.flagged(rows) == [("B", "film", 1), ("D", "film", 0)]
     assert ss.convergence_text(rows).startswith("2 of 7 fits unconverged and left out")
 
@@ -288,9 +395,24 @@ def test_claims_over_actors_are_paired_by_actor():
     # s^2 = 0.01, SE = 0.1 / sqrt(3) = 0.057735, t = 3.4641 on 2 df -> p = 0.07418 (Welch over the same values,
     # ignoring the pairing, would give p 0.25)
     flips = {"film": (0.2, 0.4, 0.3), "ppo": (0.5, 0.6, 0.4)}
-    rows = [{"command_vx": 1.0, "robot": "aliengo", "variant": v, "fit_seed": 0, "multiplicative": v == "film",
-             "actor": f"a{i}", "converged": "True", "flip": f, "cos_grad": 0.5, "ev": 0.1, "nve": 1.0, "nvb": 0.0}
-            for v, fs in flips.items() for i, f in enumerate(fs)]
+    rows = [
+        {
+            "command_vx": 1.0,
+            "robot": "aliengo",
+            "variant": v,
+            "fit_seed": 0,
+            "multiplicative": v == "film",
+            "actor": f"a{i}",
+            "converged": "True",
+            "flip": f,
+            "cos_grad": 0.5,
+            "ev": 0.1,
+            "nve": 1.0,
+            "nvb": 0.0,
+        }
+        for v, fs in flips.items()
+        for i, f in enumerate(fs)
+    ]
     e = ss.contrast_effect(rows, "flip", ["ppo"], ["film"], robot="aliengo")
     assert (e.estimate, e.se, e.df, e.n_a) == (pytest.approx(0.2), pytest.approx(0.0577350), 2.0, 3)
     assert e.p == pytest.approx(0.0741799, abs=1e-6)
@@ -303,8 +425,18 @@ def test_claims_over_actors_are_paired_by_actor():
 
 
 def test_a_one_actor_study_of_layout_1_is_read_over_fit_seeds_and_a_newer_layout_refused():
-    rows = [{"command_vx": 1.0, "robot": "aliengo", "variant": "film", "fit_seed": k, "multiplicative": True,
-             "actor": "film-cpu-s0", "ev": ev} for k, ev in enumerate((0.1, 0.3))]
+    rows = [
+        {
+            "command_vx": 1.0,
+            "robot": "aliengo",
+            "variant": "film",
+            "fit_seed": k,
+            "multiplicative": True,
+            "actor": "film-cpu-s0",
+            "ev": ev,
+        }
+        for k, ev in enumerate((0.1, 0.3))
+    ]
     assert ss.study_unit(rows) == ss.FIT_SEED and ss.unit_values(rows, "ev") == [0.1, 0.3]
     assert "layout 1" in ss.convergence_text(rows)
     assert cs.check_layout({}) == 1 and cs.check_layout({"layout": 2}) == 2
@@ -318,8 +450,14 @@ def test_a_fitted_critic_learns_a_return_its_input_tells():
     x = torch.tensor([0.0, 1.0]).repeat(64)
     from tensordict import TensorDict
 
-    obs = TensorDict({"critic": x[:, None, None].expand(128, 16, 48).clone(),
-                      "privileged": torch.zeros(128, 18), "morphology": torch.zeros(128, 11)}, batch_size=[128])
+    obs = TensorDict(
+        {
+            "critic": x[:, None, None].expand(128, 16, 48).clone(),
+            "privileged": torch.zeros(128, 18),
+            "morphology": torch.zeros(128, 11),
+        },
+        batch_size=[128],
+    )
     data = cs.FitData(obs, g_values, 15.0, 5.0)
     from morfic_cli.rl.config import smoke_preset
 
@@ -339,9 +477,22 @@ def _rows(values: dict[tuple[str, str], list[float]], metric: str) -> list[dict]
     out = []
     for (variant, robot), vals in values.items():
         for seed, v in enumerate(vals):
-            out.append({"command_vx": 1.0, "robot": robot, "variant": variant, "fit_seed": seed,
-                        "multiplicative": variant in ("film", "adaln"), "ev": math.nan, "flip": math.nan,
-                        "cos_grad": math.nan, "abs_nvb": 0.0, "nvb": 0.0, "nve": 0.0} | {metric: v})
+            out.append(
+                {
+                    "command_vx": 1.0,
+                    "robot": robot,
+                    "variant": variant,
+                    "fit_seed": seed,
+                    "multiplicative": variant in ("film", "adaln"),
+                    "ev": math.nan,
+                    "flip": math.nan,
+                    "cos_grad": math.nan,
+                    "abs_nvb": 0.0,
+                    "nvb": 0.0,
+                    "nve": 0.0,
+                }
+                | {metric: v}
+            )
     return out
 
 
@@ -349,9 +500,17 @@ def test_claim_a_effect_by_hand():
     # aliengo: film 0.5, adaln 0.3 (multiplicative mean 0.4); ppo 0.1 -> +0.3, constant seeds: exact, p 0
     # mini_cheetah: film {0, 0.2}, adaln {0, 0.2} (mean 0.1, s² 0.02 each), ppo 0.1 constant: effect 0,
     # t 0 -> p 1. Holm over the two robots: 0 and 1.
-    rows = _rows({("film", "aliengo"): [0.5, 0.5], ("adaln", "aliengo"): [0.3, 0.3], ("ppo", "aliengo"): [0.1, 0.1],
-                  ("film", "mini_cheetah"): [0.0, 0.2], ("adaln", "mini_cheetah"): [0.0, 0.2],
-                  ("ppo", "mini_cheetah"): [0.1, 0.1]}, "ev")
+    rows = _rows(
+        {
+            ("film", "aliengo"): [0.5, 0.5],
+            ("adaln", "aliengo"): [0.3, 0.3],
+            ("ppo", "aliengo"): [0.1, 0.1],
+            ("film", "mini_cheetah"): [0.0, 0.2],
+            ("adaln", "mini_cheetah"): [0.0, 0.2],
+            ("ppo", "mini_cheetah"): [0.1, 0.1],
+        },
+        "ev",
+    )
     claim = ss.claim_a(rows, 1.0)
     by_robot = {r["robot"]: r for r in claim["robots"]}
     e = by_robot["aliengo"]["effect"]
@@ -365,10 +524,12 @@ def test_claim_a_effect_by_hand():
 
 
 def test_claim_c_needs_film_best_against_every_critic():
-    flip = _rows({("film", "aliengo"): [0.2, 0.2], ("ppo", "aliengo"): [0.3, 0.3], ("adaln", "aliengo"): [0.1, 0.1]},
-                 "flip")
-    cos = _rows({("film", "aliengo"): [0.5, 0.5], ("ppo", "aliengo"): [0.4, 0.4], ("adaln", "aliengo"): [0.4, 0.4]},
-                "cos_grad")
+    flip = _rows(
+        {("film", "aliengo"): [0.2, 0.2], ("ppo", "aliengo"): [0.3, 0.3], ("adaln", "aliengo"): [0.1, 0.1]}, "flip"
+    )
+    cos = _rows(
+        {("film", "aliengo"): [0.5, 0.5], ("ppo", "aliengo"): [0.4, 0.4], ("adaln", "aliengo"): [0.4, 0.4]}, "cos_grad"
+    )
     for r, c in zip(flip, cos, strict=True):
         r["cos_grad"] = c["cos_grad"]
     claim = ss.claim_c(flip, 1.0)
@@ -387,8 +548,9 @@ def test_claim_c_needs_film_best_against_every_critic():
 
 
 def test_a_users_critic_is_in_neither_group_of_claim_a():
-    rows = _rows({("film", "aliengo"): [0.5, 0.5], ("ppo", "aliengo"): [0.1, 0.1], ("mine", "aliengo"): [9.0, 9.0]},
-                 "ev")
+    rows = _rows(
+        {("film", "aliengo"): [0.5, 0.5], ("ppo", "aliengo"): [0.1, 0.1], ("mine", "aliengo"): [9.0, 9.0]}, "ev"
+    )
     for r in rows:
         if r["variant"] == "mine":
             r["multiplicative"] = float("nan")  # as a CSV with an empty cell reads back

@@ -191,15 +191,18 @@ def test_ev_value_labels_do_not_overlap(runs):
     from morfic_cli.diagnostics.figures import ev_plot
 
     robots = ["go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c"]
-    rows = [{"run": f"r{k}", "variant": "film", "robot": robot, "ev": -0.55 if j % 2 else -25.0 - k}
-            for k in range(runs) for j, robot in enumerate(robots)]
+    rows = [
+        {"run": f"r{k}", "variant": "film", "robot": robot, "ev": -0.55 if j % 2 else -25.0 - k}
+        for k in range(runs)
+        for j, robot in enumerate(robots)
+    ]
     fig = ev_plot(rows)
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     boxes = [t.get_window_extent(renderer) for t in fig.axes[0].texts]
     plt.close(fig)
     assert len(boxes) == runs * len(robots)
-    overlaps = [(a, b) for i, a in enumerate(boxes) for b in boxes[i + 1:] if a.overlaps(b)]
+    overlaps = [(a, b) for i, a in enumerate(boxes) for b in boxes[i + 1 :] if a.overlaps(b)]
     assert not overlaps, overlaps[:3]  # horizontal labels of 7 runs overlapped ("-0.550.55")
 
 

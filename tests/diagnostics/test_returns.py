@@ -132,6 +132,6 @@ def test_cutting_a_rollout_moves_returns_in_i_eps_by_at_most_eps(seed):
     fell = ~truncated  # the episode ends by a fall inside the cut recording: its return is exact
     assert torch.equal(G_cut[fell], G_full[:n_cut][fell])
     assert not torch.any(mask & truncated & (H < h_eps))
-    assert not mask[n_cut - h_eps + 1:].any()  # nothing after the window, fall or not
+    assert not mask[n_cut - h_eps + 1 :].any()  # nothing after the window, fall or not
     no_timeouts = torch.zeros_like(done[:n_cut])
     assert torch.equal(sample_window(done[:n_cut], no_timeouts, gamma, eps), window.expand(n_cut, n_envs))

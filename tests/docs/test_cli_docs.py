@@ -52,13 +52,16 @@ def test_cli_md_has_a_section_for_every_command():
 
 def test_clean_unescapes_and_shifts_headings():
     gen = _gen()
-    raw = ("# `morfic`\n\n**Commands**:\n\n* `train`: Train a policy with one...\n* `--help`: Show this.\n\n"
-           "## `morfic train`\n\n* `--logger <x>`: wandb (pip install &#x27;morfic\\\\\\[wandb]&#x27;) "
-           "\\[default: 500].  [default: tensorboard]\n\nExample: a\nExample: b\n\n```console\n$ morfic train\n```\n")
+    raw = (
+        "# `morfic`\n\n**Commands**:\n\n* `train`: Train a policy with one...\n* `--help`: Show this.\n\n"
+        "## `morfic train`\n\n* `--logger <x>`: wandb (pip install &#x27;morfic\\\\\\[wandb]&#x27;) "
+        "\\[default: 500].  [default: tensorboard]\n\nExample: a\nExample: b\n\n```console\n$ morfic train\n```\n"
+    )
     assert gen.clean(raw, {"morfic train": "Train a policy with one variant."}) == (
         "## `morfic`\n\n**Commands**:\n\n* `train`: Train a policy with one variant.\n* `--help`: Show this.\n\n"
         "### `morfic train`\n\n* `--logger <x>`: wandb (pip install 'morfic[wandb]') [default: 500].  "
-        "[default: tensorboard]\n\nExample: a\n\nExample: b\n\n```console\n$ morfic train\n```\n")
+        "[default: tensorboard]\n\nExample: a\n\nExample: b\n\n```console\n$ morfic train\n```\n"
+    )
 
 
 def test_cli_md_is_current():

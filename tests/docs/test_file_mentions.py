@@ -14,8 +14,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 TOP = ("morfic_cli", "docs", "tests", "examples", "robots", "artifacts", "scripts", ".ci")
-PATH = re.compile(r"(?<![\w./-])((?:\.\./)*(?:" + "|".join(re.escape(t) for t in TOP)
-                  + r")/[\w./-]*[\w-]|[\w./-]*[\w-]\.md)(?![\w/-])")
+PATH = re.compile(
+    r"(?<![\w./-])((?:\.\./)*(?:"
+    + "|".join(re.escape(t) for t in TOP)
+    + r")/[\w./-]*[\w-]|[\w./-]*[\w-]\.md)(?![\w/-])"
+)
 WRITTEN = {"report.md"}
 """Files morfic writes (the report's Markdown), mentioned by their name or under an output folder."""
 OUTSIDE = re.compile(r"\bSPEC(?:\.md| section| §)|\banchors\.md\b|\breference/|\bARCHITECTURE\.md\b")
@@ -47,6 +50,9 @@ def test_every_mentioned_file_exists(source):
 
 @pytest.mark.parametrize("source", _sources(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_no_citation_of_notes_outside_the_repository(source):
-    lines = [f"{i}: {line.strip()}" for i, line in enumerate(source.read_text(encoding="utf-8").splitlines(), 1)
-             if OUTSIDE.search(line)]
+    lines = [
+        f"{i}: {line.strip()}"
+        for i, line in enumerate(source.read_text(encoding="utf-8").splitlines(), 1)
+        if OUTSIDE.search(line)
+    ]
     assert not lines, f"{source.relative_to(ROOT)} cites design notes that are not in this repository: {lines}"

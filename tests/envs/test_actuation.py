@@ -39,21 +39,48 @@ def test_extended_descriptor_of_go2_and_b1_by_hand():
     go2, b1 = E.extended_descriptor(load_robot("go2")), E.extended_descriptor(load_robot("b1"))
     assert go2.shape == b1.shape == (28,)
     np.testing.assert_allclose(go2[:11], load_robot("go2").descriptor)  # the paper's 11 first, unchanged
-    for vec, expect in ((go2, {"total_mass": GO2_MASS, "kp": 20.0, "kd": 0.5, "torque_limit_hip": 23.7,
-                               "torque_limit_calf": 45.43, "base_length": 0.3762, "hip_x": 0.1934, "hip_y": 0.0465,
-                               "thigh_offset": 0.0955, "thigh_length": 0.213, "calf_radius": 0.013,
-                               "foot_radius": 0.022}),
-                        (b1, {"base_mass": 29.45, "total_mass": B1_MASS, "kp": 250.0, "kd": 10.0,
-                              "torque_limit_thigh": 93.33, "torque_limit_calf": 140.0, "base_width": 0.30,
-                              "calf_length": 0.35, "foot_radius": 0.04})):
+    for vec, expect in (
+        (
+            go2,
+            {
+                "total_mass": GO2_MASS,
+                "kp": 20.0,
+                "kd": 0.5,
+                "torque_limit_hip": 23.7,
+                "torque_limit_calf": 45.43,
+                "base_length": 0.3762,
+                "hip_x": 0.1934,
+                "hip_y": 0.0465,
+                "thigh_offset": 0.0955,
+                "thigh_length": 0.213,
+                "calf_radius": 0.013,
+                "foot_radius": 0.022,
+            },
+        ),
+        (
+            b1,
+            {
+                "base_mass": 29.45,
+                "total_mass": B1_MASS,
+                "kp": 250.0,
+                "kd": 10.0,
+                "torque_limit_thigh": 93.33,
+                "torque_limit_calf": 140.0,
+                "base_width": 0.30,
+                "calf_length": 0.35,
+                "foot_radius": 0.04,
+            },
+        ),
+    ):
         for name, value in expect.items():
             assert vec[_idx(name)] == pytest.approx(value, abs=1e-9), name
 
 
 def test_generated_robot_geometry_is_template_times_factors():
     go2 = load_robot("go2")
-    sample = GeometrySample(1.1, np.array([1.2, 0.9, 1.0]), 1.0, np.array([1.05, 0.95]), 1.0, 0.8, 1.25, 1.0, 1.0,
-                            np.ones(4))
+    sample = GeometrySample(
+        1.1, np.array([1.2, 0.9, 1.0]), 1.0, np.array([1.05, 0.95]), 1.0, 0.8, 1.25, 1.0, 1.0, np.ones(4)
+    )
     vec = E.extended_descriptor(generate_robot(go2, sample, GeometryRandCfg(gains_with_mass=False)))
     assert vec[_idx("base_length")] == pytest.approx(0.3762 * 1.1 * 1.2)
     assert vec[_idx("hip_y")] == pytest.approx(0.0465 * 1.1 * 0.9 * 0.95)
@@ -89,13 +116,16 @@ def test_heavy_robots_and_absurd_inputs_stay_finite_and_bounded(robot):
 
 
 def test_sample_actuation_follows_mass_by_hand():
-    go2 = Actuation(torch.tensor([20.0], dtype=torch.float64), torch.tensor([0.5], dtype=torch.float64),
-                    torch.tensor([[23.7, 23.7, 45.43]], dtype=torch.float64))
+    go2 = Actuation(
+        torch.tensor([20.0], dtype=torch.float64),
+        torch.tensor([0.5], dtype=torch.float64),
+        torch.tensor([[23.7, 23.7, 45.43]], dtype=torch.float64),
+    )
     cfg = ActuationRandCfg(enabled=True, torque_mass_exponent=0.75)
     act = sample_actuation(torch.tensor([2 * GO2_MASS, GO2_MASS]), go2, GO2_MASS, cfg, torch.Generator())
     np.testing.assert_allclose(act.kp.numpy(), [40.0, 20.0])
     np.testing.assert_allclose(act.kd.numpy(), [1.0, 0.5])
-    np.testing.assert_allclose(act.torque_limit[0].numpy(), np.array([23.7, 23.7, 45.43]) * 2 ** 0.75)  # 39.86 ...
+    np.testing.assert_allclose(act.torque_limit[0].numpy(), np.array([23.7, 23.7, 45.43]) * 2**0.75)  # 39.86 ...
     jitter = dataclasses.replace(cfg, kp_factor=(2.0, 2.0), gains_with_mass=False, torque_mass_exponent=0.0)
     act = sample_actuation(torch.tensor([2 * GO2_MASS]), go2, GO2_MASS, jitter, torch.Generator())
     assert float(act.kp[0]) == pytest.approx(40.0) and float(act.kd[0]) == 0.5
@@ -103,8 +133,14 @@ def test_sample_actuation_follows_mass_by_hand():
 
 
 def test_curriculum_widens_on_a_crafted_sequence():
-    cfg = ActuationRandCfg(enabled=True, mass_scale=(0.8, 4.0), curriculum=True, curriculum_init=1.25,
-                           curriculum_step=1.25, curriculum_threshold=0.7)
+    cfg = ActuationRandCfg(
+        enabled=True,
+        mass_scale=(0.8, 4.0),
+        curriculum=True,
+        curriculum_init=1.25,
+        curriculum_step=1.25,
+        curriculum_threshold=0.7,
+    )
     upper = torch.tensor(initial_upper(cfg), dtype=torch.float64)
     seen, changed = [], []
     for tracking in (0.5, 0.75, 0.69, 0.9, 0.9, 0.9, 0.9, 0.9, 0.9):
@@ -205,11 +241,28 @@ def test_cli_train_film_act_smoke_and_eval_actuation_matched(tmp_path):
     runner, store = CliRunner(), str(tmp_path / "store")
     result = runner.invoke(app, ["train", "--variant", "film-act", "--preset", "smoke", "--quiet", "--store", store])
     assert result.exit_code == 0, result.output
-    result = runner.invoke(app, ["eval", "runs/film-act-smoke-s0", "--mode", "actuation-matched", "--robots",
-                                 "aliengo", "--envs", "2", "--steps", "5", "--format", "json", "--quiet",
-                                 "--store", store])
+    result = runner.invoke(
+        app,
+        [
+            "eval",
+            "runs/film-act-smoke-s0",
+            "--mode",
+            "actuation-matched",
+            "--robots",
+            "aliengo",
+            "--envs",
+            "2",
+            "--steps",
+            "5",
+            "--format",
+            "json",
+            "--quiet",
+            "--store",
+            store,
+        ],
+    )
     assert result.exit_code == 0, result.output
-    rows = json.loads(result.output[result.output.index("["):])
+    rows = json.loads(result.output[result.output.index("[") :])
     assert [(r["robot"], r["mode"], r["steps"]) for r in rows] == [("aliengo", "actuation-matched", 5)]
     from morfic_cli.store import Store
 
@@ -261,15 +314,49 @@ def test_report_gives_actuation_matched_its_own_table():
     from morfic_cli.report.gather import RunInfo, StoreData
     from morfic_cli.report.tables import transfer_table
 
-    run = RunInfo(spec="runs/film-act-cpu-s0", name="film-act-cpu-s0", checkpoint="a" * 64, variant="film-act",
-                  seed=0, preset="cpu", iteration=1, max_iterations=1, env_steps=1, wall_time_s=1.0, device="cpu",
-                  finished=True, created="")
-    rows = [{"run": run.name, "variant": run.variant, "seed": 0, "preset": "cpu", "checkpoint": run.checkpoint,
-             "robot": "aliengo", "mode": mode, "command_vx": 2.0, "d": 0.3, "vx_mean": vx, "vx_std": 0.1,
-             "vx_env_std": 0.01, "vx_step_mean": vx, "n_alive": 100, "vx_peak_1s_mean": vx, "vx_peak_1s_std": 0.1,
-             "survival": 1.0, "tracking_ratio": vx / 2, "valid_fraction": 1.0, "num_envs": 64, "steps": 500}
-            for mode, vx in (("descriptor", 1.2), ("actuation-matched", 1.9))]
-    table = transfer_table(transfer_rows(StoreData(runs=[run], evals=rows)), key="k", title="t", command_vx=2.0,
-                           mode="actuation-matched")
+    run = RunInfo(
+        spec="runs/film-act-cpu-s0",
+        name="film-act-cpu-s0",
+        checkpoint="a" * 64,
+        variant="film-act",
+        seed=0,
+        preset="cpu",
+        iteration=1,
+        max_iterations=1,
+        env_steps=1,
+        wall_time_s=1.0,
+        device="cpu",
+        finished=True,
+        created="",
+    )
+    rows = [
+        {
+            "run": run.name,
+            "variant": run.variant,
+            "seed": 0,
+            "preset": "cpu",
+            "checkpoint": run.checkpoint,
+            "robot": "aliengo",
+            "mode": mode,
+            "command_vx": 2.0,
+            "d": 0.3,
+            "vx_mean": vx,
+            "vx_std": 0.1,
+            "vx_env_std": 0.01,
+            "vx_step_mean": vx,
+            "n_alive": 100,
+            "vx_peak_1s_mean": vx,
+            "vx_peak_1s_std": 0.1,
+            "survival": 1.0,
+            "tracking_ratio": vx / 2,
+            "valid_fraction": 1.0,
+            "num_envs": 64,
+            "steps": 500,
+        }
+        for mode, vx in (("descriptor", 1.2), ("actuation-matched", 1.9))
+    ]
+    table = transfer_table(
+        transfer_rows(StoreData(runs=[run], evals=rows)), key="k", title="t", command_vx=2.0, mode="actuation-matched"
+    )
     assert table.columns == ("MorFiC-F(act)",) and table.rows[0].cells[0][0].value == pytest.approx(1.9)
     assert "Kp, Kd and torque limits x the target's mass / Go2's" in table.caption

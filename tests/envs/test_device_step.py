@@ -42,8 +42,21 @@ def no_host_reads():
     """Make every host read of a tensor or warp array raise :class:`HostRead`, except inside :mod:`sync`."""
     import warp as wp
 
-    targets = [(torch.Tensor, name) for name in ("cpu", "numpy", "item", "tolist", "__array__", "__bool__", "__int__",
-                                                 "__float__", "__index__", "nonzero")]
+    targets = [
+        (torch.Tensor, name)
+        for name in (
+            "cpu",
+            "numpy",
+            "item",
+            "tolist",
+            "__array__",
+            "__bool__",
+            "__int__",
+            "__float__",
+            "__index__",
+            "nonzero",
+        )
+    ]
     targets += [(torch, "nonzero"), (wp.array, "numpy"), (wp.array, "list")]
     saved = [(owner, name, getattr(owner, name)) for owner, name in targets]
 
@@ -52,6 +65,7 @@ def no_host_reads():
             if not sync._inside:
                 raise HostRead(f"host read inside the step: {name}")
             return original(*args, **kwargs)
+
         return patched
 
     for owner, name, original in saved:
@@ -66,7 +80,8 @@ def no_host_reads():
 def _cfg(backend: str) -> EnvCfg:
     cfg = EnvCfg(num_envs=N, sim=SimCfg(num_threads=1, backend=backend, device=DEVICE if backend == "warp" else "cpu"))
     return dataclasses.replace(
-        cfg, episode_length_s=0.4,  # 20 steps: time-outs and resets
+        cfg,
+        episode_length_s=0.4,  # 20 steps: time-outs and resets
         rand=dataclasses.replace(cfg.rand, push_interval_s=0.1, rerandomize_interval_s=0.14),
         commands=dataclasses.replace(cfg.commands, resample_time_s=0.1, curriculum_threshold=0.0),
     )
@@ -75,8 +90,16 @@ def _cfg(backend: str) -> EnvCfg:
 def test_the_guard_catches_host_reads():
     t = torch.ones(3)
     with no_host_reads():
-        for read in (t.cpu, t.numpy, t[0].item, t.tolist, lambda: bool(t[0]), lambda: float(t[0]),
-                     lambda: np.asarray(t), t.nonzero):
+        for read in (
+            t.cpu,
+            t.numpy,
+            t[0].item,
+            t.tolist,
+            lambda: bool(t[0]),
+            lambda: float(t[0]),
+            lambda: np.asarray(t),
+            t.nonzero,
+        ):
             with pytest.raises(HostRead):
                 read()
         assert sync.any_true(t > 0) and len(sync.nonzero_ids(t > 0)) == 3  # the counted reads go through

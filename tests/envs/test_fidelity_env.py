@@ -36,11 +36,25 @@ class _Recorder:
 def _state(n: int = 3) -> EnvState:
     g = torch.Generator().manual_seed(0)
     fields = {}
-    shapes = {"base_pos_w": (3,), "base_quat_w": (4,), "foot_pos_w": (4, 3), "foot_vel_w": (4, 3),
-              "foot_vel_w_prev": (4, 3), "foot_force_w": (4, 3), "body_contact_force": (9,), "command": (3,),
-              "gait_phase": (4,), "desired_contact": (4,), "gait_frequency": (), "nominal_foot_pos_b": (4, 2),
-              "nominal_height": (), "total_mass": (), "base_lin_vel_b": (3,), "base_ang_vel_b": (3,),
-              "projected_gravity_b": (3,)}
+    shapes = {
+        "base_pos_w": (3,),
+        "base_quat_w": (4,),
+        "foot_pos_w": (4, 3),
+        "foot_vel_w": (4, 3),
+        "foot_vel_w_prev": (4, 3),
+        "foot_force_w": (4, 3),
+        "body_contact_force": (9,),
+        "command": (3,),
+        "gait_phase": (4,),
+        "desired_contact": (4,),
+        "gait_frequency": (),
+        "nominal_foot_pos_b": (4, 2),
+        "nominal_height": (),
+        "total_mass": (),
+        "base_lin_vel_b": (3,),
+        "base_ang_vel_b": (3,),
+        "projected_gravity_b": (3,),
+    }
     for f in dataclasses.fields(EnvState):
         if f.name == "dt":
             fields["dt"] = 0.02

@@ -131,8 +131,9 @@ def test_set_geometry_makes_an_env_model_equal_its_pool_robots():
         ids = torch.tensor([0, 1])
         backend.set_geometry(ids, torch.tensor([2, 1]))
         backend.set_morphology(ids, torch.as_tensor(pool.descriptors[[0, 0]]) * 1.1)  # change what can change
-        backend.set_dynamics(ids, torch.full((2,), 0.7), torch.full((2,), 0.3), torch.full((2, 3), 0.02),
-                             torch.full((2, 12), 0.1))
+        backend.set_dynamics(
+            ids, torch.full((2,), 0.7), torch.full((2,), 0.3), torch.full((2, 3), 0.02), torch.full((2, 12), 0.1)
+        )
         backend.set_geometry(ids, torch.tensor([0, 2]))
         for env, pick in ((0, 0), (1, 2)):
             model, source = backend.models[env], backend._pool[pick].model

@@ -30,8 +30,9 @@ def _run(models, robots, **kwargs):
     from morfic_cli.evaluation.rollout import run_rollouts
 
     actor, critic, cfg = models
-    return run_rollouts(actor, critic, cfg.env, robots=robots, mode="descriptor", command_vx=1.0, num_envs=2,
-                        steps=4, seed=3, **kwargs)
+    return run_rollouts(
+        actor, critic, cfg.env, robots=robots, mode="descriptor", command_vx=1.0, num_envs=2, steps=4, seed=3, **kwargs
+    )
 
 
 def test_one_env_per_robot_slice_has_that_robots_morphology():
@@ -44,12 +45,20 @@ def test_one_env_per_robot_slice_has_that_robots_morphology():
         for robot, envs in (("a1", slice(0, 2)), ("aliengo", slice(2, 4))):
             alone = LocomotionEnv(eval_env_cfg(EnvCfg(num_envs=2)), mode="descriptor", robot=robot, seed=0)
             try:
-                for field in ("descriptor", "nominal_height", "total_mass", "base_mass", "default_joint_pos",
-                              "joint_range"):
-                    torch.testing.assert_close(getattr(joint.params, field)[envs], getattr(alone.params, field),
-                                               rtol=0, atol=0, msg=field)
-                torch.testing.assert_close(joint.get_observations()["morphology"][envs],
-                                           alone.get_observations()["morphology"], rtol=0, atol=0)
+                for field in (
+                    "descriptor",
+                    "nominal_height",
+                    "total_mass",
+                    "base_mass",
+                    "default_joint_pos",
+                    "joint_range",
+                ):
+                    torch.testing.assert_close(
+                        getattr(joint.params, field)[envs], getattr(alone.params, field), rtol=0, atol=0, msg=field
+                    )
+                torch.testing.assert_close(
+                    joint.get_observations()["morphology"][envs], alone.get_observations()["morphology"], rtol=0, atol=0
+                )
             finally:
                 alone.close()
         assert not torch.equal(joint.params.descriptor[0], joint.params.descriptor[2])
@@ -68,8 +77,9 @@ def test_a_batched_rollout_is_each_robots_slice(models):
     both = _run(models, ("go1", "a1"), keep_obs=OBS_GROUPS, keep_models=1)
     assert list(both) == ["go1", "a1"]
     for robot, r in both.items():
-        alone = run_rollout(actor, critic, cfg.env, robot=robot, mode="descriptor", command_vx=1.0, num_envs=2,
-                            steps=4, seed=3)
+        alone = run_rollout(
+            actor, critic, cfg.env, robot=robot, mode="descriptor", command_vx=1.0, num_envs=2, steps=4, seed=3
+        )
         assert (r.robot, r.mode, r.command_vx, r.seed, r.dt) == (robot, "descriptor", 1.0, 3, alone.dt)
         np.testing.assert_array_equal(r.descriptor, alone.descriptor)
         assert {k: a.shape for k, a in r.arrays.items()} == {k: a.shape for k, a in alone.arrays.items()}
@@ -80,8 +90,9 @@ def test_a_batched_rollout_is_each_robots_slice(models):
     assert not np.array_equal(both["go1"].obs["morphology"], both["a1"].obs["morphology"])
     # one robot is exactly run_rollout
     (one,) = _run(models, ("go1",)).values()
-    again = run_rollout(actor, critic, cfg.env, robot="go1", mode="descriptor", command_vx=1.0, num_envs=2, steps=4,
-                        seed=3)
+    again = run_rollout(
+        actor, critic, cfg.env, robot="go1", mode="descriptor", command_vx=1.0, num_envs=2, steps=4, seed=3
+    )
     for key in one.arrays:
         np.testing.assert_array_equal(one.arrays[key], again.arrays[key])
 
@@ -101,8 +112,16 @@ def test_unbatched_configs_keep_their_keys_and_batched_ones_say_so():
     plain = eval_config("runs/x", EvalCfg(robots=("go1", "a1")))
     assert set(plain) == {"spec", "robots", "modes", "command_vx", "num_envs", "steps", "seed", "scene_envs"}
     assert eval_config("runs/x", EvalCfg(robots=("go1", "a1"), batch_robots=True))["batch_robots"] is True
-    assert set(diagnose_config(DiagnoseCfg())) == {"robots", "mode", "command_vx", "num_envs", "steps", "seed",
-                                                   "trunc_eps", "sigma_eps"}
+    assert set(diagnose_config(DiagnoseCfg())) == {
+        "robots",
+        "mode",
+        "command_vx",
+        "num_envs",
+        "steps",
+        "seed",
+        "trunc_eps",
+        "sigma_eps",
+    }
     joint = DiagnoseCfg(robots=("go1",), batch=("go1", "a1"))
     assert diagnose_config(joint)["batch"] == ("go1", "a1")
     assert rollout_config("go1", joint)["batch"] == ["go1", "a1"]

@@ -30,15 +30,39 @@ def store(smoke_store, tmp_path, monkeypatch):
 
 
 def test_every_robot_in_both_modes_through_the_cli(run_cli, store):
-    code, out, err = run_cli("eval", "runs/film-s0", "--robots", "all", "--mode", "both", "--envs", "2",
-                             "--steps", "6", "--command-vx", "1.0", "--format", "json", "--quiet")
+    code, out, err = run_cli(
+        "eval",
+        "runs/film-s0",
+        "--robots",
+        "all",
+        "--mode",
+        "both",
+        "--envs",
+        "2",
+        "--steps",
+        "6",
+        "--command-vx",
+        "1.0",
+        "--format",
+        "json",
+        "--quiet",
+    )
     assert code == 0, err
     rows = json.loads(out)
     robots = list_robots()
     assert [(r["robot"], r["mode"]) for r in rows] == [(n, m) for n in robots for m in ("descriptor", "full")]
     for row in rows:
-        assert {"robot", "mode", "command_vx", "vx_mean", "vx_std", "vx_env_std", "vx_peak_1s_mean", "survival",
-                "valid"} <= set(row)
+        assert {
+            "robot",
+            "mode",
+            "command_vx",
+            "vx_mean",
+            "vx_std",
+            "vx_env_std",
+            "vx_peak_1s_mean",
+            "survival",
+            "valid",
+        } <= set(row)
         assert row["command_vx"] == 1.0 and 0.0 <= row["survival"] <= 1.0 and isinstance(row["valid"], bool)
         assert row["num_envs"] == 2 and row["steps"] == 6
         assert " / " in row["cell"]
@@ -85,8 +109,15 @@ def test_rollout_metrics_follow_the_recorded_arrays(store):
     result = evaluate(store, "runs/film-s0", cfg)
     rollout = result.rollouts[rollout_role("go2", "descriptor", 1.0)]
     a = rollout.arrays
-    m = transfer_metrics(a["base_lin_vel"][..., 0], a["done"] & ~a["time_out"], 1.0, 0.02, tilt=a["tilt"],
-                         height_ratio=a["height_ratio"], foot_slip=a["foot_slip"])
+    m = transfer_metrics(
+        a["base_lin_vel"][..., 0],
+        a["done"] & ~a["time_out"],
+        1.0,
+        0.02,
+        tilt=a["tilt"],
+        height_ratio=a["height_ratio"],
+        foot_slip=a["foot_slip"],
+    )
     row = result.rows[0]
     assert row["vx_mean"] == pytest.approx(m.vx_mean) and row["survival"] == m.survival
     assert not a["time_out"].any()  # the eval episode is longer than the rollout
@@ -100,8 +131,10 @@ def test_rollout_metrics_follow_the_recorded_arrays(store):
         (["runs/nothing"], "no artifact 'runs/nothing'"),
         (["runs/film-s0", "--robots", "go3"], "unknown robot 'go3'"),
         (["runs/film-s0", "--command-vx", "fast"], "--command-vx takes"),
-        (["runs/film-s0", "--mode", "sideways"],
-         "'sideways' is not one of 'descriptor', 'full', 'actuation-matched', 'both'"),
+        (
+            ["runs/film-s0", "--mode", "sideways"],
+            "'sideways' is not one of 'descriptor', 'full', 'actuation-matched', 'both'",
+        ),
         (["runs/film-s0", "--envs", "0"], "Invalid value for '--envs'"),
     ],
 )
@@ -121,14 +154,37 @@ def test_eval_of_a_trainer_state_is_refused(run_cli, store):
 
 def test_video_is_stored_and_written_into_out(run_cli, store, tmp_path, gl_backend):
     out = tmp_path / "results"
-    code, _, err = run_cli("eval", "runs/film-s0", "--robots", "go2", "--envs", "2", "--steps", "4",
-                           "--command-vx", "1.0", "--video", "--out", str(out), "--format", "json", "--quiet")
+    code, _, err = run_cli(
+        "eval",
+        "runs/film-s0",
+        "--robots",
+        "go2",
+        "--envs",
+        "2",
+        "--steps",
+        "4",
+        "--command-vx",
+        "1.0",
+        "--video",
+        "--out",
+        str(out),
+        "--format",
+        "json",
+        "--quiet",
+    )
     assert code == 0, err
     videos = sorted(p.name for p in out.iterdir())
     ext = "mp4" if any(n.endswith(".mp4") for n in videos) else "gif"
-    assert videos == sorted(["eval.csv", "go2-descriptor-vx1-frames.png", f"go2-descriptor-vx1.{ext}",
-                             "go2-descriptor-vx1-speed.png", "go2-descriptor-vx1-speed.pdf",
-                             "go2-descriptor-vx1.mcap"])
+    assert videos == sorted(
+        [
+            "eval.csv",
+            "go2-descriptor-vx1-frames.png",
+            f"go2-descriptor-vx1.{ext}",
+            "go2-descriptor-vx1-speed.png",
+            "go2-descriptor-vx1-speed.pdf",
+            "go2-descriptor-vx1.mcap",
+        ]
+    )
     media = store.ls("media")
     assert len(media) == 1
     manifest = store.read_manifest(media[0]["id"])
@@ -144,8 +200,22 @@ def test_out_holds_the_mcap_log_of_every_rollout(run_cli, store, tmp_path):
     from morfic_cli.recording.rollout_log import read_rollout
 
     out = tmp_path / "results"
-    code, _, err = run_cli("eval", "runs/film-s0", "--robots", "go2,a1", "--envs", "2", "--steps", "3",
-                           "--command-vx", "1.0,1.5", "--out", str(out), "--format", "json")
+    code, _, err = run_cli(
+        "eval",
+        "runs/film-s0",
+        "--robots",
+        "go2,a1",
+        "--envs",
+        "2",
+        "--steps",
+        "3",
+        "--command-vx",
+        "1.0,1.5",
+        "--out",
+        str(out),
+        "--format",
+        "json",
+    )
     assert code == 0, err
     logs = sorted(p.name for p in out.glob("*.mcap"))
     assert logs == sorted(f"{r}-descriptor-vx{vx}.mcap" for r in ("a1", "go2") for vx in ("1", "1.5"))
@@ -194,12 +264,15 @@ def test_eval_log_has_a_3d_scene_foxglove_reads(store, tmp_path):
     by_topic, schemas = defaultdict(list), {}
     with open(path, "rb") as fh:
         for schema, channel, message, decoded in make_reader(
-                fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            fh, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
             by_topic[channel.topic].append((message.log_time, decoded))
             schemas[channel.topic] = (schema.name, schema.encoding, channel.message_encoding)
-    assert schemas == {"/rollout/step": ("morfic.RolloutStep", "protobuf", "protobuf"),
-                       "/scene": ("foxglove.SceneUpdate", "protobuf", "protobuf"),
-                       "/tf": ("foxglove.FrameTransforms", "protobuf", "protobuf")}
+    assert schemas == {
+        "/rollout/step": ("morfic.RolloutStep", "protobuf", "protobuf"),
+        "/scene": ("foxglove.SceneUpdate", "protobuf", "protobuf"),
+        "/tf": ("foxglove.FrameTransforms", "protobuf", "protobuf"),
+    }
     steps = by_topic["/rollout/step"]
     assert len(steps) == 6 and len(by_topic["/scene"]) == 1 and len(by_topic["/tf"]) == 1 + 6
 
@@ -223,9 +296,11 @@ def test_eval_log_has_a_3d_scene_foxglove_reads(store, tmp_path):
         assert t_tf == t_step
         transforms = {}
         for t in [*static.transforms, *moving.transforms]:
-            transforms[t.child_frame_id] = (t.parent_frame_id, np.array([t.translation.x, t.translation.y,
-                                                                         t.translation.z]),
-                                            np.array([t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z]))
+            transforms[t.child_frame_id] = (
+                t.parent_frame_id,
+                np.array([t.translation.x, t.translation.y, t.translation.z]),
+                np.array([t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z]),
+            )
         for i in range(2):
             model = rollout.models[i]
             data = mujoco.MjData(model)
@@ -242,7 +317,7 @@ def test_eval_log_has_a_3d_scene_foxglove_reads(store, tmp_path):
         assert not any(f.startswith("env2/") for f in transforms)  # env 2 carries no frames
 
     # the scene: one entity per geom of each scene env, in its body's frame, with the geom's type and size
-    (_, scene), = by_topic["/scene"]
+    ((_, scene),) = by_topic["/scene"]
     entities = {e.id: e for e in scene.entities}
     model = rollout.models[0]
     assert "floor" in entities and entities["floor"].cubes[0].size.x >= 100

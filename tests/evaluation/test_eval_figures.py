@@ -9,10 +9,7 @@ from morfic_cli.evaluation.metrics import env_outcomes, transfer_metrics
 
 
 def test_speed_survival_curves_by_hand():
-    vx = np.array([[1.0, 2.0, 3.0],
-                   [1.0, 2.0, 5.0],
-                   [1.0, 4.0, 9.0],
-                   [2.0, 4.0, 9.0]], dtype=np.float32)
+    vx = np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 5.0], [1.0, 4.0, 9.0], [2.0, 4.0, 9.0]], dtype=np.float32)
     terminated = np.zeros((4, 3), bool)
     terminated[1, 2] = True  # env 2 falls at step 1: alive at step 0 only
     terminated[3, 0] = True  # env 0 falls at the last step
@@ -56,7 +53,9 @@ def test_the_verdict_line_is_the_tables_verdict_with_each_failure_counted():
     m = transfer_metrics(vx, terminated, 1.0, 0.02, **kw)
     assert m.valid_fraction == 0.25 and m.verdict == "falls"  # a tie: the first failure class in order
     assert verdict_line(outcomes, m.verdict) == (
-        "verdict: falls \u2013 valid 1/4 (falls 1, stands still 1, drags feet 1)", False)
+        "verdict: falls \u2013 valid 1/4 (falls 1, stands still 1, drags feet 1)",
+        False,
+    )
     assert verdict_line(outcomes) == verdict_line(outcomes, m.verdict)
     assert verdict_line(np.array(["ok", "ok", "drags feet"])) == ("verdict: ok \u2013 valid 2/3 (drags feet 1)", True)
     png, pdf = rollout_figure(vx, terminated, 0.02, 1.0, "t", foot_slip=slip, outcomes=outcomes, verdict=m.verdict)
@@ -74,12 +73,22 @@ def test_a_left_out_speed_figure_is_drawn_from_the_eval_row(tmp_path):
     src = Store(tmp_path / "src")
     ckpt = src.put_manifest("checkpoint", config={"variant": "film"}, files={"model.pt": b"w", "curve.csv": b"it\n1"})
     src.set_ref("runs/x", ckpt)
-    rollout = src.put_manifest("rollout", config={"robot": "go1"}, inputs={"checkpoint": ckpt},
-                               files={"rollout.mcap": b"log", "speed.png": b"png", "speed.pdf": b"pdf"})
-    table = (b"robot,mode,command_vx,vx_mean,vx_std,vx_peak_1s_mean,vx_peak_1s_std,survival,valid_fraction,verdict,"
-             b"num_envs\ngo1,descriptor,2.0,1.5,0.25,1.75,0.5,0.75,0.5,ok,8\n")
-    ev = src.put_manifest("eval", inputs={"checkpoint": ckpt, "rollout/go1/descriptor/vx2": rollout},
-                          files={"eval.csv": table}, meta={"run": "x"})
+    rollout = src.put_manifest(
+        "rollout",
+        config={"robot": "go1"},
+        inputs={"checkpoint": ckpt},
+        files={"rollout.mcap": b"log", "speed.png": b"png", "speed.pdf": b"pdf"},
+    )
+    table = (
+        b"robot,mode,command_vx,vx_mean,vx_std,vx_peak_1s_mean,vx_peak_1s_std,survival,valid_fraction,verdict,"
+        b"num_envs\ngo1,descriptor,2.0,1.5,0.25,1.75,0.5,0.75,0.5,ok,8\n"
+    )
+    ev = src.put_manifest(
+        "eval",
+        inputs={"checkpoint": ckpt, "rollout/go1/descriptor/vx2": rollout},
+        files={"eval.csv": table},
+        meta={"run": "x"},
+    )
     src.set_ref("evals/x", ev)
     assert figure_or_table(src, rollout, None, "t") == (b"png", b"pdf")  # stored: read back as it is
     dst = Store(tmp_path / "dst")

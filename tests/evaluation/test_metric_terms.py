@@ -37,9 +37,17 @@ def yaw_rate_abs(r: RolloutData) -> float:
 
 
 YAW_RATE = MetricTerm(
-    "yaw_rate_abs", yaw_rate_abs, "rad/s", "mean |yaw rate| over alive steps, mean over envs", fmt=".2f",
-    higher_is_better=False, seeds=(SeedColumn("yaw_rate_abs", seed_mean("yaw_rate_abs"), header="|yaw|"),),
-    show=5, header="|yaw|", legend="|yaw|: mean |yaw rate| (rad/s)", drop=4,
+    "yaw_rate_abs",
+    yaw_rate_abs,
+    "rad/s",
+    "mean |yaw rate| over alive steps, mean over envs",
+    fmt=".2f",
+    higher_is_better=False,
+    seeds=(SeedColumn("yaw_rate_abs", seed_mean("yaw_rate_abs"), header="|yaw|"),),
+    show=5,
+    header="|yaw|",
+    legend="|yaw|: mean |yaw rate| (rad/s)",
+    drop=4,
 )
 
 
@@ -51,9 +59,25 @@ def with_yaw(monkeypatch):
 
 
 STOCK_COLUMNS = (
-    "robot", "mode", "command_vx", "d", "vx_mean", "vx_std", "vx_env_std", "vx_step_mean", "n_alive",
-    "vx_peak_1s_mean", "vx_peak_1s_std", "survival", "tracking_ratio", "valid", "valid_fraction", "verdict", "cell",
-    "num_envs", "steps",
+    "robot",
+    "mode",
+    "command_vx",
+    "d",
+    "vx_mean",
+    "vx_std",
+    "vx_env_std",
+    "vx_step_mean",
+    "n_alive",
+    "vx_peak_1s_mean",
+    "vx_peak_1s_std",
+    "survival",
+    "tracking_ratio",
+    "valid",
+    "valid_fraction",
+    "verdict",
+    "cell",
+    "num_envs",
+    "steps",
 )
 
 
@@ -73,10 +97,23 @@ def test_the_stock_terms_are_the_papers_metrics_of_the_rollout():
     t, n = 60, 4
     done = np.zeros((t, n), bool)
     done[20, 1] = True  # env 1 falls on step 20
-    arrays = {"base_lin_vel": rng.normal(1.0, 0.3, (t, n, 3)), "done": done, "time_out": np.zeros((t, n), bool),
-              "tilt": rng.uniform(0, 0.3, (t, n)), "height_ratio": np.ones((t, n)), "foot_slip": np.zeros((t, n))}
-    m = transfer_metrics(arrays["base_lin_vel"][..., 0], done, 1.0, 0.02, tilt=arrays["tilt"],
-                         height_ratio=arrays["height_ratio"], foot_slip=arrays["foot_slip"])
+    arrays = {
+        "base_lin_vel": rng.normal(1.0, 0.3, (t, n, 3)),
+        "done": done,
+        "time_out": np.zeros((t, n), bool),
+        "tilt": rng.uniform(0, 0.3, (t, n)),
+        "height_ratio": np.ones((t, n)),
+        "foot_slip": np.zeros((t, n)),
+    }
+    m = transfer_metrics(
+        arrays["base_lin_vel"][..., 0],
+        done,
+        1.0,
+        0.02,
+        tilt=arrays["tilt"],
+        height_ratio=arrays["height_ratio"],
+        foot_slip=arrays["foot_slip"],
+    )
     values = metric_values(RolloutData(arrays, command_vx=1.0, dt=0.02))
     assert values == {**dataclasses.asdict(m), "cell": paper_cell(m)}
     assert list(values) == list(STOCK_COLUMNS[4:-2])
@@ -85,8 +122,11 @@ def test_the_stock_terms_are_the_papers_metrics_of_the_rollout():
 def test_the_example_metric_by_hand():
     # 3 steps x 2 envs; env 1 falls on step 1: it counts step 0 only
     wz = np.array([[0.5, -1.0], [-0.3, 2.0], [0.1, 3.0]])
-    arrays = {"base_ang_vel": np.stack([np.zeros_like(wz), np.zeros_like(wz), wz], axis=-1),
-              "done": np.array([[False, False], [False, True], [False, False]]), "time_out": np.zeros((3, 2), bool)}
+    arrays = {
+        "base_ang_vel": np.stack([np.zeros_like(wz), np.zeros_like(wz), wz], axis=-1),
+        "done": np.array([[False, False], [False, True], [False, False]]),
+        "time_out": np.zeros((3, 2), bool),
+    }
     data = RolloutData(arrays, command_vx=1.0, dt=0.02)
     # env 0: (0.5 + 0.3 + 0.1) / 3 = 0.3; env 1: 1.0; mean over envs 0.65
     assert yaw_rate_abs(data) == pytest.approx(0.65)
@@ -97,8 +137,15 @@ def test_a_name_taken_is_refused(monkeypatch):
     with pytest.raises(ValueError, match="vx_mean"):
         register_metric(MetricTerm("vx_mean", yaw_rate_abs, "rad/s", "a clash"))
     with pytest.raises(ValueError, match="survival_seed_std"):
-        register_metric(MetricTerm("new", yaw_rate_abs, "1", "its seed column clashes",
-                                   seeds=(SeedColumn("survival_seed_std", seed_mean("new")),)))
+        register_metric(
+            MetricTerm(
+                "new",
+                yaw_rate_abs,
+                "1",
+                "its seed column clashes",
+                seeds=(SeedColumn("survival_seed_std", seed_mean("new")),),
+            )
+        )
 
 
 def test_seeds_aggregate_as_declared(with_yaw):
@@ -106,10 +153,27 @@ def test_seeds_aggregate_as_declared(with_yaw):
     from morfic_cli.report.gather import StoreData
 
     def row(seed: int, vx: float, survival: float, yaw: float) -> dict:
-        return {"preset": "cpu", "variant": "film", "robot": "go2", "mode": "descriptor", "command_vx": 2.0, "d": 0.0,
-                "run": f"film-cpu-s{seed}", "vx_mean": vx, "vx_std": 0.1, "vx_env_std": 0.0, "vx_step_mean": vx,
-                "n_alive": 100, "vx_peak_1s_mean": vx + 0.1, "survival": survival, "tracking_ratio": vx / 2.0,
-                "valid_fraction": 1.0, "yaw_rate_abs": yaw, "num_envs": 64, "steps": 500}
+        return {
+            "preset": "cpu",
+            "variant": "film",
+            "robot": "go2",
+            "mode": "descriptor",
+            "command_vx": 2.0,
+            "d": 0.0,
+            "run": f"film-cpu-s{seed}",
+            "vx_mean": vx,
+            "vx_std": 0.1,
+            "vx_env_std": 0.0,
+            "vx_step_mean": vx,
+            "n_alive": 100,
+            "vx_peak_1s_mean": vx + 0.1,
+            "survival": survival,
+            "tracking_ratio": vx / 2.0,
+            "valid_fraction": 1.0,
+            "yaw_rate_abs": yaw,
+            "num_envs": 64,
+            "steps": 500,
+        }
 
     (out,) = transfer_rows(StoreData(runs=[], evals=[row(0, 1.8, 1.0, 0.2), row(1, 2.0, 0.5, 0.4)]))
     assert out["yaw_rate_abs"] == pytest.approx(0.3)  # mean over seeds, as declared
@@ -119,20 +183,43 @@ def test_seeds_aggregate_as_declared(with_yaw):
     assert out["vx_std"] == pytest.approx(math.sqrt(0.02))
     assert out["cell"] == "1.90 ± 0.14 / 0.750"
     keys = list(out)  # the stock layout, the new column after the stock ones and before the budget
-    assert keys[keys.index("runs") + 1:] == ["vx", "vx_std", "vx_seed_std", "vx_peak_1s", "survival",
-                                             "survival_seed_std", "tracking_ratio", "valid_fraction", "cell",
-                                             "yaw_rate_abs", "num_envs", "steps"]
+    assert keys[keys.index("runs") + 1 :] == [
+        "vx",
+        "vx_std",
+        "vx_seed_std",
+        "vx_peak_1s",
+        "survival",
+        "survival_seed_std",
+        "tracking_ratio",
+        "valid_fraction",
+        "cell",
+        "yaw_rate_abs",
+        "num_envs",
+        "steps",
+    ]
 
 
-def test_a_registered_metric_reaches_eval_csv_the_table_and_compare_baselines(run_cli, tmp_path, monkeypatch,
-                                                                              with_yaw):
+def test_a_registered_metric_reaches_eval_csv_the_table_and_compare_baselines(run_cli, tmp_path, monkeypatch, with_yaw):
     from morfic_cli.recording.rollout_log import read_rollout
 
     monkeypatch.setenv("COLUMNS", "250")  # wide enough for every column
     assert run_cli("store", "import", str(LEGACY_BUNDLE))[0] == 0  # runs/film-cpu
     out = tmp_path / "out"
-    code, stdout, err = run_cli("eval", "runs/film-cpu", "--robots", "go2", "--envs", "3", "--steps", "20",
-                                "--scene-envs", "0", "--out", str(out), "-q")
+    code, stdout, err = run_cli(
+        "eval",
+        "runs/film-cpu",
+        "--robots",
+        "go2",
+        "--envs",
+        "3",
+        "--steps",
+        "20",
+        "--scene-envs",
+        "0",
+        "--out",
+        str(out),
+        "-q",
+    )
     assert code == 0, err
     assert "|yaw|" in stdout and "|yaw|: mean |yaw rate| (rad/s)" in stdout.replace("\n", " ")
 

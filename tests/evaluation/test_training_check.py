@@ -51,8 +51,10 @@ def test_first_episode_lengths_and_stats_by_hand():
 
 
 def test_training_reference_by_hand():
-    rows = [{"iteration": i, "episode_length_s": v, "curriculum.vx_max": c}
-            for i, v, c in [(1, float("nan"), 1.0), (2, 10.0, 1.0), (3, 12.0, 1.5), (4, 14.0, 1.5), (5, 16.0, 2.0)]]
+    rows = [
+        {"iteration": i, "episode_length_s": v, "curriculum.vx_max": c}
+        for i, v, c in [(1, float("nan"), 1.0), (2, 10.0, 1.0), (3, 12.0, 1.5), (4, 14.0, 1.5), (5, 16.0, 2.0)]
+    ]
     ref = training_reference(rows, window=3)
     # the last 3 rows that logged a length: 12, 14, 16 -> mean 14, sample std 2; vx_max 1.5 held over most of them
     assert ref.length_s == pytest.approx(14.0) and ref.sd_s == pytest.approx(2.0)
@@ -93,8 +95,16 @@ def test_each_row_changes_exactly_its_condition():
     cmd = check_env_cfg(env, rows["command 1"], 16, (-1.0, 2.5), 1.0)
     assert cmd.commands.fixed == (1.0, 0.0, 0.0) and cmd.rand == env.rand
     protocol = rows["eval protocol"]
-    assert not any((protocol.train_morphology, protocol.randomisation, protocol.latency, protocol.sampled_actions,
-                    protocol.dropout, protocol.curriculum_commands))
+    assert not any(
+        (
+            protocol.train_morphology,
+            protocol.randomisation,
+            protocol.latency,
+            protocol.sampled_actions,
+            protocol.dropout,
+            protocol.curriculum_commands,
+        )
+    )
     single = [c for c in rows.values() if c.name not in ("training", "eval protocol", "no randomisation")]
     for c in single:  # exactly one condition differs from training
         flags = (c.train_morphology, c.randomisation, c.latency, c.sampled_actions, c.dropout, c.curriculum_commands)
@@ -105,11 +115,22 @@ def test_each_row_changes_exactly_its_condition():
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_a_smoke_run_under_its_training_conditions_reproduces_its_training_episode_length(run_cli, variant):
     """Smoke preset with 0.2 s episodes (10 steps) so that training completes episodes to compare with."""
-    code, _, err = run_cli("train", "--variant", variant, "--preset", "smoke", "--set", "env.episode_length_s=0.2",
-                           "--set", "init_at_random_ep_len=false", "--quiet")
+    code, _, err = run_cli(
+        "train",
+        "--variant",
+        variant,
+        "--preset",
+        "smoke",
+        "--set",
+        "env.episode_length_s=0.2",
+        "--set",
+        "init_at_random_ep_len=false",
+        "--quiet",
+    )
     assert code == 0, err
-    code, out, err = run_cli("eval", f"runs/{variant}-smoke-s0", "--training-conditions", "--envs", "8",
-                             "--format", "json", "--quiet")
+    code, out, err = run_cli(
+        "eval", f"runs/{variant}-smoke-s0", "--training-conditions", "--envs", "8", "--format", "json", "--quiet"
+    )
     assert code == 0, err
     rows = json.loads(out)
     assert [r["conditions"] for r in rows] == [c.name for c in ladder("go2", 1.0)]

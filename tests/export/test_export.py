@@ -246,8 +246,15 @@ def test_check_result_object(store):
     assert result.ok and result.problems == [] and result.verification.samples == 8
 
 
-MJLAB_KEYS = ("joint_names", "joint_stiffness", "joint_damping", "default_joint_pos", "action_scale",
-              "observation_names", "command_names")
+MJLAB_KEYS = (
+    "joint_names",
+    "joint_stiffness",
+    "joint_damping",
+    "default_joint_pos",
+    "action_scale",
+    "observation_names",
+    "command_names",
+)
 MORFIC_KEYS = ("history_length", "history_order", "observation_scales", "dt", "morfic_version", "run", "checkpoint")
 
 
@@ -315,10 +322,17 @@ def test_an_unknown_ref_fails_before_torch_is_imported(tmp_path, extra):
     """The ref is resolved first: the error comes without importing torch and the exporters (11 s on 2 busy cores)."""
     import subprocess
 
-    code = ("import sys\nfrom morfic_cli.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit as exc:\n"
-            "    print('exit', exc.code)\nprint(sorted(m for m in ('torch', 'morfic_cli.export.artifact') "
-            "if m in sys.modules))")
-    proc = subprocess.run([sys.executable, "-c", code, "export", "runs/nothing", *extra, "--store",
-                           str(tmp_path / "store")], capture_output=True, text=True, timeout=120, check=False)
+    code = (
+        "import sys\nfrom morfic_cli.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit as exc:\n"
+        "    print('exit', exc.code)\nprint(sorted(m for m in ('torch', 'morfic_cli.export.artifact') "
+        "if m in sys.modules))"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code, "export", "runs/nothing", *extra, "--store", str(tmp_path / "store")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert proc.stdout.split("\n")[:2] == ["exit 1", "[]"], proc.stdout + proc.stderr
     assert proc.stderr.startswith("Error: no artifact 'runs/nothing'"), proc.stderr

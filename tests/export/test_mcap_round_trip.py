@@ -32,10 +32,15 @@ def frames(log: dict[str, np.ndarray], meta: dict, robot: str) -> np.ndarray:
     """o built from each logged step's state and action, by policy.json's layout. Shape: (T, 48), float32."""
     obs, control = meta["observation"], meta["control"]
     q0 = np.asarray(meta["robots"][robot]["default_joint_pos"], dtype=np.float32)
-    raw = {"base_lin_vel": log["base_lin_vel"], "base_ang_vel": log["base_ang_vel"],
-           "projected_gravity": _rotate_inverse(log["base_quat"], np.array([0.0, 0.0, -1.0], np.float32)),
-           "command": log["command"], "joint_pos": log["joint_pos"] - q0, "joint_vel": log["joint_vel"],
-           "last_action": np.clip(log["action"], -control["action_clip"], control["action_clip"])}
+    raw = {
+        "base_lin_vel": log["base_lin_vel"],
+        "base_ang_vel": log["base_ang_vel"],
+        "projected_gravity": _rotate_inverse(log["base_quat"], np.array([0.0, 0.0, -1.0], np.float32)),
+        "command": log["command"],
+        "joint_pos": log["joint_pos"] - q0,
+        "joint_vel": log["joint_vel"],
+        "last_action": np.clip(log["action"], -control["action_clip"], control["action_clip"]),
+    }
     o = np.concatenate([raw[term["name"]] for term in obs["terms"]], axis=1)
     scale = np.concatenate([np.asarray(term["scale"], dtype=np.float32) for term in obs["terms"]])
     return np.clip(o * scale, -obs["clip"], obs["clip"]).astype(np.float32)
@@ -48,9 +53,25 @@ def test_the_policy_input_of_step_t_comes_from_the_state_logged_at_step_t_minus_
 
     store = str(tmp_path / "store")
     assert run_cli("store", "import", str(BUNDLE), "--store", store)[0] == 0
-    code, _, err = run_cli("eval", "runs/film-cpu-s0", "--robots", "go1", "--envs", "1", "--steps", str(STEPS),
-                           "--command-vx", "1.0", "--scene-envs", "0", "--out", str(tmp_path / "eval"), "-q",
-                           "--store", store)
+    code, _, err = run_cli(
+        "eval",
+        "runs/film-cpu-s0",
+        "--robots",
+        "go1",
+        "--envs",
+        "1",
+        "--steps",
+        str(STEPS),
+        "--command-vx",
+        "1.0",
+        "--scene-envs",
+        "0",
+        "--out",
+        str(tmp_path / "eval"),
+        "-q",
+        "--store",
+        store,
+    )
     assert code == 0, err
     code, _, err = run_cli("export", "runs/film-cpu-s0", "--out", str(tmp_path / "policy"), "-q", "--store", store)
     assert code == 0, err
@@ -65,7 +86,7 @@ def test_the_policy_input_of_step_t_comes_from_the_state_logged_at_step_t_minus_
 
     def actions(o: np.ndarray, last: int) -> np.ndarray:
         """The policy's a_t for t = h..T-1 from the frames of steps t-h+1+last-1 .. t+last-1, oldest first."""
-        history = np.stack([o[t + last - h: t + last] for t in range(h, STEPS)])  # (T-h, h, 48)
+        history = np.stack([o[t + last - h : t + last] for t in range(h, STEPS)])  # (T-h, h, 48)
         return session.run(["actions"], {"history": history, "morphology": np.repeat(morphology, len(history), 0)})[0]
 
     o = frames(env0, meta, "go1")

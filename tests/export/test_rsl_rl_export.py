@@ -54,15 +54,21 @@ def _same_actions(runner: OnPolicyRunner, env: LocomotionEnv, store: Store, spec
 
 def test_rsl_rl_loads_a_trained_checkpoint_with_its_optimizer(run_cli, smoke_store, tmp_path):
     out = tmp_path / "rsl"
-    code, stdout, err = run_cli("export", "runs/film-s0", "--to", "rsl-rl", "--out", str(out),
-                                "--store", str(smoke_store.root), "-f", "json")
+    code, stdout, err = run_cli(
+        "export", "runs/film-s0", "--to", "rsl-rl", "--out", str(out), "--store", str(smoke_store.root), "-f", "json"
+    )
     assert code == 0, err
     result = json.loads(stdout)
     assert result["ref"] == "exports/film-s0/rsl-rl@1" and result["optimizer"] == "trained"
     assert sorted(p.name for p in out.iterdir()) == ["agent.json", "model_2.pt", "train.json"]
     assert sorted(torch.load(out / "model_2.pt", weights_only=False)) == [
-        "actor_state_dict", "adaptation_optimizer_state_dict", "critic_state_dict", "infos", "iter",
-        "optimizer_state_dict"]  # with a trainer state: the adaptation module's optimiser too (docs/deploy.md)
+        "actor_state_dict",
+        "adaptation_optimizer_state_dict",
+        "critic_state_dict",
+        "infos",
+        "iter",
+        "optimizer_state_dict",
+    ]  # with a trainer state: the adaptation module's optimiser too (docs/deploy.md)
     runner, env, infos = _rsl_rl_runner(out)
     assert runner.current_learning_iteration == 2
     assert infos["morfic_checkpoint"] == load_trained(smoke_store, "runs/film-s0").checkpoint_id
@@ -72,8 +78,9 @@ def test_rsl_rl_loads_a_trained_checkpoint_with_its_optimizer(run_cli, smoke_sto
     _same_actions(runner, env, smoke_store, "runs/film-s0")
     env.close()
     # the same export again: the store already holds it, no new version
-    code, stdout, _ = run_cli("export", "runs/film-s0", "--to", "rsl-rl", "--store", str(smoke_store.root),
-                              "-f", "json")
+    code, stdout, _ = run_cli(
+        "export", "runs/film-s0", "--to", "rsl-rl", "--store", str(smoke_store.root), "-f", "json"
+    )
     assert code == 0 and json.loads(stdout)["ref"] == "exports/film-s0/rsl-rl@1"
 
 
@@ -81,13 +88,19 @@ def test_rsl_rl_loads_the_shipped_weights_only_bundle(run_cli, tmp_path):
     other = tmp_path / "other"
     assert run_cli("store", "import", str(BUNDLE), "--store", str(other))[0] == 0
     out = tmp_path / "rsl"
-    code, stdout, err = run_cli("export", "runs/film-cpu", "--to", "rsl-rl", "--out", str(out), "--store",
-                                str(other), "-f", "json")
+    code, stdout, err = run_cli(
+        "export", "runs/film-cpu", "--to", "rsl-rl", "--out", str(out), "--store", str(other), "-f", "json"
+    )
     assert code == 0, err
     assert json.loads(stdout)["optimizer"] == "fresh" and "optimizer state: fresh" in err
     (model,) = out.glob("model_*.pt")
     assert sorted(torch.load(model, weights_only=False)) == [
-        "actor_state_dict", "critic_state_dict", "infos", "iter", "optimizer_state_dict"]  # weights only: no
+        "actor_state_dict",
+        "critic_state_dict",
+        "infos",
+        "iter",
+        "optimizer_state_dict",
+    ]  # weights only: no
     # adaptation_optimizer_state_dict (docs/deploy.md)
     runner, env, infos = _rsl_rl_runner(out)
     assert infos["optimizer"] == "fresh" and runner.current_learning_iteration == 1000
@@ -96,6 +109,7 @@ def test_rsl_rl_loads_the_shipped_weights_only_bundle(run_cli, tmp_path):
 
 
 def test_rsl_rl_export_refuses_robot_options(run_cli, smoke_store):
-    code, _, err = run_cli("export", "runs/film-s0", "--to", "rsl-rl", "--robot", "go1",
-                           "--store", str(smoke_store.root))
+    code, _, err = run_cli(
+        "export", "runs/film-s0", "--to", "rsl-rl", "--robot", "go1", "--store", str(smoke_store.root)
+    )
     assert code == 1 and "Error:" in err and "--robot" in err

@@ -55,8 +55,13 @@ def test_b1_descriptor_sets_b1_link_masses_and_limits(go2):
 def test_inertia_is_scaled_by_the_mass_ratio(go2):
     _, nominal, _ = go2
     model = _applied(go2, load_robot("b1").descriptor)
-    for body, ratio in (("base", 29.45 / 6.921), ("RR_thigh", 4.30 / 1.152), ("FL_calf", 1.05 / 0.154),
-                        ("FR_hip", 2.15 / 0.678), ("RL_foot", 0.05 / 0.040)):
+    for body, ratio in (
+        ("base", 29.45 / 6.921),
+        ("RR_thigh", 4.30 / 1.152),
+        ("FL_calf", 1.05 / 0.154),
+        ("FR_hip", 2.15 / 0.678),
+        ("RL_foot", 0.05 / 0.040),
+    ):
         np.testing.assert_allclose(model.body(body).inertia, nominal.body(body).inertia * ratio, rtol=1e-12)
         np.testing.assert_array_equal(model.body(body).iquat, nominal.body(body).iquat)
 
@@ -76,17 +81,32 @@ def test_derived_constants_match_a_freshly_compiled_model(go2):
     robot, _, _ = go2
     b1 = load_robot("b1").descriptor
     applied = _applied(go2, b1)
-    links = {link: dataclasses.replace(robot.links[link], mass=b1[i],
-                                       inertia=robot.links[link].inertia * b1[i] / robot.links[link].mass)
-             for link, i in LINK_MASS_INDEX.items()}
-    b1_go2 = dataclasses.replace(robot, base_mass=b1[4], base_inertia=robot.base_inertia * b1[4] / robot.base_mass,
-                                 links=links, joint_range=np.tile(descriptor_ranges(b1), (4, 1, 1)))
+    links = {
+        link: dataclasses.replace(
+            robot.links[link], mass=b1[i], inertia=robot.links[link].inertia * b1[i] / robot.links[link].mass
+        )
+        for link, i in LINK_MASS_INDEX.items()
+    }
+    b1_go2 = dataclasses.replace(
+        robot,
+        base_mass=b1[4],
+        base_inertia=robot.base_inertia * b1[4] / robot.base_mass,
+        links=links,
+        joint_range=np.tile(descriptor_ranges(b1), (4, 1, 1)),
+    )
     spec = build_spec(b1_go2)
     fresh = spec.compile()
-    for field in ("body_mass", "body_inertia", "body_subtreemass", "dof_invweight0", "body_invweight0",
-                  "actuator_acc0", "jnt_range", "actuator_ctrlrange"):
-        np.testing.assert_allclose(getattr(applied, field), getattr(fresh, field), rtol=1e-9, atol=1e-12,
-                                   err_msg=field)
+    for field in (
+        "body_mass",
+        "body_inertia",
+        "body_subtreemass",
+        "dof_invweight0",
+        "body_invweight0",
+        "actuator_acc0",
+        "jnt_range",
+        "actuator_ctrlrange",
+    ):
+        np.testing.assert_allclose(getattr(applied, field), getattr(fresh, field), rtol=1e-9, atol=1e-12, err_msg=field)
 
 
 def test_applying_twice_equals_applying_once(go2):
@@ -98,8 +118,15 @@ def test_applying_twice_equals_applying_once(go2):
     apply_descriptor(twice, data, load_robot("a1").descriptor, info)
     apply_descriptor(twice, data, b1, info)
     apply_descriptor(twice, data, b1, info)
-    for field in ("body_mass", "body_inertia", "jnt_range", "actuator_ctrlrange", "body_subtreemass",
-                  "dof_invweight0", "actuator_acc0"):
+    for field in (
+        "body_mass",
+        "body_inertia",
+        "jnt_range",
+        "actuator_ctrlrange",
+        "body_subtreemass",
+        "dof_invweight0",
+        "actuator_acc0",
+    ):
         np.testing.assert_array_equal(getattr(twice, field), getattr(once, field), err_msg=field)
 
 
@@ -140,8 +167,9 @@ def test_zero_masses_are_handled(go2):
     assert np.all(np.isfinite(data.qpos)) and data.qpos[2] > 0.2
 
 
-@pytest.mark.parametrize("bad", [np.zeros(10), [1.0] * 5 + [0.5, -0.5, -1.0, 1.0, -2.0, -1.0],
-                                 [np.nan] + [1.0] * 10, [-1.0] + [1.0] * 10])
+@pytest.mark.parametrize(
+    "bad", [np.zeros(10), [1.0] * 5 + [0.5, -0.5, -1.0, 1.0, -2.0, -1.0], [np.nan] + [1.0] * 10, [-1.0] + [1.0] * 10]
+)
 def test_invalid_descriptors_are_rejected(go2, bad):
     _, nominal, info = go2
     model = copy.copy(nominal)

@@ -22,8 +22,15 @@ ROBOTS = list_robots()
 """Every robot in the library (a new TOML is built and checked without a test edit)."""
 
 # MuJoCo forward kinematics of the public URDFs at each robot's default pose (the paper's seven robots).
-FACTS_NOMINAL_HEIGHT = {"go2": 0.3235, "go1": 0.3218, "a1": 0.3025, "aliengo": 0.4258, "b1": 0.5162,
-                        "mini_cheetah": 0.3025, "anymal_c": 0.5488}
+FACTS_NOMINAL_HEIGHT = {
+    "go2": 0.3235,
+    "go1": 0.3218,
+    "a1": 0.3025,
+    "aliengo": 0.4258,
+    "b1": 0.5162,
+    "mini_cheetah": 0.3025,
+    "anymal_c": 0.5488,
+}
 
 
 @pytest.fixture(scope="module")
@@ -174,8 +181,10 @@ def test_robot_geoms_touch_the_world_but_not_each_other(built):
     for g in range(model.ngeom):
         if g == floor:
             continue
-        assert model.geom_contype[g] & model.geom_conaffinity[floor] or model.geom_contype[floor] & \
-            model.geom_conaffinity[g]
+        assert (
+            model.geom_contype[g] & model.geom_conaffinity[floor]
+            or model.geom_contype[floor] & model.geom_conaffinity[g]
+        )
         assert not (model.geom_contype[g] & model.geom_conaffinity[g])
 
 
@@ -218,8 +227,17 @@ def test_sim_sensors_layout():
     torque = model.sensor("RL_calf_torque")
     assert torque.type[0] == mujoco.mjtSensor.mjSENS_ACTUATORFRC
     assert torque.objid[0] == model.actuator("RL_calf_joint").id
-    assert contact_body_names() == ["base", "FL_thigh", "FR_thigh", "RL_thigh", "RR_thigh",
-                                    "FL_calf", "FR_calf", "RL_calf", "RR_calf"]
+    assert contact_body_names() == [
+        "base",
+        "FL_thigh",
+        "FR_thigh",
+        "RL_thigh",
+        "RR_thigh",
+        "FL_calf",
+        "FR_calf",
+        "RL_calf",
+        "RR_calf",
+    ]
     no_floor = build_model(spec_, floor=False, sim_sensors=True)  # torques only without a floor
     assert no_floor.nsensordata == plain.nsensordata + 12
 
@@ -250,4 +268,5 @@ def test_contact_sensors_report_the_world_frame_ground_force():
     for leg in LEGS:
         for j in JOINTS:
             assert data.sensor(f"{leg}_{j}_torque").data[0] == pytest.approx(
-                data.actuator_force[model.actuator(f"{leg}_{j}_joint").id])
+                data.actuator_force[model.actuator(f"{leg}_{j}_joint").id]
+            )

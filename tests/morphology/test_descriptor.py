@@ -23,9 +23,17 @@ from morfic_cli.morphology.descriptor import (
 
 def test_names_are_the_papers_order():
     assert DESCRIPTOR_NAMES == (
-        "thigh_mass", "calf_mass", "hip_mass", "foot_mass", "base_mass",
-        "hip_limit_min", "hip_limit_max", "thigh_limit_min", "thigh_limit_max",
-        "calf_limit_min", "calf_limit_max",
+        "thigh_mass",
+        "calf_mass",
+        "hip_mass",
+        "foot_mass",
+        "base_mass",
+        "hip_limit_min",
+        "hip_limit_max",
+        "thigh_limit_min",
+        "thigh_limit_max",
+        "calf_limit_min",
+        "calf_limit_max",
     )
     # Paper table "Morphology randomization parameters": Train min/max of base mass and calf limit max.
     assert TRAIN_MIN[4] == 3.300 and TRAIN_MAX[4] == 6.921

@@ -14,9 +14,18 @@ from morfic_cli.morphology.robots import LINKS, load_robot
 
 GO2 = load_robot("go2")
 CFG = GeometryRandCfg(enabled=True)
-SAMPLE = P.GeometrySample(scale=1.1, base_size=np.array([1.2, 0.8, 1.4]), base_density=0.7,
-                          hip_pos=np.array([0.95, 1.05]), thigh_offset=1.08, calf_length=1.3, thigh_ratio=0.9,
-                          calf_radius=0.6, thigh_radius_ratio=1.2, link_mass=np.array([1.4, 0.6, 1.1, 0.5]))
+SAMPLE = P.GeometrySample(
+    scale=1.1,
+    base_size=np.array([1.2, 0.8, 1.4]),
+    base_density=0.7,
+    hip_pos=np.array([0.95, 1.05]),
+    thigh_offset=1.08,
+    calf_length=1.3,
+    thigh_ratio=0.9,
+    calf_radius=0.6,
+    thigh_radius_ratio=1.2,
+    link_mass=np.array([1.4, 0.6, 1.1, 0.5]),
+)
 
 
 @pytest.fixture(scope="module")
@@ -36,10 +45,16 @@ def test_samples_lie_in_the_configured_ranges():
         s = P._draw(rng, cfg)
         assert 0.9 <= s.scale <= 1.0
         assert np.all((s.link_mass >= 0.2) & (s.link_mass <= 0.3))
-        for value, key in ((s.base_size, "base_size"), (s.base_density, "base_density"), (s.hip_pos, "hip_pos"),
-                           (s.thigh_offset, "hip_pos"), (s.calf_length, "link_length"),
-                           (s.thigh_ratio, "thigh_length_ratio"), (s.calf_radius, "link_radius"),
-                           (s.thigh_radius_ratio, "thigh_radius_ratio")):
+        for value, key in (
+            (s.base_size, "base_size"),
+            (s.base_density, "base_density"),
+            (s.hip_pos, "hip_pos"),
+            (s.thigh_offset, "hip_pos"),
+            (s.calf_length, "link_length"),
+            (s.thigh_ratio, "thigh_length_ratio"),
+            (s.calf_radius, "link_radius"),
+            (s.thigh_radius_ratio, "thigh_radius_ratio"),
+        ):
             lo, hi = getattr(cfg, key)
             assert np.all((np.asarray(value) >= lo) & (np.asarray(value) <= hi)), key
 
@@ -56,12 +71,13 @@ def test_the_built_model_has_the_sampled_lengths_and_radii(model):
     assert model.geom("FL_calf_geom").size[0] == pytest.approx(0.013 * 0.6 * s)
     assert model.geom("FL_thigh_collision").size[0] == pytest.approx(0.022 * 0.6 * s * 1.2)
     assert model.geom("FL_foot_geom").size[0] == pytest.approx(0.022 * 0.6 * s)
-    assert model.geom("base_collision").size == pytest.approx(np.array([0.3762, 0.0935, 0.114]) * [1.2, 0.8, 1.4]
-                                                              * s / 2)
+    assert model.geom("base_collision").size == pytest.approx(
+        np.array([0.3762, 0.0935, 0.114]) * [1.2, 0.8, 1.4] * s / 2
+    )
 
 
 def test_masses_scale_with_the_cube_of_the_scale(model, robot):
-    s3 = SAMPLE.scale ** 3
+    s3 = SAMPLE.scale**3
     for leg in ("FL", "RR"):
         assert model.body(f"{leg}_hip").mass[0] == pytest.approx(0.678 * 1.4 * s3)
         assert model.body(f"{leg}_thigh").mass[0] == pytest.approx(1.152 * 0.6 * s3)
@@ -72,9 +88,15 @@ def test_masses_scale_with_the_cube_of_the_scale(model, robot):
     assert model.body("base").mass[0] == pytest.approx(6.921 * 0.7 * volume)  # density factor x volume ratio
     assert float(model.body_mass.sum()) == pytest.approx(robot.total_mass)
     # the descriptor is the generated robot's: thigh, calf, hip, foot, base masses, then the template's limits
-    assert robot.descriptor[:5] == pytest.approx([model.body("FL_thigh").mass[0], model.body("FL_calf").mass[0],
-                                                  model.body("FL_hip").mass[0], model.body("FL_foot").mass[0],
-                                                  model.body("base").mass[0]])
+    assert robot.descriptor[:5] == pytest.approx(
+        [
+            model.body("FL_thigh").mass[0],
+            model.body("FL_calf").mass[0],
+            model.body("FL_hip").mass[0],
+            model.body("FL_foot").mass[0],
+            model.body("base").mass[0],
+        ]
+    )
     assert robot.descriptor[5:] == pytest.approx(GO2.descriptor[5:])
 
 
@@ -107,8 +129,16 @@ def test_init_height_keeps_the_templates_clearance(model, robot):
 def test_the_nominal_sample_is_the_template():
     same = P.generate_robot(GO2, P.GeometrySample.nominal(), CFG)
     a, b = build_model(GO2), build_model(same)
-    for name in ("body_pos", "body_mass", "body_inertia", "body_ipos", "geom_size", "actuator_gainprm",
-                 "actuator_biasprm", "key_qpos"):
+    for name in (
+        "body_pos",
+        "body_mass",
+        "body_inertia",
+        "body_ipos",
+        "geom_size",
+        "actuator_gainprm",
+        "actuator_biasprm",
+        "key_qpos",
+    ):
         assert getattr(b, name) == pytest.approx(getattr(a, name)), name
     assert same.descriptor == pytest.approx(GO2.descriptor)
     assert {link: same.links[link].mass for link in LINKS} == {link: GO2.links[link].mass for link in LINKS}

@@ -35,17 +35,47 @@ PAPER_MARKS = {
     "go1": {"thigh_limit_min": 1, "thigh_limit_max": 1},
     "a1": {"thigh_limit_min": 1, "thigh_limit_max": 1},
     "mini_cheetah": {"hip_limit_min": -1, "hip_limit_max": 1, "thigh_limit_min": -1, "thigh_limit_max": -1},
-    "aliengo": {"calf_mass": 1, "hip_mass": 1, "base_mass": 1, "hip_limit_min": -1, "hip_limit_max": 1,
-                "thigh_limit_min": -1, "thigh_limit_max": -1, "calf_limit_min": -1, "calf_limit_max": 1},
-    "anymal_c": {"calf_mass": 1, "hip_mass": 1, "foot_mass": 1, "base_mass": 1, "hip_limit_min": 1,
-                 "hip_limit_max": -1},
-    "b1": {"thigh_mass": 1, "calf_mass": 1, "hip_mass": 1, "base_mass": 1, "hip_limit_min": 1,
-           "hip_limit_max": -1, "thigh_limit_min": 1, "calf_limit_max": 1},
+    "aliengo": {
+        "calf_mass": 1,
+        "hip_mass": 1,
+        "base_mass": 1,
+        "hip_limit_min": -1,
+        "hip_limit_max": 1,
+        "thigh_limit_min": -1,
+        "thigh_limit_max": -1,
+        "calf_limit_min": -1,
+        "calf_limit_max": 1,
+    },
+    "anymal_c": {
+        "calf_mass": 1,
+        "hip_mass": 1,
+        "foot_mass": 1,
+        "base_mass": 1,
+        "hip_limit_min": 1,
+        "hip_limit_max": -1,
+    },
+    "b1": {
+        "thigh_mass": 1,
+        "calf_mass": 1,
+        "hip_mass": 1,
+        "base_mass": 1,
+        "hip_limit_min": 1,
+        "hip_limit_max": -1,
+        "thigh_limit_min": 1,
+        "calf_limit_max": 1,
+    },
 }
 
 # Public total masses (the robots' public URDFs; Mini Cheetah with rotors and pkGym feet).
-PUBLIC_TOTAL = {"go2": 16.09, "go1": 11.31, "a1": 13.74, "aliengo": 24.94, "b1": 62.58,
-                "mini_cheetah": 8.952, "anymal_c": 52.13}
+PUBLIC_TOTAL = {
+    "go2": 16.09,
+    "go1": 11.31,
+    "a1": 13.74,
+    "aliengo": 24.94,
+    "b1": 62.58,
+    "mini_cheetah": 8.952,
+    "anymal_c": 52.13,
+}
 
 
 def test_library_holds_the_papers_seven_robots_template_first():
@@ -149,10 +179,17 @@ def test_every_fact_has_a_unit_and_a_source(name):
         assert row["unit"] and row["source"].strip(), row
 
 
-@pytest.mark.parametrize("name,fields", [
-    ("go2", ["thigh_limit"]), ("aliengo", ["hip_mass", "thigh_limit"]), ("mini_cheetah", ["foot_mass", "calf_limit"]),
-    ("anymal_c", ["thigh_mass", "hip_limit", "calf_limit"]), ("go1", ["base_mass"]), ("a1", ["base_mass"]),
-])
+@pytest.mark.parametrize(
+    "name,fields",
+    [
+        ("go2", ["thigh_limit"]),
+        ("aliengo", ["hip_mass", "thigh_limit"]),
+        ("mini_cheetah", ["foot_mass", "calf_limit"]),
+        ("anymal_c", ["thigh_mass", "hip_limit", "calf_limit"]),
+        ("go1", ["base_mass"]),
+        ("a1", ["base_mass"]),
+    ],
+)
 def test_conflicts_with_public_sources_are_recorded(name, fields):
     text = " ".join(r["field"] for r in conflict_rows(load_robot(name)))
     for field in fields:
@@ -199,25 +236,44 @@ def _line(prefix: str) -> str:
     return next(line for line in GO2_TEXT.splitlines() if line.startswith(prefix))
 
 
-@pytest.mark.parametrize("old,new,field,message", [
-    ('mass = { value = 0.678', 'mass = { value = -0.678', "links.hip.mass", "must be > 0"),
-    ('mass = { value = 6.921', 'mass = { value = 0.0', "base.mass", "must be > 0"),
-    ('hip = { value = [-1.0472, 1.0472]', 'hip = { value = [1.0472, -1.0472]', "joint_limits.hip", "min limit"),
-    ('mass = { value = 6.921, unit = "kg"', 'mass = { value = 6921.0, unit = "g"', "base.mass", "wrong unit 'g'"),
-    ('foot_radius = { value = 0.022', 'foot_radius = { value = -0.022', "leg.foot_radius", "must be > 0"),
-    ('calf = { value = -1.5, unit = "rad"', 'calf = { value = -0.2, unit = "rad"', "default_pose.calf",
-     "outside the joint"),
-    ('kp = { value = 20.0', 'kp = { value = nan', "actuators.kp", "finite"),
-    ('inertia = { value = [0.02448, 0.098077, 0.107]', 'inertia = { value = [0.02448, 0.98077, 0.107]',
-     "base.inertia", "triangle inequality"),
-    ('[base]\n', '[base]\ncolour = "red"\n', "base.colour", "unknown key 'colour'"),
-    ('unit = "kg", source = "unitree_ros go2_description.urdf @d6f13aa, base link" }',
-     'unit = "kg", source = "x", tolerance = 0.1 }', "base.mass.tolerance", "unknown key"),
-    ('[descriptor]\n', '[descriptors]\n', "descriptors", "unknown key"),
-    ('calf_at = "thigh_joint"', 'calf_at = "knee"', "rotors.calf_at", "not one of"),
-    ('hip = { left = 0.1, right = -0.1, unit = "rad"', 'hip = { value = [0.1], unit = "rad"', "default_pose.hip",
-     "expected a number"),
-])
+@pytest.mark.parametrize(
+    "old,new,field,message",
+    [
+        ("mass = { value = 0.678", "mass = { value = -0.678", "links.hip.mass", "must be > 0"),
+        ("mass = { value = 6.921", "mass = { value = 0.0", "base.mass", "must be > 0"),
+        ("hip = { value = [-1.0472, 1.0472]", "hip = { value = [1.0472, -1.0472]", "joint_limits.hip", "min limit"),
+        ('mass = { value = 6.921, unit = "kg"', 'mass = { value = 6921.0, unit = "g"', "base.mass", "wrong unit 'g'"),
+        ("foot_radius = { value = 0.022", "foot_radius = { value = -0.022", "leg.foot_radius", "must be > 0"),
+        (
+            'calf = { value = -1.5, unit = "rad"',
+            'calf = { value = -0.2, unit = "rad"',
+            "default_pose.calf",
+            "outside the joint",
+        ),
+        ("kp = { value = 20.0", "kp = { value = nan", "actuators.kp", "finite"),
+        (
+            "inertia = { value = [0.02448, 0.098077, 0.107]",
+            "inertia = { value = [0.02448, 0.98077, 0.107]",
+            "base.inertia",
+            "triangle inequality",
+        ),
+        ("[base]\n", '[base]\ncolour = "red"\n', "base.colour", "unknown key 'colour'"),
+        (
+            'unit = "kg", source = "unitree_ros go2_description.urdf @d6f13aa, base link" }',
+            'unit = "kg", source = "x", tolerance = 0.1 }',
+            "base.mass.tolerance",
+            "unknown key",
+        ),
+        ("[descriptor]\n", "[descriptors]\n", "descriptors", "unknown key"),
+        ('calf_at = "thigh_joint"', 'calf_at = "knee"', "rotors.calf_at", "not one of"),
+        (
+            'hip = { left = 0.1, right = -0.1, unit = "rad"',
+            'hip = { value = [0.1], unit = "rad"',
+            "default_pose.hip",
+            "expected a number",
+        ),
+    ],
+)
 def test_bad_robot_toml_names_the_field(tmp_path, old, new, field, message):
     path = _mutate(tmp_path, old, new)
     with pytest.raises(RobotSpecError) as info:
@@ -228,11 +284,14 @@ def test_bad_robot_toml_names_the_field(tmp_path, old, new, field, message):
     assert message in text
 
 
-@pytest.mark.parametrize("prefix,field", [
-    ("foot_radius = ", "leg.foot_radius"),
-    ("thigh_limit_max = ", "descriptor"),
-    ("init_height = ", "default_pose.init_height"),
-])
+@pytest.mark.parametrize(
+    "prefix,field",
+    [
+        ("foot_radius = ", "leg.foot_radius"),
+        ("thigh_limit_max = ", "descriptor"),
+        ("init_height = ", "default_pose.init_height"),
+    ],
+)
 def test_missing_field_is_named(tmp_path, prefix, field):
     path = _mutate(tmp_path, _line(prefix) + "\n", "")
     with pytest.raises(RobotSpecError, match=re.escape(field)) as info:

@@ -22,11 +22,21 @@ N = 2
 
 def _step(t: int) -> dict[str, np.ndarray]:
     z3 = np.zeros((N, 3))
-    return {"base_pos": z3 + [0.1 * t, 0.0, 0.3], "base_quat": np.tile([1.0, 0.0, 0.0, 0.0], (N, 1)),
-            "base_lin_vel": z3 + [1.0, 0.0, 0.0], "base_ang_vel": z3, "command": z3 + [1.0, 0.0, 0.0],
-            "joint_pos": np.zeros((N, 12)), "joint_vel": np.zeros((N, 12)), "action": np.zeros((N, 12)),
-            "reward": np.full(N, 0.01 * t), "reward_terms": np.zeros((N, 2)), "value": np.zeros(N),
-            "done": np.zeros(N, bool), "time_out": np.zeros(N, bool)}
+    return {
+        "base_pos": z3 + [0.1 * t, 0.0, 0.3],
+        "base_quat": np.tile([1.0, 0.0, 0.0, 0.0], (N, 1)),
+        "base_lin_vel": z3 + [1.0, 0.0, 0.0],
+        "base_ang_vel": z3,
+        "command": z3 + [1.0, 0.0, 0.0],
+        "joint_pos": np.zeros((N, 12)),
+        "joint_vel": np.zeros((N, 12)),
+        "action": np.zeros((N, 12)),
+        "reward": np.full(N, 0.01 * t),
+        "reward_terms": np.zeros((N, 2)),
+        "value": np.zeros(N),
+        "done": np.zeros(N, bool),
+        "time_out": np.zeros(N, bool),
+    }
 
 
 def _scene():
@@ -73,11 +83,21 @@ async def _session(port: int, subprotocols: list[str], want: dict[str, int]):
                 ops.append(op["op"])
                 if op["op"] == "advertise":
                     for c in op["channels"]:
-                        schema = Schema(id=c["id"], name=c["schemaName"], encoding=c["schemaEncoding"],
-                                        data=base64.b64decode(c["schema"]))
+                        schema = Schema(
+                            id=c["id"],
+                            name=c["schemaName"],
+                            encoding=c["schemaEncoding"],
+                            data=base64.b64decode(c["schema"]),
+                        )
                         channels[c["id"]] = (c, DecoderFactory().decoder_for(c["encoding"], schema))
-                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                        {"id": c["id"], "channelId": c["id"]} for c in op["channels"]]}))
+                    await ws.send(
+                        json.dumps(
+                            {
+                                "op": "subscribe",
+                                "subscriptions": [{"id": c["id"], "channelId": c["id"]} for c in op["channels"]],
+                            }
+                        )
+                    )
                 continue
             opcode, sub_id, _ = struct.unpack_from("<BIQ", frame)
             assert opcode == 1
@@ -92,8 +112,12 @@ def test_a_client_offering_either_subprotocol_gets_the_channels(live, offered):
     subprotocol, ops, topics, got = asyncio.run(asyncio.wait_for(_session(live.port, offered, want), 60))
     assert subprotocol == (SDK_SUBPROTOCOL if SDK_SUBPROTOCOL in offered else LEGACY_SUBPROTOCOL)
     assert ops[0] == "serverInfo" and "advertise" in ops
-    assert topics == {"/rollout/step": "morfic.RolloutStep", "/scene": "foxglove.SceneUpdate",
-                      "/tf": "foxglove.FrameTransforms", "/tf_static": "foxglove.FrameTransforms"}
+    assert topics == {
+        "/rollout/step": "morfic.RolloutStep",
+        "/scene": "foxglove.SceneUpdate",
+        "/tf": "foxglove.FrameTransforms",
+        "/tf_static": "foxglove.FrameTransforms",
+    }
     step = got["/rollout/step"][-1]
     assert len(step.envs) == N and step.envs[1].command[0] == 1.0
     # the fixed frames on /tf_static (env offsets, feet), the moving bodies on /tf
@@ -113,6 +137,7 @@ def test_a_client_offering_neither_gets_a_400_naming_both_and_morfic_says_so(liv
     caplog.set_level(logging.WARNING)
     relay = SubprotocolRelay(live.relay.upstream.rsplit(":", 1)[1], host="127.0.0.1", port=0)
     try:
+
         async def connect(subprotocols):
             async with websockets.connect(f"ws://127.0.0.1:{relay.port}", subprotocols=subprotocols):
                 pass

@@ -40,11 +40,21 @@ RELAY_LOG = "morfic_cli.recording.ws_relay"
 
 def _step(t: int) -> dict[str, np.ndarray]:
     z3 = np.zeros((N, 3))
-    return {"base_pos": z3 + [0.1 * t, 0.0, 0.3], "base_quat": np.tile([1.0, 0.0, 0.0, 0.0], (N, 1)),
-            "base_lin_vel": z3 + [1.0, 0.0, 0.0], "base_ang_vel": z3, "command": z3 + [1.0, 0.0, 0.0],
-            "joint_pos": np.zeros((N, 12)), "joint_vel": np.zeros((N, 12)), "action": np.zeros((N, 12)),
-            "reward": np.full(N, 0.01 * t), "reward_terms": np.zeros((N, 2)), "value": np.zeros(N),
-            "done": np.zeros(N, bool), "time_out": np.zeros(N, bool)}
+    return {
+        "base_pos": z3 + [0.1 * t, 0.0, 0.3],
+        "base_quat": np.tile([1.0, 0.0, 0.0, 0.0], (N, 1)),
+        "base_lin_vel": z3 + [1.0, 0.0, 0.0],
+        "base_ang_vel": z3,
+        "command": z3 + [1.0, 0.0, 0.0],
+        "joint_pos": np.zeros((N, 12)),
+        "joint_vel": np.zeros((N, 12)),
+        "action": np.zeros((N, 12)),
+        "reward": np.full(N, 0.01 * t),
+        "reward_terms": np.zeros((N, 2)),
+        "value": np.zeros(N),
+        "done": np.zeros(N, bool),
+        "time_out": np.zeros(N, bool),
+    }
 
 
 @pytest.fixture(scope="module")
@@ -78,8 +88,15 @@ def live():
 def relay(live, caplog):
     """A relay of its own in front of the live view's server, with short handshake and close timeouts."""
     caplog.set_level(logging.WARNING)
-    r = SubprotocolRelay(live.server.port, host="127.0.0.1", port=0, max_frame_bytes=64 << 10,
-                         handshake_timeout_s=0.5, close_timeout_s=2.0, ping_interval_s=None)
+    r = SubprotocolRelay(
+        live.server.port,
+        host="127.0.0.1",
+        port=0,
+        max_frame_bytes=64 << 10,
+        handshake_timeout_s=0.5,
+        close_timeout_s=2.0,
+        ping_interval_s=None,
+    )
     yield r
     r.close()
 
@@ -115,24 +132,32 @@ def _one_line_for(caplog, port: int, *fragments: str) -> str:
 
 def _only_relay_lines(caplog) -> None:
     """No other logger (websockets, asyncio, foxglove) said anything at warning level or above."""
-    assert all(r.name == RELAY_LOG and r.exc_info is None for r in _warnings(caplog)), \
-        [(r.name, r.getMessage()) for r in _warnings(caplog)]
+    assert all(r.name == RELAY_LOG and r.exc_info is None for r in _warnings(caplog)), [
+        (r.name, r.getMessage()) for r in _warnings(caplog)
+    ]
 
 
 async def _good_client(port: int, n: int = 3, subprotocol: str = LEGACY_SUBPROTOCOL) -> int:
     """Connect, subscribe to every advertised channel and receive ``n`` messages; the number received."""
     import websockets
 
-    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[subprotocol], max_size=None,
-                                  open_timeout=GUARD_S) as ws:
+    async with websockets.connect(
+        f"ws://127.0.0.1:{port}", subprotocols=[subprotocol], max_size=None, open_timeout=GUARD_S
+    ) as ws:
         got = 0
         while got < n:
             frame = await ws.recv()
             if isinstance(frame, str):
                 op = json.loads(frame)
                 if op["op"] == "advertise":
-                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                        {"id": c["id"], "channelId": c["id"]} for c in op["channels"]]}))
+                    await ws.send(
+                        json.dumps(
+                            {
+                                "op": "subscribe",
+                                "subscriptions": [{"id": c["id"], "channelId": c["id"]} for c in op["channels"]],
+                            }
+                        )
+                    )
             elif frame[0] == 1:
                 got += 1
         return got
@@ -266,8 +291,11 @@ def _listening(port: int) -> set[str]:
                 local, state = row.split()[1], row.split()[3]
                 addr, p = local.split(":")
                 if state == "0A" and int(p, 16) == port:  # LISTEN
-                    found.add(socket.inet_ntop(socket.AF_INET, bytes.fromhex(addr)[::-1]) if len(addr) == 8
-                              else f"{table[-4:]}:{addr}")
+                    found.add(
+                        socket.inet_ntop(socket.AF_INET, bytes.fromhex(addr)[::-1])
+                        if len(addr) == 8
+                        else f"{table[-4:]}:{addr}"
+                    )
     return found
 
 
@@ -344,17 +372,21 @@ def _connect_and_close(raw: Raw) -> bytes:
     return raw.drain_to_eof()
 
 
-@pytest.mark.parametrize("bad, answer, reason", [
-    (_junk, b"", "did not send an HTTP request"),
-    (_plain_get, b"HTTP/1.1 426", "without a WebSocket upgrade"),
-    (_wrong_subprotocol, b"HTTP/1.1 400", "offered no Foxglove subprotocol (offered: foxglove.websocket.v2)"),
-    (_no_subprotocol, b"HTTP/1.1 400", "offered no Foxglove subprotocol (offered: none)"),
-    (_no_key, b"HTTP/1.1 400", "Sec-WebSocket-Key"),
-    (_silent, b"", "no complete WebSocket handshake within 0.5 s"),
-    (_half_then_stall, b"", "no complete WebSocket handshake within 0.5 s"),
-    (_half_then_close, b"", "closed the connection before completing a WebSocket handshake"),
-    (_connect_and_close, b"", "closed the connection before completing a WebSocket handshake"),
-], ids=lambda v: v.__name__.strip("_") if callable(v) else None)
+@pytest.mark.parametrize(
+    "bad, answer, reason",
+    [
+        (_junk, b"", "did not send an HTTP request"),
+        (_plain_get, b"HTTP/1.1 426", "without a WebSocket upgrade"),
+        (_wrong_subprotocol, b"HTTP/1.1 400", "offered no Foxglove subprotocol (offered: foxglove.websocket.v2)"),
+        (_no_subprotocol, b"HTTP/1.1 400", "offered no Foxglove subprotocol (offered: none)"),
+        (_no_key, b"HTTP/1.1 400", "Sec-WebSocket-Key"),
+        (_silent, b"", "no complete WebSocket handshake within 0.5 s"),
+        (_half_then_stall, b"", "no complete WebSocket handshake within 0.5 s"),
+        (_half_then_close, b"", "closed the connection before completing a WebSocket handshake"),
+        (_connect_and_close, b"", "closed the connection before completing a WebSocket handshake"),
+    ],
+    ids=lambda v: v.__name__.strip("_") if callable(v) else None,
+)
 def test_a_bad_handshake_is_refused_in_one_line_and_the_server_keeps_serving(relay, caplog, bad, answer, reason):
     clients = [Raw(relay.port) for _ in range(3)]  # three alike: one line each
     for raw in clients:
@@ -379,11 +411,19 @@ BAD_FRAMES = {
     "no op": (1, b'{"x": 1}', 1008, "without an op"),
     "unknown op": (1, b'{"op": "frobnicate"}', 1008, "unknown op 'frobnicate'"),
     "subscribe shape": (1, b'{"op": "subscribe", "subscriptions": "all"}', 1008, "subscribe without"),
-    "subscribe ids": (1, b'{"op": "subscribe", "subscriptions": [{"id": "1", "channelId": 1}]}', 1008,
-                      "subscribe without"),
+    "subscribe ids": (
+        1,
+        b'{"op": "subscribe", "subscriptions": [{"id": "1", "channelId": 1}]}',
+        1008,
+        "subscribe without",
+    ),
     "unsubscribe shape": (1, b'{"op": "unsubscribe", "subscriptionIds": [1.5]}', 1008, "unsubscribe without"),
-    "unknown channel": (1, b'{"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 99999}]}', 1008,
-                        "subscribed to channel 99999, which the server never advertised"),
+    "unknown channel": (
+        1,
+        b'{"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 99999}]}',
+        1008,
+        "subscribed to channel 99999, which the server never advertised",
+    ),
     "client message data": (2, b"\x01\x01\x00\x00\x00hi", 1008, "needs the clientPublish capability"),
     "service call": (2, b"\x02" + bytes(16), 1008, "needs the services capability"),
     "binary garbage": (2, b"\xff\x00garbage\x13\x37", 1008, "first byte ff"),
@@ -412,10 +452,18 @@ def test_a_bad_frame_closes_that_client_in_one_line_and_the_server_keeps_serving
     _still_serves(relay.port)
 
 
-@pytest.mark.parametrize("frame", [
-    '{"op": "subscribe", "subscriptions": []}', '{"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 7}]}',
-    '{"op": "unsubscribe", "subscriptionIds": [7]}', '{"op": "getParameters", "parameterNames": []}',
-    '{"op": "advertise", "channels": []}', b"\x01\x00\x00\x00\x00payload", b"\x02" + bytes(12)])
+@pytest.mark.parametrize(
+    "frame",
+    [
+        '{"op": "subscribe", "subscriptions": []}',
+        '{"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 7}]}',
+        '{"op": "unsubscribe", "subscriptionIds": [7]}',
+        '{"op": "getParameters", "parameterNames": []}',
+        '{"op": "advertise", "channels": []}',
+        b"\x01\x00\x00\x00\x00payload",
+        b"\x02" + bytes(12),
+    ],
+)
 def test_a_well_formed_request_passes_even_one_the_server_declines(frame):
     assert client_frame_error(frame, capabilities={"clientPublish", "services"}, channels={7}) is None
 
@@ -476,8 +524,11 @@ def _close_cleanly(raw: Raw) -> None:
     assert raw.finish() == 1000
 
 
-@pytest.mark.parametrize("drop", [_reset_while_streaming, _reset_during_subscribe, _close_mid_frame,
-                                  _reset_mid_frame, _close_cleanly], ids=lambda f: f.__name__.strip("_"))
+@pytest.mark.parametrize(
+    "drop",
+    [_reset_while_streaming, _reset_during_subscribe, _close_mid_frame, _reset_mid_frame, _close_cleanly],
+    ids=lambda f: f.__name__.strip("_"),
+)
 def test_a_disconnect_mid_stream_costs_no_line_and_the_server_keeps_serving(relay, caplog, drop):
     for _ in range(3):
         drop(Raw(relay.port))
@@ -497,14 +548,26 @@ def test_fifty_clients_at_once_subscribing_and_dropping(live, caplog):
     caplog.set_level(logging.WARNING)
 
     async def one(i: int) -> int:
-        ws = await websockets.connect(f"ws://127.0.0.1:{live.port}", max_size=None, open_timeout=GUARD_S,
-                                      subprotocols=[(LEGACY_SUBPROTOCOL, SDK_SUBPROTOCOL)[i % 2]])
+        ws = await websockets.connect(
+            f"ws://127.0.0.1:{live.port}",
+            max_size=None,
+            open_timeout=GUARD_S,
+            subprotocols=[(LEGACY_SUBPROTOCOL, SDK_SUBPROTOCOL)[i % 2]],
+        )
         got = 0
         while True:
             frame = await ws.recv()
             if isinstance(frame, str) and json.loads(frame)["op"] == "advertise":
-                await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                    {"id": c["id"], "channelId": c["id"]} for c in json.loads(frame)["channels"]]}))
+                await ws.send(
+                    json.dumps(
+                        {
+                            "op": "subscribe",
+                            "subscriptions": [
+                                {"id": c["id"], "channelId": c["id"]} for c in json.loads(frame)["channels"]
+                            ],
+                        }
+                    )
+                )
                 if i % 3 == 2:
                     break
             elif isinstance(frame, bytes) and frame[0] == 1:
@@ -513,8 +576,9 @@ def test_fifty_clients_at_once_subscribing_and_dropping(live, caplog):
         if i % 3 == 0:
             await ws.close()
         else:
-            ws.transport.get_extra_info("socket").setsockopt(socket.SOL_SOCKET, socket.SO_LINGER,
-                                                             struct.pack("ii", 1, 0))
+            ws.transport.get_extra_info("socket").setsockopt(
+                socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0)
+            )
             ws.transport.abort()
         return got
 
@@ -534,8 +598,9 @@ def bulk(live):
     and all, where the live view's own channels would take many."""
     import foxglove
 
-    channel = foxglove.Channel("/test/bulk", schema=foxglove.Schema(name="bulk", encoding="", data=b""),
-                               message_encoding="raw")
+    channel = foxglove.Channel(
+        "/test/bulk", schema=foxglove.Schema(name="bulk", encoding="", data=b""), message_encoding="raw"
+    )
     stop = threading.Event()
 
     def flood() -> None:
@@ -555,8 +620,9 @@ def bulk(live):
 def test_a_client_that_never_reads_loses_old_messages_not_the_others_service(live, bulk, caplog):
     caplog.set_level(logging.WARNING)
     limit = 64 << 10
-    relay = SubprotocolRelay(live.server.port, host="127.0.0.1", port=0, backlog_bytes=limit,
-                             ping_interval_s=None, close_timeout_s=0.5)
+    relay = SubprotocolRelay(
+        live.server.port, host="127.0.0.1", port=0, backlog_bytes=limit, ping_interval_s=None, close_timeout_s=0.5
+    )
     try:
         slow = Raw(relay.port, rcvbuf=4096)
         slow.handshake()
@@ -583,8 +649,9 @@ def test_a_stuck_client_whose_control_messages_pass_the_bound_is_dropped_in_one_
 
     caplog.set_level(logging.WARNING)
     limit = 64 << 10
-    relay = SubprotocolRelay(live.server.port, host="127.0.0.1", port=0, backlog_bytes=limit,
-                             ping_interval_s=None, close_timeout_s=0.5)
+    relay = SubprotocolRelay(
+        live.server.port, host="127.0.0.1", port=0, backlog_bytes=limit, ping_interval_s=None, close_timeout_s=0.5
+    )
     try:
         slow = Raw(relay.port, rcvbuf=4096)
         slow.handshake()
@@ -605,8 +672,7 @@ def test_a_stuck_client_whose_control_messages_pass_the_bound_is_dropped_in_one_
 
 def test_a_client_that_stops_answering_pings_is_closed_in_one_line(live, caplog):
     caplog.set_level(logging.WARNING)
-    relay = SubprotocolRelay(live.server.port, host="127.0.0.1", port=0, ping_interval_s=0.2,
-                             close_timeout_s=0.5)
+    relay = SubprotocolRelay(live.server.port, host="127.0.0.1", port=0, ping_interval_s=0.2, close_timeout_s=0.5)
     try:
         mute = Raw(relay.port)
         mute.handshake()  # then neither reads nor answers
@@ -627,6 +693,7 @@ def test_an_unreachable_server_is_one_line_and_a_1011_not_a_traceback(caplog):
         dead = s.getsockname()[1]
     relay = SubprotocolRelay(dead, host="127.0.0.1", port=0, close_timeout_s=0.5)
     try:
+
         async def run() -> tuple[int, int]:
             async with websockets.connect(f"ws://127.0.0.1:{relay.port}", subprotocols=[SDK_SUBPROTOCOL]) as ws:
                 with pytest.raises(websockets.ConnectionClosedError):
@@ -685,10 +752,23 @@ def test_the_outbox_drops_the_oldest_messages_and_keeps_control_messages():
     assert len(asyncio.run(drain())) == 4 and box.bytes == 0 and box.control_bytes == 0
 
 
-@pytest.mark.parametrize("frame", ["", "null", "3", '"op"', '{"op": 3}', '{"op": "Subscribe"}',
-                                   '{"op": "subscribe"}', '{"op": "subscribe", "subscriptions": [{"id": true, '
-                                   '"channelId": 1}]}', '{"op": "unsubscribe", "subscriptionIds": "1"}',
-                                   b"\x00", b"\x04\x00", b"\x7fELF"])
+@pytest.mark.parametrize(
+    "frame",
+    [
+        "",
+        "null",
+        "3",
+        '"op"',
+        '{"op": 3}',
+        '{"op": "Subscribe"}',
+        '{"op": "subscribe"}',
+        '{"op": "subscribe", "subscriptions": [{"id": true, "channelId": 1}]}',
+        '{"op": "unsubscribe", "subscriptionIds": "1"}',
+        b"\x00",
+        b"\x04\x00",
+        b"\x7fELF",
+    ],
+)
 def test_frames_the_protocol_does_not_define_are_named(frame):
     reason = client_frame_error(frame, capabilities={"clientPublish", "services", "playbackControl"})
     assert reason and reason.startswith("sent ") and "\n" not in reason

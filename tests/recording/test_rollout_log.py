@@ -23,9 +23,17 @@ N, T = 3, 5
 TERMS = ["r_lin", "p_vz"]
 DT = 0.02
 META = {
-    "run": "run-1a2b", "checkpoint": "ckpt-3c4d", "robot": "go2", "descriptor": [0.25, 1.5, -3.0],
-    "mode": "zero-shot", "command": [0.5, 0.0, 0.25], "seed": 7, "morfic_version": "0.1.0",
-    "deterministic": True, "push_scale": 0.1, "numeric_string": "42",
+    "run": "run-1a2b",
+    "checkpoint": "ckpt-3c4d",
+    "robot": "go2",
+    "descriptor": [0.25, 1.5, -3.0],
+    "mode": "zero-shot",
+    "command": [0.5, 0.0, 0.25],
+    "seed": 7,
+    "morfic_version": "0.1.0",
+    "deterministic": True,
+    "push_scale": 0.1,
+    "numeric_string": "42",
 }
 
 
@@ -96,8 +104,16 @@ def test_metadata_round_trips_typed(log_path):
     raw = records[0].metadata
     assert raw["robot"] == "go2" and raw["numeric_string"] == "42"  # str values stored as is
     assert raw["seed"] == "7" and raw["command"] == "[0.5, 0.0, 0.25]" and raw["term_names"] == '["r_lin", "p_vz"]'
-    assert set(json.loads(raw["json_keys"])) == {"descriptor", "command", "seed", "deterministic", "push_scale",
-                                                 "num_envs", "term_names", "scene_envs"}
+    assert set(json.loads(raw["json_keys"])) == {
+        "descriptor",
+        "command",
+        "seed",
+        "deterministic",
+        "push_scale",
+        "num_envs",
+        "term_names",
+        "scene_envs",
+    }
 
 
 def test_raw_mcap_schema_channel_chunks_and_messages(log_path):
@@ -152,17 +168,35 @@ def test_format_1_json_logs_still_read(tmp_path):
     from mcap.writer import CompressionType, Writer
 
     path = tmp_path / "v1.mcap"
-    env = {"base_pos": [0.1, 0.2, 0.3], "base_quat": [1.0, 0.0, 0.0, 0.0], "base_lin_vel": [1.5, 0.0, 0.0],
-           "base_ang_vel": [0.0, 0.0, 0.0], "command": [2.0, 0.0, 0.0], "joint_pos": [0.5] * 12,
-           "joint_vel": [0.0] * 12, "action": [0.25] * 12, "reward": 0.07,
-           "reward_terms": {"r_lin": 0.08, "p_vz": None}, "value": 1.9, "done": True, "time_out": False}
+    env = {
+        "base_pos": [0.1, 0.2, 0.3],
+        "base_quat": [1.0, 0.0, 0.0, 0.0],
+        "base_lin_vel": [1.5, 0.0, 0.0],
+        "base_ang_vel": [0.0, 0.0, 0.0],
+        "command": [2.0, 0.0, 0.0],
+        "joint_pos": [0.5] * 12,
+        "joint_vel": [0.0] * 12,
+        "action": [0.25] * 12,
+        "reward": 0.07,
+        "reward_terms": {"r_lin": 0.08, "p_vz": None},
+        "value": 1.9,
+        "done": True,
+        "time_out": False,
+    }
     with open(path, "wb") as f:
         w = Writer(f, compression=CompressionType.ZSTD)
         w.start()
         sid = w.register_schema("morfic.RolloutStep", "jsonschema", b"{}")
         cid = w.register_channel(ROLLOUT_TOPIC, "json", sid)
-        w.add_metadata(METADATA_NAME, {"format": "morfic.rollout/1", "num_envs": "1", "term_names": '["r_lin", "p_vz"]',
-                                       "json_keys": '["num_envs", "term_names"]'})
+        w.add_metadata(
+            METADATA_NAME,
+            {
+                "format": "morfic.rollout/1",
+                "num_envs": "1",
+                "term_names": '["r_lin", "p_vz"]',
+                "json_keys": '["num_envs", "term_names"]',
+            },
+        )
         w.add_message(cid, 20_000_000, json.dumps({"step": 0, "time_s": 0.02, "envs": [env]}).encode(), 20_000_000)
         w.finish()
     log = read_rollout(path)
@@ -226,8 +260,12 @@ def test_bad_constructor_arguments(tmp_path):
         RolloutLogWriter(path, num_envs=0, term_names=TERMS, metadata={})
     assert not path.exists()  # nothing written before the arguments are checked
     # agreeing num_envs / term_names, numpy values and tuples are fine
-    with RolloutLogWriter(path, num_envs=N, term_names=TERMS,
-                          metadata={"num_envs": N, "term_names": TERMS, "seed": np.int64(3), "cmd": (1.0, 0.0)}):
+    with RolloutLogWriter(
+        path,
+        num_envs=N,
+        term_names=TERMS,
+        metadata={"num_envs": N, "term_names": TERMS, "seed": np.int64(3), "cmd": (1.0, 0.0)},
+    ):
         pass
     log = read_rollout(path)
     assert log.metadata["seed"] == 3 and log.metadata["cmd"] == [1.0, 0.0]

@@ -24,6 +24,7 @@ from morfic_cli.recording.video import encode_video, frame_grid_png, grid_shape,
 W, H = 64, 48
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
+
 @pytest.fixture(scope="module")
 def go2():
     return build_model(load_robot("go2"))
@@ -77,8 +78,7 @@ def test_select_rejects_bad_mujoco_gl(monkeypatch):
 
 
 def test_grid_shape():
-    assert [grid_shape(n) for n in (1, 2, 3, 4, 6, 8, 9)] == [(1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (2, 4),
-                                                               (3, 3)]
+    assert [grid_shape(n) for n in (1, 2, 3, 4, 6, 8, 9)] == [(1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (2, 4), (3, 3)]
 
 
 def test_render_validates_shapes(go2):
@@ -114,7 +114,7 @@ def test_robot_visible_and_moving(frames):
     for a, b in zip(frames[:-1], frames[1:], strict=True):
         assert np.any(a != b)
     # same robot, same pose: the two tiles match (apart from the separator at their shared edge)
-    assert np.array_equal(frames[:, :, 2:W - 2], frames[:, :, W + 2:2 * W - 2])
+    assert np.array_equal(frames[:, :, 2 : W - 2], frames[:, :, W + 2 : 2 * W - 2])
 
 
 def test_every_keeps_every_nth_step(gl_backend, go2):
@@ -128,8 +128,9 @@ def test_every_keeps_every_nth_step(gl_backend, go2):
 def test_each_env_renders_its_own_morphology(gl_backend, go2, monkeypatch):
     """Models that differ only in geometry sizes share one renderer; each tile still shows its own geometry."""
     thick = build_model(load_robot("go2"))
-    thick.geom_size[[mujoco.mj_name2id(thick, mujoco.mjtObj.mjOBJ_GEOM, f"{leg}_calf_geom")
-                     for leg in ("FL", "FR", "RL", "RR")], 0] *= 3.0
+    thick.geom_size[
+        [mujoco.mj_name2id(thick, mujoco.mjtObj.mjOBJ_GEOM, f"{leg}_calf_geom") for leg in ("FL", "FR", "RL", "RR")], 0
+    ] *= 3.0
     made = []
     make = video._make_renderer
     monkeypatch.setattr(video, "_make_renderer", lambda *a: made.append(a[0]) or make(*a))
@@ -137,14 +138,14 @@ def test_each_env_renders_its_own_morphology(gl_backend, go2, monkeypatch):
     both = render_frames([go2, thick], qpos, every=1, width=W, height=H)
     assert made == [go2]
     alone = render_frames([thick], qpos[:, :1], every=1, width=W, height=H)
-    assert not np.array_equal(both[0, :, 2:W - 2], both[0, :, W + 2:2 * W - 2])
-    assert np.array_equal(both[0, :, W + 2:], alone[0, :, 2:])
+    assert not np.array_equal(both[0, :, 2 : W - 2], both[0, :, W + 2 : 2 * W - 2])
+    assert np.array_equal(both[0, :, W + 2 :], alone[0, :, 2:])
 
 
 def test_different_robots(gl_backend, go2):
     a1 = build_model(load_robot("a1"))
     both = render_frames([go2, a1], _walk(go2, steps=1), every=1, width=W, height=H)
-    assert not np.array_equal(both[0, :, 2:W - 2], both[0, :, W + 2:2 * W - 2])
+    assert not np.array_equal(both[0, :, 2 : W - 2], both[0, :, W + 2 : 2 * W - 2])
 
 
 def test_a_raised_base_shows_floor_up_to_the_top_edge(gl_backend, go2):
@@ -173,8 +174,9 @@ def test_renders_after_mujoco_was_imported_without_mujoco_gl():
     """The caveat: ``import mujoco`` with MUJOCO_GL unset picks GLFW; render_frames must still work headless."""
     env = probe_env()
     env.pop("MUJOCO_GL", None)
-    proc = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=300,
-                          check=False)
+    proc = subprocess.run(
+        [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=300, check=False
+    )
     if proc.returncode != 0 and "OpenGL" in proc.stderr and "MorficError" in proc.stderr:
         pytest.skip("no OpenGL library here: " + proc.stderr.strip().splitlines()[-1])
     assert proc.returncode == 0, proc.stderr
@@ -208,7 +210,7 @@ def test_gif_forced_and_downscaled():
 
     big = np.zeros((3, 480, 1280, 3), dtype=np.uint8)
     for i in range(3):  # distinct frames (Pillow merges identical consecutive frames)
-        big[i, 100:200, 100 + 50 * i:300 + 50 * i] = 200
+        big[i, 100:200, 100 + 50 * i : 300 + 50 * i] = 200
     data, ext = encode_video(big, fps=10.0, fmt="gif")
     assert ext == "gif" and data[:6] == b"GIF89a"
     im = Image.open(io.BytesIO(data))

@@ -15,8 +15,17 @@ from morfic_cli.report.stats import CANNOT, HOLDS, MIXED, NOT, PARTLY, REVERSED
 
 
 def _eval(variant, robot, vx, s=1.0, seed=0, d=0.3, mode="descriptor", command_vx=2.0):
-    return {"variant": variant, "robot": robot, "vx_mean": vx, "survival": s, "seed": seed, "d": d, "mode": mode,
-            "command_vx": command_vx, "artifact": f"e-{variant}-{seed}"}
+    return {
+        "variant": variant,
+        "robot": robot,
+        "vx_mean": vx,
+        "survival": s,
+        "seed": seed,
+        "d": d,
+        "mode": mode,
+        "command_vx": command_vx,
+        "artifact": f"e-{variant}-{seed}",
+    }
 
 
 def _evals(variant, robot, vx, seeds=(0, 1), **kw):
@@ -25,13 +34,33 @@ def _evals(variant, robot, vx, seeds=(0, 1), **kw):
 
 
 def _calib(variant, robot, ev, seeds=(0, 1), command_vx=2.0):
-    return [{"variant": variant, "robot": robot, "ev": ev, "seed": k, "command_vx": command_vx,
-             "artifact": f"c-{variant}-{k}"} for k in seeds]
+    return [
+        {
+            "variant": variant,
+            "robot": robot,
+            "ev": ev,
+            "seed": k,
+            "command_vx": command_vx,
+            "artifact": f"c-{variant}-{k}",
+        }
+        for k in seeds
+    ]
 
 
 def _fixed(v, robot, flip, cos, seeds=(0, 1), actor="film"):
-    return [{"variant": v, "robot": robot, "flip": flip, "cos_grad": cos, "actor_variant": actor, "seed": k,
-             "command_vx": 2.0, "artifact": f"f-{v}-{k}"} for k in seeds]
+    return [
+        {
+            "variant": v,
+            "robot": robot,
+            "flip": flip,
+            "cos_grad": cos,
+            "actor_variant": actor,
+            "seed": k,
+            "command_vx": 2.0,
+            "artifact": f"f-{v}-{k}",
+        }
+        for k in seeds
+    ]
 
 
 def test_groups_follow_the_critic_conditioning():
@@ -47,14 +76,17 @@ def test_seed_stat_is_mean_and_population_std():
 
 
 def test_per_seed_keeps_the_last_row_of_a_seed_and_filters_the_command():
-    rows = [*_evals("film", "aliengo", 1.0), _eval("film", "aliengo", 1.5, seed=1),  # seed 1 again: replaces
-            _eval("film", "aliengo", float("nan"), seed=2), _eval("film", "go2", 9.0),
-            _eval("film", "aliengo", 7.0, command_vx=1.0)]
+    rows = [
+        *_evals("film", "aliengo", 1.0),
+        _eval("film", "aliengo", 1.5, seed=1),  # seed 1 again: replaces
+        _eval("film", "aliengo", float("nan"), seed=2),
+        _eval("film", "go2", 9.0),
+        _eval("film", "aliengo", 7.0, command_vx=1.0),
+    ]
     assert C.per_seed(C.at_command(rows, 2.0), "vx_mean", "aliengo") == {"film": [1.0, 1.5]}
     assert C.per_seed(C.at_command(rows, 1.0), "vx_mean", "aliengo") == {"film": [7.0]}
     # a row without command_vx was written at the paper's command
     assert C.row_command({}) == 2.0 and C.row_command({"command_vx": "1.0"}) == 1.0
-
 
 
 def test_judge_corrects_over_the_claims_comparisons():
@@ -79,8 +111,12 @@ def test_judge_corrects_over_the_claims_comparisons():
 def test_claim_a_t_contrast_of_ev():
     rows = []
     # aliengo: film 0.6, hyper 0.4 (group 0.5) vs ppo 0.2, concat 0.4 (group 0.3): +0.20, zero spread: p 0 -> for
-    rows += [*_calib("film", "aliengo", 0.6), *_calib("hyper", "aliengo", 0.4), *_calib("ppo", "aliengo", 0.2),
-             *_calib("concat", "aliengo", 0.4)]
+    rows += [
+        *_calib("film", "aliengo", 0.6),
+        *_calib("hyper", "aliengo", 0.4),
+        *_calib("ppo", "aliengo", 0.2),
+        *_calib("concat", "aliengo", 0.4),
+    ]
     # mini_cheetah: 0.1 vs 0.5: -0.40, against
     rows += [*_calib("film", "mini_cheetah", 0.1), *_calib("ppo", "mini_cheetah", 0.5)]
     # anymal_c: no additive critic (counted in m = 3, no test); genloco is in neither group
@@ -93,13 +129,24 @@ def test_claim_a_t_contrast_of_ev():
     assert c.reason.startswith("1 of 3 primary comparisons significant in the claimed direction (> 0), 1 against")
     assert "for: aliengo EV multiplicative - additive; against: mini_cheetah" in c.reason
     assert [r["outcome"] for r in c.comparisons] == ["for", "against", "not significant"]
-    assert c.artifacts == ["c-concat-0", "c-concat-1", "c-film-0", "c-film-1", "c-hyper-0", "c-hyper-1", "c-ppo-0",
-                           "c-ppo-1"]
+    assert c.artifacts == [
+        "c-concat-0",
+        "c-concat-1",
+        "c-film-0",
+        "c-film-1",
+        "c-hyper-0",
+        "c-hyper-1",
+        "c-ppo-0",
+        "c-ppo-1",
+    ]
 
 
 def test_claim_a_a_variant_with_one_seed_has_no_test():
-    rows = [*_calib("film", "aliengo", 0.6), *_calib("hyper", "aliengo", 0.4, seeds=(0,)),
-            *_calib("ppo", "aliengo", 0.2)]
+    rows = [
+        *_calib("film", "aliengo", 0.6),
+        *_calib("hyper", "aliengo", 0.4, seeds=(0,)),
+        *_calib("ppo", "aliengo", 0.2),
+    ]
     c = C.claim_a(rows)
     # (0.6 + 0.4) / 2 - 0.2 = +0.30, no test: hyper has one seed
     assert c.verdict == CANNOT
@@ -108,8 +155,11 @@ def test_claim_a_a_variant_with_one_seed_has_no_test():
 
 
 def test_a_store_of_one_seed_per_variant_cannot_tell_any_claim():
-    evals = [_eval(v, r, 1.0 + 0.1 * k, seed=0, d=0.1 * i) for k, v in enumerate(C.STOCK)
-             for i, r in enumerate(("go2", "go1", "a1", "aliengo", "mini_cheetah", "anymal_c", "b1"))]
+    evals = [
+        _eval(v, r, 1.0 + 0.1 * k, seed=0, d=0.1 * i)
+        for k, v in enumerate(C.STOCK)
+        for i, r in enumerate(("go2", "go1", "a1", "aliengo", "mini_cheetah", "anymal_c", "b1"))
+    ]
     calib = [r for v in C.STOCK for robot in C.OOD_ROBOTS for r in _calib(v, robot, 0.5, seeds=(0,))]
     fixed = [r for v in C.STOCK for robot in C.FIXED_ROBOTS for r in _fixed(v, robot, 0.2, 0.5, seeds=(0,))]
     claims = C.check_claims(evals, calib, fixed)
@@ -120,8 +170,12 @@ def test_a_store_of_one_seed_per_variant_cannot_tell_any_claim():
 def test_claim_b_film_minus_every_baseline():
     rows = []
     # aliengo: film 1.9 x 0.5 = 0.95 vs ppo 0.5, actor-only 0.6, concat 1.0 x 0.8 = 0.8: every effect > 0, exact
-    rows += [*_evals("film", "aliengo", 1.9, s=0.5), *_evals("ppo", "aliengo", 0.5),
-             *_evals("actor-only", "aliengo", 0.6), *_evals("concat", "aliengo", 1.0, s=0.8)]
+    rows += [
+        *_evals("film", "aliengo", 1.9, s=0.5),
+        *_evals("ppo", "aliengo", 0.5),
+        *_evals("actor-only", "aliengo", 0.6),
+        *_evals("concat", "aliengo", 1.0, s=0.8),
+    ]
     # mini_cheetah: film falls (2.0 x 0 = 0) vs ppo 1.2 -> against (the others missing)
     rows += [*_evals("film", "mini_cheetah", 2.0, s=0.0), *_evals("ppo", "mini_cheetah", 1.2)]
     # anymal_c: both fall: 0 - 0, a tie: p 1
@@ -129,11 +183,15 @@ def test_claim_b_film_minus_every_baseline():
     rows += [_eval("ppo", "aliengo", 9.0, mode="full")]  # another mode never counts
     c = C.claim_b(rows)
     assert c.verdict == MIXED  # 3 for, 1 against, 5 not significant
-    assert ("aliengo: film - ppo +0.45 [+0.45, +0.45] (n 2 vs 2, p 0, Holm 0); film - actor-only +0.35 [+0.35, "
-            "+0.35] (n 2 vs 2, p 0, Holm 0); film - concat +0.15 [+0.15, +0.15]") in c.ours
+    assert (
+        "aliengo: film - ppo +0.45 [+0.45, +0.45] (n 2 vs 2, p 0, Holm 0); film - actor-only +0.35 [+0.35, "
+        "+0.35] (n 2 vs 2, p 0, Holm 0); film - concat +0.15 [+0.15, +0.15]"
+    ) in c.ours
     assert "(v_x x S, seed mean: film 0.95 (v_x 1.90, S 0.50; n=2), ppo 0.50 (v_x 0.50, S 1.00; n=2)" in c.ours
-    assert ("mini_cheetah: film - ppo -1.20 [-1.20, -1.20] (n 2 vs 2, p 0, Holm 0); film - actor-only (no test: "
-            "actor-only not evaluated)") in c.ours
+    assert (
+        "mini_cheetah: film - ppo -1.20 [-1.20, -1.20] (n 2 vs 2, p 0, Holm 0); film - actor-only (no test: "
+        "actor-only not evaluated)"
+    ) in c.ours
     assert "anymal_c: film - ppo +0.00 [+0.00, +0.00] (n 2 vs 2, p 1, Holm 1)" in c.ours
     assert c.reason.startswith("3 of 9 primary comparisons significant in the claimed direction")
     assert "film 1.98 m/s, S 1.00" in c.paper and "ppo 0.27 m/s, S 0.00" in c.paper
@@ -146,8 +204,11 @@ def test_claim_b_one_reversal_is_not_does_not_hold():
     rows = [r for r in rows if not (r["robot"] == "aliengo" and r["variant"] == "concat")]
     rows += _evals("concat", "aliengo", 1.5)
     assert C.claim_b(rows).verdict == REVERSED
-    every = [r for robot in C.OOD_ROBOTS for r in (*_evals("film", robot, 0.5),
-                                                   *[x for b in C.BASELINES for x in _evals(b, robot, 1.0)])]
+    every = [
+        r
+        for robot in C.OOD_ROBOTS
+        for r in (*_evals("film", robot, 0.5), *[x for b in C.BASELINES for x in _evals(b, robot, 1.0)])
+    ]
     assert C.claim_b(every).verdict == NOT
 
 
@@ -177,24 +238,33 @@ def test_claims_are_judged_at_each_command_apart():
     assert got["b@2.0"].verdict == NOT and "film - ppo -1.00 [-1.00, -1.00]" in got["b@2.0"].ours
     assert got["b@1.0"].verdict == HOLDS and "film - ppo +0.20 [+0.20, +0.20]" in got["b@1.0"].ours
     assert "at 1.0 m/s" in got["b@1.0"].claim and "at 2.0 m/s" in got["b@2.0"].claim
-    assert got["a@1.0"].verdict == CANNOT and "aliengo: EV multiplicative - additive (no test: no critic diagnosed " \
-        "at 1.0 m/s)" in got["a@1.0"].ours
+    assert (
+        got["a@1.0"].verdict == CANNOT
+        and "aliengo: EV multiplicative - additive (no test: no critic diagnosed at 1.0 m/s)" in got["a@1.0"].ours
+    )
     # 1.0 m/s is judged only where an out-of-distribution robot was evaluated there (not a Go2 walking check)
     assert [c.label for c in C.check_claims([_eval("film", "go2", 1.0, command_vx=1.0)], [], [])] == [
-        f"{k}@2.0" for k in "abcde"]
+        f"{k}@2.0" for k in "abcde"
+    ]
     assert [c.command_vx for c in C.check_claims(rows, [], [], commands=[1.0])] == [1.0] * 5
 
 
 def test_claim_c_film_against_the_papers_three_baselines():
-    rows = [*_fixed("film", "aliengo", 0.2, 0.9), *_fixed("ppo", "aliengo", 0.3, 0.5),
-            *_fixed("film", "mini_cheetah", 0.2, 0.4), *_fixed("ppo", "mini_cheetah", 0.3, 0.5),  # Cos reversed
-            *_fixed("film", "anymal_c", 0.0, 1.0),  # not a robot of claim (c)
-            {"variant": "mc", "robot": "aliengo", "flip": 0.0, "cos_grad": 1.0, "artifact": "f"}]  # MC: reference
+    rows = [
+        *_fixed("film", "aliengo", 0.2, 0.9),
+        *_fixed("ppo", "aliengo", 0.3, 0.5),
+        *_fixed("film", "mini_cheetah", 0.2, 0.4),
+        *_fixed("ppo", "mini_cheetah", 0.3, 0.5),  # Cos reversed
+        *_fixed("film", "anymal_c", 0.0, 1.0),  # not a robot of claim (c)
+        {"variant": "mc", "robot": "aliengo", "flip": 0.0, "cos_grad": 1.0, "artifact": "f"},
+    ]  # MC: reference
     c = C.claim_c(rows)
     # 12 primary comparisons: 3 for (both aliengo, mini_cheetah's Flip), 1 against, 8 without a test
     assert c.verdict == MIXED and "against: mini_cheetah film - ppo Cos" in c.reason
-    assert ("aliengo: film - ppo Flip -0.100 [-0.100, -0.100] (n 2 vs 2, p 0, Holm 0); film - ppo Cos +0.400 "
-            "[+0.400, +0.400]") in c.ours
+    assert (
+        "aliengo: film - ppo Flip -0.100 [-0.100, -0.100] (n 2 vs 2, p 0, Holm 0); film - ppo Cos +0.400 "
+        "[+0.400, +0.400]"
+    ) in c.ours
     assert "(Flip/Cos: ppo 0.300/0.500 (n=2), film 0.200/0.900 (n=2))" in c.ours
     assert len(c.comparisons) == 12
     # a critic scored on another actor's rollouts (concat's own) is not compared: it would win on AlienGo here
@@ -207,9 +277,11 @@ def test_claim_c_film_against_the_papers_three_baselines():
 
 def test_claim_d_every_pair_against_the_tolerance():
     rows = []
-    for robot, vals in (("aliengo", (1.0, 1.1, 1.2, 1.25)),  # every pair within 0.25 < max(0.3, 0.23): similar
-                        ("mini_cheetah", (0.5, 1.0, 1.0, 1.05)),  # at most 0.55 < the paper's 0.58
-                        ("anymal_c", (0.1, 0.5, 0.5, 0.5))):  # film 0.40 from each > 0.3: 3 pairs beyond
+    for robot, vals in (
+        ("aliengo", (1.0, 1.1, 1.2, 1.25)),  # every pair within 0.25 < max(0.3, 0.23): similar
+        ("mini_cheetah", (0.5, 1.0, 1.0, 1.05)),  # at most 0.55 < the paper's 0.58
+        ("anymal_c", (0.1, 0.5, 0.5, 0.5)),
+    ):  # film 0.40 from each > 0.3: 3 pairs beyond
         for v, x in zip(C.MULTIPLICATIVE, vals, strict=True):
             rows += _evals(v, robot, x)
     c = C.claim_d(rows)
@@ -220,7 +292,8 @@ def test_claim_d_every_pair_against_the_tolerance():
     assert C.paper_spread("aliengo") == pytest.approx(0.23)
     # the tolerance scales with the command: at 1.0 m/s half of 2.0 m/s's
     assert C.tolerance("aliengo", 1.0) == pytest.approx(0.15) and C.tolerance("mini_cheetah", 1.0) == pytest.approx(
-        0.29)
+        0.29
+    )
     similar = [r for robot in C.OOD_ROBOTS for v in C.MULTIPLICATIVE for r in _evals(v, robot, 1.0)]
     assert C.claim_d(similar).verdict == HOLDS
 
@@ -277,8 +350,12 @@ def test_claim_e_rho_per_variant_with_holm_over_the_variants():
 def test_claim_e_five_robots_cannot_pass_holm_over_three_variants():
     # 5 robots: p = 2/120 = 0.0167 each; Holm over film, ppo, hyper: 3 x 0.0167 = 0.05, not below 0.05
     robots = ("go2", "go1", "a1", "aliengo", "b1")
-    rows = [r for k, robot in enumerate(robots) for v in ("film", "ppo", "hyper")
-            for r in _evals(v, robot, 2.0 - k * 0.3, d=0.1 * k)]
+    rows = [
+        r
+        for k, robot in enumerate(robots)
+        for v in ("film", "ppo", "hyper")
+        for r in _evals(v, robot, 2.0 - k * 0.3, d=0.1 * k)
+    ]
     c = C.claim_e(rows)
     assert c.verdict == CANNOT and "(p 0.017, Holm 0.05)" in c.ours
 

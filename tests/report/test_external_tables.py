@@ -47,10 +47,42 @@ def store(tmp_path_factory) -> Store:
         run = new_run(st, preset_cfg("smoke", variant), f"{variant}-smoke-s0")
         run.train()
         run.env.close()
-        _cli("eval", f"runs/{variant}-smoke-s0", "--robots", "go2", "--command-vx", "2.0,2.5", "--mode", "descriptor",
-             "--envs", "2", "--steps", "10", "--store", str(root), "-q", "-f", "json")
-    _cli("diagnose", *(f"runs/{v}-smoke-s0" for v in VARIANTS), "--robots", "go2", "--envs", "2", "--steps", "80",
-         "--trunc-eps", "0.5", "--store", str(root), "-q", "-f", "json")
+        _cli(
+            "eval",
+            f"runs/{variant}-smoke-s0",
+            "--robots",
+            "go2",
+            "--command-vx",
+            "2.0,2.5",
+            "--mode",
+            "descriptor",
+            "--envs",
+            "2",
+            "--steps",
+            "10",
+            "--store",
+            str(root),
+            "-q",
+            "-f",
+            "json",
+        )
+    _cli(
+        "diagnose",
+        *(f"runs/{v}-smoke-s0" for v in VARIANTS),
+        "--robots",
+        "go2",
+        "--envs",
+        "2",
+        "--steps",
+        "80",
+        "--trunc-eps",
+        "0.5",
+        "--store",
+        str(root),
+        "-q",
+        "-f",
+        "json",
+    )
     torch.set_num_threads(threads)
     return st
 
@@ -61,9 +93,21 @@ def data(store) -> StoreData:
 
 
 def _run(variant: str) -> RunInfo:
-    return RunInfo(spec=f"runs/{variant}-cpu-s0", name=f"{variant}-cpu-s0", checkpoint=variant * 8, variant=variant,
-                   seed=0, preset="cpu", iteration=1, max_iterations=1, env_steps=1, wall_time_s=1.0, device="cpu",
-                   finished=True, created="2026-01-01T00:00:00Z")
+    return RunInfo(
+        spec=f"runs/{variant}-cpu-s0",
+        name=f"{variant}-cpu-s0",
+        checkpoint=variant * 8,
+        variant=variant,
+        seed=0,
+        preset="cpu",
+        iteration=1,
+        max_iterations=1,
+        env_steps=1,
+        wall_time_s=1.0,
+        device="cpu",
+        finished=True,
+        created="2026-01-01T00:00:00Z",
+    )
 
 
 # ---------------------------------------------------------------------------- the paper's group (no store)
@@ -74,7 +118,10 @@ def test_the_paper_group_is_the_papers_two_tables_as_printed():
     by = {(r["command_vx"], r["variant"], r["robot"]): r for r in rows}
     # cells read off the paper's Table "External baselines vs. MorFiC" and its 2.5 m/s twin
     assert (by[2.0, "urma", "go2"]["vx"], by[2.0, "urma", "go2"]["vx_std"], by[2.0, "urma", "go2"]["survival"]) == (
-        1.84, 0.26, 1.0)
+        1.84,
+        0.26,
+        1.0,
+    )
     assert by[2.0, "bot", "aliengo"]["label"] == "BodyTransformer"  # the paper's BodyTransformer is our bot
     assert (by[2.0, "bot", "aliengo"]["vx"], by[2.0, "bot", "aliengo"]["survival"]) == (0.30, 0.234)
     assert by[2.0, "urma", "aliengo"]["vx"] is None and by[2.0, "urma", "aliengo"]["cell"] == "- / -"  # "-/-"
@@ -89,9 +136,11 @@ def test_the_paper_group_is_the_papers_two_tables_as_printed():
         table = paper.CROSS_EMBODIMENT_BASELINES if r["command_vx"] == 2.0 else paper.CROSS_EMBODIMENT_BASELINES_25
         method = C.paper_method(r["variant"])
         speed = table.parts[0]
-        assert (r["vx"], r["vx_std"], r["survival"]) == (table.value(r["robot"], method, speed),
-                                                         table.value(r["robot"], method, f"{speed}_std"),
-                                                         table.value(r["robot"], method, "survival"))
+        assert (r["vx"], r["vx_std"], r["survival"]) == (
+            table.value(r["robot"], method, speed),
+            table.value(r["robot"], method, f"{speed}_std"),
+            table.value(r["robot"], method, "survival"),
+        )
 
 
 def test_without_a_run_of_ours_the_table_says_not_trained_yet_in_one_line():
@@ -101,8 +150,15 @@ def test_without_a_run_of_ours_the_table_says_not_trained_yet_in_one_line():
     assert rows == C.paper_external_rows()
     table = T.external_table(rows, 2.0)
     labels = [r.label for r in table.rows]
-    assert labels == [C.PAPER_GROUP, "URMA (paper)", "BodyTransformer (paper)", "GenLoco (paper)",
-                      "Embodiment Scaling (paper)", "MorFiC-F (paper)", "Ours: not trained yet"]
+    assert labels == [
+        C.PAPER_GROUP,
+        "URMA (paper)",
+        "BodyTransformer (paper)",
+        "GenLoco (paper)",
+        "Embodiment Scaling (paper)",
+        "MorFiC-F (paper)",
+        "Ours: not trained yet",
+    ]
     assert C.external_note(False) in table.notes and C.PAPER_ONLY["embodiment-scaling"] in table.notes
     assert C.external_note(True) == ""
     # the report's section: the paper's group at 2.0 and 2.5 m/s, the line, and the compute of the paper's methods
@@ -147,11 +203,20 @@ def test_our_group_is_the_mean_over_seeds_of_each_evaluation(data):
         (ev,) = [e for e in data.evals if e["variant"] == row["variant"] and e["command_vx"] == row["command_vx"]]
         # one seed: the mean over seeds is the run's own v_x, σ its own σ over env-steps, S its own
         assert (row["vx"], row["vx_std"], row["survival"], row["n_seeds"]) == (
-            pytest.approx(ev["vx_mean"]), pytest.approx(ev["vx_std"]), pytest.approx(ev["survival"]), 1)
+            pytest.approx(ev["vx_mean"]),
+            pytest.approx(ev["vx_std"]),
+            pytest.approx(ev["survival"]),
+            1,
+        )
     table = T.external_table(C.external_rows(data), 2.5)
     labels = [r.label for r in table.rows]
-    assert labels[6:] == [C.OURS_GROUP, "URMA (smoke, 1 seed)", "BodyTransformer (smoke, 1 seed)",
-                          "GenLoco (smoke, 1 seed)", "MorFiC-F (smoke, 1 seed)"]
+    assert labels[6:] == [
+        C.OURS_GROUP,
+        "URMA (smoke, 1 seed)",
+        "BodyTransformer (smoke, 1 seed)",
+        "GenLoco (smoke, 1 seed)",
+        "MorFiC-F (smoke, 1 seed)",
+    ]
     bot = table.rows[labels.index("BodyTransformer (smoke, 1 seed)")]
     (ev,) = [e for e in data.evals if e["variant"] == "bot" and e["command_vx"] == 2.5]
     assert bot.cells[0][0].value == pytest.approx(ev["vx_mean"]) and bot.cells[1][0].value is None  # go2; no go1
@@ -172,8 +237,9 @@ def test_the_compute_table_counts_each_models_parameters(store, data):
     table = T.external_compute_table(list(rows.values()))
     bot = next(r for r in table.rows if r.label == "BodyTransformer (smoke, 1 seed)")
     assert bot.cells[0][0].text == f"{rows['bot']['actor_params']:,}" and bot.cells[4][0].text == "cpu"
-    assert any(r.label == "Embod. Scaling, full Gendog pool (paper)" and r.cells[3][0].text == "1507 GPU-h"
-               for r in table.rows)
+    assert any(
+        r.label == "Embod. Scaling, full Gendog pool (paper)" and r.cells[3][0].text == "1507 GPU-h" for r in table.rows
+    )
     assert C.paper_hours("genloco") == "53.3 (200M); 213.5 (800M)" and C.paper_hours("film") == "2.2-3.0"
 
 
@@ -206,4 +272,8 @@ def test_reproduce_trains_the_external_baselines_by_default():
     assert reproduce_cfg("cpu").variants == REPRODUCE_VARIANTS
     assert C.PAPER_VARIANTS == ("ppo", "actor-only", "concat", "film", "film-scaled", "hyper", "adaln")
     assert C.EXTERNAL_VARIANTS == ("bot", "urma", "genloco") and C.EXTERNAL_TABLE_VARIANTS == (
-        "urma", "bot", "genloco", "film")
+        "urma",
+        "bot",
+        "genloco",
+        "film",
+    )

@@ -33,8 +33,8 @@ def tex() -> str:
 def _tabular_rows(tex: str, label: str) -> list[list[str]]:
     """The body rows (after \\midrule) of the tabular under \\label{label}, split into cells."""
     start = tex.index(rf"\label{{{label}}}")
-    body = tex[start:tex.index(r"\bottomrule", start)]
-    body = body[body.index(r"\midrule") + len(r"\midrule"):]
+    body = tex[start : tex.index(r"\bottomrule", start)]
+    body = body[body.index(r"\midrule") + len(r"\midrule") :]
     rows = [r for r in (" ".join(x.split()) for x in body.split(r"\\")) if r.strip()]
     return [[c.strip() for c in row.split("&")] for row in rows]
 
@@ -59,8 +59,11 @@ def test_spot_checks_against_the_published_numbers():
     assert paper.FILM_MORPH_RANGE_ABLATION.value("b1", "expanded-range", "vx_max_std") == 0.0215
     assert paper.CRITIC_METRICS_VARIANTS.value("a1", "actor-only", "nve") == 16.463
     ext_critic = paper.CRITIC_METRICS_EXTERNAL
-    assert [ext_critic.value("mini_cheetah", m, "nve") for m in ("embodiment-scaling", "urma", "bodytransformer")] \
-        == [None, None, None]
+    assert [ext_critic.value("mini_cheetah", m, "nve") for m in ("embodiment-scaling", "urma", "bodytransformer")] == [
+        None,
+        None,
+        None,
+    ]
     assert paper.CAUSAL_ADV_ALL.value("film", "b1", "cos_grad") == -0.182
     assert paper.CAUSAL_ADV.value("ppo", "aliengo", "cos_grad") == -0.113
     assert paper.CAUSAL_ADV.columns == ("aliengo", "mini_cheetah")
@@ -97,12 +100,11 @@ def test_morphology_support_matches_the_descriptor_facts():
     assert t.cell("base_mass", "go2")[0].mark == ""
 
 
-@pytest.mark.parametrize("label", ["zero_shot_transfer", "critic_conditioning_ablation",
-                                   "cross_embodiment_baselines"])
+@pytest.mark.parametrize("label", ["zero_shot_transfer", "critic_conditioning_ablation", "cross_embodiment_baselines"])
 def test_transfer_tables_round_trip_to_the_papers_latex(tex, label):
     """Rendered back to LaTeX, every cell (bold marks included) is the paper's own cell, character for character."""
     rendered = table_latex(paper_table(paper.TABLES[label]), float_env=False)
-    body = rendered[rendered.index(r"\midrule") + len(r"\midrule"):rendered.index(r"\bottomrule")]
+    body = rendered[rendered.index(r"\midrule") + len(r"\midrule") : rendered.index(r"\bottomrule")]
     ours = [[c.strip() for c in r.split("&")] for r in (" ".join(x.split()) for x in body.split(r"\\")) if r.strip()]
     theirs = _tabular_rows(tex, f"tab:{label}")
     assert len(ours) == len(theirs) == 7
@@ -116,7 +118,7 @@ def test_every_number_and_bold_mark_of_the_result_tables_is_in_the_tex(tex):
         if key == "causal_adv":
             continue
         start = tex.index(rf"\label{{tab:{key}}}")
-        chunk = tex[start:tex.index(r"\bottomrule", start)]
+        chunk = tex[start : tex.index(r"\bottomrule", start)]
         for cell in table.cells.values():
             for part in cell:
                 if part.value is None:
@@ -124,8 +126,9 @@ def test_every_number_and_bold_mark_of_the_result_tables_is_in_the_tex(tex):
                 text = f"{part.value:.{part.decimals}f}"
                 assert text in chunk, (key, text)
                 if part.bold:
-                    assert re.search(r"\\(mathbf|textbf|hi|lo)\{" + re.escape(text), chunk) or \
-                        re.search(r"\\(mathbf|textbf)\{" + re.escape(text) + r"\{\\pm\}", chunk), (key, text)
+                    assert re.search(r"\\(mathbf|textbf|hi|lo)\{" + re.escape(text), chunk) or re.search(
+                        r"\\(mathbf|textbf)\{" + re.escape(text) + r"\{\\pm\}", chunk
+                    ), (key, text)
 
 
 # Two rows of the paper's Table "Zero-shot cross-morphology transfer", copied from the .tex, so the round trip is
@@ -138,7 +141,7 @@ _ZERO_SHOT_ROWS_AS_PRINTED = [
 
 def test_zero_shot_rows_round_trip_with_bold_marks_without_the_tex():
     rendered = table_latex(paper_table(paper.TABLES["zero_shot_transfer"]), float_env=False)
-    body = rendered[rendered.index(r"\midrule") + len(r"\midrule"):rendered.index(r"\bottomrule")]
+    body = rendered[rendered.index(r"\midrule") + len(r"\midrule") : rendered.index(r"\bottomrule")]
     ours = [[c.strip() for c in r.split("&")] for r in (" ".join(x.split()) for x in body.split(r"\\")) if r.strip()]
     for mine, printed in zip(ours[:2], _ZERO_SHOT_ROWS_AS_PRINTED, strict=True):
         assert [re.sub(r"\s+", "", c) for c in mine[1:]] == [re.sub(r"\s+", "", c) for c in printed.split("&")]

@@ -17,7 +17,8 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 def test_protocol_text_names_a_reduced_budget():
     assert protocol_text([{"num_envs": 64, "steps": 500}]) == "the paper protocol: 64 envs x 500 steps"
     assert protocol_text([{"num_envs": 16, "steps": 250}, {"num_envs": 64, "steps": 500}]) == (
-        "a reduced protocol: 16 envs x 250 steps, 64 envs x 500 steps; the paper's is 64 x 500")
+        "a reduced protocol: 16 envs x 250 steps, 64 envs x 500 steps; the paper's is 64 x 500"
+    )
     assert protocol_text([{}]) == "envs and steps not recorded"
 
 

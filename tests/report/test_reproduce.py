@@ -39,8 +39,20 @@ def reproduced(tmp_path_factory):
     root = tmp_path_factory.mktemp("reproduce") / "store"
     out = io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.suppress(SystemExit):
-        main(["reproduce", "--preset", "smoke", "--variants", VARIANTS, "--store", str(root), "--format", "json",
-              "--quiet"])
+        main(
+            [
+                "reproduce",
+                "--preset",
+                "smoke",
+                "--variants",
+                VARIANTS,
+                "--store",
+                str(root),
+                "--format",
+                "json",
+                "--quiet",
+            ]
+        )
     return root, json.loads(out.getvalue())
 
 
@@ -61,15 +73,32 @@ def test_reproduce_writes_every_stage_and_the_report(reproduced):
     store = Store(root)
     # train, eval, diagnose x 2 variants, fixed rollout x 2 robots, the critic study, compare, report
     assert summary["work_done"] == summary["steps"] == 2 + 2 + 2 + 2 + 1 + 1 + 1
-    for ref in ("runs/film-smoke-s0", "runs/ppo-smoke-s0", "evals/film-smoke-s0", "evals/ppo-smoke-s0",
-                "diagnoses/calibration", "diagnoses/fixed-rollout/aliengo", "diagnoses/fixed-rollout/mini_cheetah",
-                "diagnoses/critic-study",
-                "tables/compare-baselines", "tables/morphology-support", "reports/smoke"):
+    for ref in (
+        "runs/film-smoke-s0",
+        "runs/ppo-smoke-s0",
+        "evals/film-smoke-s0",
+        "evals/ppo-smoke-s0",
+        "diagnoses/calibration",
+        "diagnoses/fixed-rollout/aliengo",
+        "diagnoses/fixed-rollout/mini_cheetah",
+        "diagnoses/critic-study",
+        "tables/compare-baselines",
+        "tables/morphology-support",
+        "reports/smoke",
+    ):
         assert store.has_ref(ref), ref
     report = store.read_manifest("reports/smoke")
     assert report.kind == "report"
-    assert {"report.md", "report.tex", "report.json", "provenance.csv", "figures/ev.png", "figures/distance.png",
-            "figures/compute.png", "figures/curves.png"} <= set(report.files)
+    assert {
+        "report.md",
+        "report.tex",
+        "report.json",
+        "provenance.csv",
+        "figures/ev.png",
+        "figures/distance.png",
+        "figures/compute.png",
+        "figures/curves.png",
+    } <= set(report.files)
     # every input of the report is in its provenance section, by full id
     md = store.read_file("reports/smoke", "report.md").decode()
     for oid in report.inputs.values():
@@ -109,9 +138,20 @@ def test_reproduce_continues_after_ctrl_c(tmp_path):
     from morfic_cli.pipeline import Pipeline, ReproduceCfg
 
     store = Store(tmp_path / "store")
-    cfg = ReproduceCfg(preset="smoke", variants=("film",), robots=("go2",), command_vx=(2.0,), modes=("descriptor",),
-                       eval_envs=2, eval_steps=5, diagnose_envs=2, diagnose_steps=80, trunc_eps=0.5,
-                       fixed_rollout_robots=("go2",), torch_threads=1)
+    cfg = ReproduceCfg(
+        preset="smoke",
+        variants=("film",),
+        robots=("go2",),
+        command_vx=(2.0,),
+        modes=("descriptor",),
+        eval_envs=2,
+        eval_steps=5,
+        diagnose_envs=2,
+        diagnose_steps=80,
+        trunc_eps=0.5,
+        fixed_rollout_robots=("go2",),
+        torch_threads=1,
+    )
 
     class CtrlC:
         pipeline = None
@@ -162,19 +202,28 @@ def test_compare_baselines_with_paper_csv_has_the_papers_aliengo_film_value(run_
     assert code == 0, err
     rows = list(csv.DictReader(io.StringIO(out)))
     # with --with-paper and no external baseline trained: the external table holds the paper's group only
-    assert {r["table"] for r in rows} == {"transfer", "external", "calibration", "fixed_rollout", "compute",
-                                          "verdicts"}
+    assert {r["table"] for r in rows} == {"transfer", "external", "calibration", "fixed_rollout", "compute", "verdicts"}
     assert {r["group"] for r in rows if r["table"] == "external"} == {"paper"}
-    cell = next(r for r in rows if r["table"] == "transfer" and r["variant"] == "film" and r["robot"] == "aliengo"
-                and r["mode"] == "descriptor" and float(r["command_vx"]) == 2.0)
+    cell = next(
+        r
+        for r in rows
+        if r["table"] == "transfer"
+        and r["variant"] == "film"
+        and r["robot"] == "aliengo"
+        and r["mode"] == "descriptor"
+        and float(r["command_vx"]) == 2.0
+    )
     assert float(cell["paper_vx"]) == 1.98 and cell["paper_table"] == "tab:zero_shot_transfer"
     assert "1.98" in out
     assert float(cell["n_seeds"]) == 1 and cell["vx"] != ""
     # full-mode rows get no paper numbers; a number the paper does not print stays empty, never 0
     full = next(r for r in rows if r["table"] == "transfer" and r["mode"] == "full")
     assert full["paper_vx"] == ""
-    fast = next(r for r in rows if r["table"] == "transfer" and r["variant"] == "ppo" and r["command_vx"] == "2.5"
-                and r["mode"] == "descriptor")
+    fast = next(
+        r
+        for r in rows
+        if r["table"] == "transfer" and r["variant"] == "ppo" and r["command_vx"] == "2.5" and r["mode"] == "descriptor"
+    )
     assert fast["paper_vx"] == "" and fast["paper_survival"] == "" and fast["paper_quantity"] == ""
     mc = [r for r in rows if r["table"] == "fixed_rollout" and r["variant"] == "mc"]
     assert {r["robot"] for r in mc} == {"aliengo", "mini_cheetah"}
@@ -224,13 +273,16 @@ def test_report_markdown_default_with_paper_tables(run_cli, store, tmp_path):
     md = (tmp_path / "md" / "report.md").read_text()
     assert "## Zero-shot transfer" in md and "## Provenance" in md
     assert "**Zero-shot cross-morphology transfer (paper).**" in md
-    assert "| AlienGo | 0.27 ± 0.07 / 0.000 | 0.64 ± 0.26 / **1.000** | 0.40 ± 0.18 / 0.156 | " \
-           "**1.98 ± 0.51** / **1.000** |" in md
+    assert (
+        "| AlienGo | 0.27 ± 0.07 / 0.000 | 0.64 ± 0.26 / **1.000** | 0.40 ± 0.18 / 0.156 | "
+        "**1.98 ± 0.51** / **1.000** |" in md
+    )
     # the external baselines' table: the paper's rows (URMA's "-/-" on AlienGo stays missing), ours not trained yet
-    assert "| URMA (paper) | 1.84 ± 0.26 / **1.000** | 1.93 ± 0.28 / **1.000** | 1.79 ± 0.25 / **1.000** | - / - |" \
-        in md
+    assert (
+        "| URMA (paper) | 1.84 ± 0.26 / **1.000** | 1.93 ± 0.28 / **1.000** | 1.79 ± 0.25 / **1.000** | - / - |" in md
+    )
     assert "| *Ours: not trained yet* |" in md
-    ours = md[md.index("**Zero-shot cross-morphology transfer.**"):md.index("(paper).**")]
+    ours = md[md.index("**Zero-shot cross-morphology transfer.**") : md.index("(paper).**")]
     assert "| Target | PPO | MorFiC-F |" in ours and "**" in ours.split("|---|")[1]
 
 
@@ -249,8 +301,9 @@ def _check_latex_structure(tex: str) -> None:
     assert sorted(begins) == sorted(ends)
     stripped = re.sub(r"\\[{}]", "", tex)
     assert stripped.count("{") == stripped.count("}")
-    assert "_" not in re.sub(r"\$[^$]*\$|\\_|\\label\{[^}]*\}|\\includegraphics[^}]*\}|\\begin\{longtable\}\{[^}]*\}",
-                             "", tex)  # every underscore outside math is escaped
+    assert "_" not in re.sub(
+        r"\$[^$]*\$|\\_|\\label\{[^}]*\}|\\includegraphics[^}]*\}|\\begin\{longtable\}\{[^}]*\}", "", tex
+    )  # every underscore outside math is escaped
     for line in tex.splitlines():
         if line.count("&") and line.rstrip().endswith("\\\\"):
             assert "$" not in line or line.count("$") % 2 == 0, line
@@ -261,8 +314,9 @@ def test_smoke_report_tex_compiles_with_pdflatex(run_cli, store, tmp_path):
 
     if pdflatex() is None:
         pytest.skip("pdflatex is not installed (apt-get install texlive-latex-base texlive-latex-recommended)")
-    code, out, err = run_cli("report", "--latex", "--figures", "--with-paper", "--out", str(tmp_path / "tex"),
-                             "--format", "json")
+    code, out, err = run_cli(
+        "report", "--latex", "--figures", "--with-paper", "--out", str(tmp_path / "tex"), "--format", "json"
+    )
     assert code == 0, err
     assert (tmp_path / "tex" / "report.pdf").read_bytes().startswith(b"%PDF")
     tex = (tmp_path / "tex" / "report.tex").read_text()
@@ -297,8 +351,16 @@ def bundles(tmp_path_factory) -> Path:
 
 def _tiny(cfg):
     """The shipped pipeline at test size (2 robots, 2 envs, short rollouts)."""
-    return dataclasses.replace(cfg, robots=("go2", "aliengo"), eval_envs=2, eval_steps=20, diagnose_envs=2,
-                               diagnose_steps=80, trunc_eps=0.5, fixed_rollout_robots=("aliengo",))
+    return dataclasses.replace(
+        cfg,
+        robots=("go2", "aliengo"),
+        eval_envs=2,
+        eval_steps=20,
+        diagnose_envs=2,
+        diagnose_steps=80,
+        trunc_eps=0.5,
+        fixed_rollout_robots=("aliengo",),
+    )
 
 
 def test_shipped_cfg_is_the_cpu_runs_with_the_quick_protocol(bundles):
@@ -308,20 +370,28 @@ def test_shipped_cfg_is_the_cpu_runs_with_the_quick_protocol(bundles):
     assert (cfg.modes, cfg.command_vx, cfg.eval_envs, cfg.eval_steps) == (("descriptor",), (2.0,), 16, 500)
     assert SHIPPED_PROTOCOL["diagnose_steps"] == cfg.diagnose_steps == 800
     full = reproduce_cfg("shipped", bundles=bundles, full_protocol=True)
-    assert (full.modes, full.command_vx, full.eval_envs, full.diagnose_envs) == (("descriptor", "full"), (2.0, 2.5),
-                                                                               64, 64)
+    assert (full.modes, full.command_vx, full.eval_envs, full.diagnose_envs) == (
+        ("descriptor", "full"),
+        (2.0, 2.5),
+        64,
+        64,
+    )
 
 
 def test_shipped_imports_evaluates_reports_and_a_rerun_does_nothing(bundles, tmp_path):
     store = Store(tmp_path / "store")
     cfg = _tiny(reproduce_cfg("shipped", bundles=bundles))
     pipe = Pipeline(store, cfg, out=tmp_path / "out")
-    assert [kind for kind, _, _ in pipe.plan()] == ["import", "eval", "diagnose", "fixed-rollout", "compare",
-                                                    "report"]
+    assert [kind for kind, _, _ in pipe.plan()] == ["import", "eval", "diagnose", "fixed-rollout", "compare", "report"]
     result = pipe.run()
     assert [(s.kind, s.status) for s in result.steps] == [
-        ("import", "done"), ("eval", "done"), ("diagnose", "done"), ("fixed-rollout", "done"), ("compare", "done"),
-        ("report", "done")]
+        ("import", "done"),
+        ("eval", "done"),
+        ("diagnose", "done"),
+        ("fixed-rollout", "done"),
+        ("compare", "done"),
+        ("report", "done"),
+    ]
     # the imported run is the bundle's, with the bundle's ids
     shipped = Store(bundles / "store-film-cpu-s0-film")
     assert store.resolve("runs/film-cpu-s0") == shipped.resolve("runs/film-cpu-s0")
@@ -344,7 +414,7 @@ def test_shipped_imports_evaluates_reports_and_a_rerun_does_nothing(bundles, tmp
     md = (tmp_path / "out" / "report.md").read_text()
     assert "shipped preset" in md and "2 envs x 20 steps" in md  # the report names its reduced protocol
     # the claims open the report: film alone can be compared with nothing, so (a)-(d) cannot tell
-    claims = md[md.index("## The paper's claims"):md.index("## Zero-shot transfer")]
+    claims = md[md.index("## The paper's claims") : md.index("## Zero-shot transfer")]
     assert [claims.count(f"**({k})") for k in "abcde"] == [1] * 5
     assert claims.count("Verdict: **cannot tell**") >= 4
     tex = (tmp_path / "out" / "report.tex").read_text()
@@ -367,18 +437,20 @@ def test_a_bundle_that_is_not_the_named_variant_is_refused(tmp_path):
         Pipeline(store, cfg).run()
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--variants", "ppo"], "no shipped bundle .*ppo-cpu-s0.tar; the shipped variants are film"),
-    (["--seeds", "2"], "one seed per variant"),
-    (["--set", "max_iterations=1"], "trains nothing"),
-    (["--executor", "ray"], "without --executor ray"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--variants", "ppo"], "no shipped bundle .*ppo-cpu-s0.tar; the shipped variants are film"),
+        (["--seeds", "2"], "one seed per variant"),
+        (["--set", "max_iterations=1"], "trains nothing"),
+        (["--executor", "ray"], "without --executor ray"),
+    ],
+)
 def test_shipped_bad_input(run_cli, bundles, tmp_path, args, message):
     import re
 
     root = tmp_path / "store"
-    code, _, err = run_cli("reproduce", "--preset", "shipped", "--bundles", str(bundles), *args, "--store",
-                           str(root))
+    code, _, err = run_cli("reproduce", "--preset", "shipped", "--bundles", str(bundles), *args, "--store", str(root))
     assert code == 1 and err.startswith("Error: ") and re.search(message, err), err
     assert not (root / "refs").exists() or not any((root / "refs").rglob("*"))  # nothing written
 

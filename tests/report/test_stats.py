@@ -133,8 +133,11 @@ def test_text_shows_interval_p_and_holm():
 def test_mean_interval_by_hand():
     # 1, 2, 3: mean 2, s 1, half-width t(0.975, 2) / sqrt(3) = 4.303 / 1.732 = 2.484
     mean, lo, hi = stats.mean_interval([1, 2, 3])
-    assert mean == 2 and hi - mean == pytest.approx(sst.t.ppf(0.975, 2) / math.sqrt(3)) and lo == pytest.approx(
-        2 - 2.484, abs=1e-3)
+    assert (
+        mean == 2
+        and hi - mean == pytest.approx(sst.t.ppf(0.975, 2) / math.sqrt(3))
+        and lo == pytest.approx(2 - 2.484, abs=1e-3)
+    )
     assert math.isnan(stats.mean_interval([1.0])[1])
 
 
@@ -190,9 +193,21 @@ def test_the_simulated_rule_is_the_claims_rule():
         x = rng.normal(size=(1, 3, 4, 3))
         x[:, :, 0] += shift
         x[:, 1, 0] -= shift * (shift > 2)  # a mixed store: film better on two robots, not on mini_cheetah
-        rows = [{"variant": v, "robot": r, "vx_mean": float(x[0, i, j, k]), "survival": 1.0, "seed": k,
-                 "mode": "descriptor", "command_vx": 2.0, "artifact": "x"}
-                for i, r in enumerate(C.OOD_ROBOTS) for j, v in enumerate(("film", *C.BASELINES)) for k in range(3)]
+        rows = [
+            {
+                "variant": v,
+                "robot": r,
+                "vx_mean": float(x[0, i, j, k]),
+                "survival": 1.0,
+                "seed": k,
+                "mode": "descriptor",
+                "command_vx": 2.0,
+                "artifact": "x",
+            }
+            for i, r in enumerate(C.OOD_ROBOTS)
+            for j, v in enumerate(("film", *C.BASELINES))
+            for k in range(3)
+        ]
         assert C.claim_b(rows).verdict == simulate.claim_b(x)[0]
 
 

@@ -17,18 +17,49 @@ from morfic_cli.report.tables import fixed_rollout_table, paper_table, transfer_
 
 
 def _run(variant: str, seed: int, wall: float = 36.0, steps: int = 1000, iters: int = 10) -> RunInfo:
-    return RunInfo(spec=f"runs/{variant}-s{seed}", name=f"{variant}-s{seed}", checkpoint=f"{variant}{seed}" * 8,
-                   variant=variant, seed=seed, preset="cpu", iteration=iters, max_iterations=iters, env_steps=steps,
-                   wall_time_s=wall, device="cpu", finished=True, created="")
+    return RunInfo(
+        spec=f"runs/{variant}-s{seed}",
+        name=f"{variant}-s{seed}",
+        checkpoint=f"{variant}{seed}" * 8,
+        variant=variant,
+        seed=seed,
+        preset="cpu",
+        iteration=iters,
+        max_iterations=iters,
+        env_steps=steps,
+        wall_time_s=wall,
+        device="cpu",
+        finished=True,
+        created="",
+    )
 
 
-def _eval(run: RunInfo, robot: str, vx: float, std: float, s: float, n_alive: int = 100,
-          command_vx: float = 2.0) -> dict:
-    return {"run": run.name, "variant": run.variant, "seed": run.seed, "preset": run.preset,
-            "checkpoint": run.checkpoint, "robot": robot, "mode": "descriptor", "command_vx": command_vx, "d": 0.3,
-            "vx_mean": vx, "vx_std": std, "vx_env_std": 0.01, "vx_step_mean": vx, "n_alive": n_alive,
-            "vx_peak_1s_mean": vx + 0.1, "vx_peak_1s_std": std, "survival": s,
-            "tracking_ratio": vx / 2, "valid_fraction": s, "num_envs": 64, "steps": 500}
+def _eval(
+    run: RunInfo, robot: str, vx: float, std: float, s: float, n_alive: int = 100, command_vx: float = 2.0
+) -> dict:
+    return {
+        "run": run.name,
+        "variant": run.variant,
+        "seed": run.seed,
+        "preset": run.preset,
+        "checkpoint": run.checkpoint,
+        "robot": robot,
+        "mode": "descriptor",
+        "command_vx": command_vx,
+        "d": 0.3,
+        "vx_mean": vx,
+        "vx_std": std,
+        "vx_env_std": 0.01,
+        "vx_step_mean": vx,
+        "n_alive": n_alive,
+        "vx_peak_1s_mean": vx + 0.1,
+        "vx_peak_1s_std": std,
+        "survival": s,
+        "tracking_ratio": vx / 2,
+        "valid_fraction": s,
+        "num_envs": 64,
+        "steps": 500,
+    }
 
 
 def test_mean_and_std_over_seeds_by_hand():
@@ -50,8 +81,9 @@ def test_mean_and_std_over_seeds_by_hand():
     # μ = (300 + 200) / 400 = 1.25, σ² = (300 * 0.0625 + 100 * 0.5625) / 400 = 0.1875
     assert pooled_std([1.0, 2.0], [0.0, 0.0], [300, 100]) == pytest.approx(math.sqrt(0.1875))
     # an evaluation stored before σ was over steps (no vx_env_std) has another σ: the cell's σ stays empty
-    old = {k: v for k, v in _eval(a, "go1", 1.0, 0.3, 0.5).items() if k not in ("vx_env_std", "vx_step_mean",
-                                                                                   "n_alive")}
+    old = {
+        k: v for k, v in _eval(a, "go1", 1.0, 0.3, 0.5).items() if k not in ("vx_env_std", "vx_step_mean", "n_alive")
+    }
     (r_old,) = transfer_rows(StoreData(runs=[a], evals=[old]))
     assert r_old["vx_std"] is None and r_old["cell"] == "1.00 ± - / 0.500"
 
@@ -66,8 +98,9 @@ def test_paper_columns_and_compute_normalisation():
     (t,) = add_paper_columns(transfer_rows(StoreData(runs=[a], evals=[_eval(a, "b1", 0.2, 0.1, 1.0)])))
     assert t["paper_vx"] == 0.22 and t["paper_survival"] == 1.0 and t["paper_quantity"] == "v_x"
     # at 2.5 m/s the paper's v_x^max (its speed under the higher command) sits beside our v_x of that command
-    (f,) = add_paper_columns(transfer_rows(StoreData(runs=[a], evals=[_eval(a, "aliengo", 0.9, 0.5, 1.0,
-                                                                            command_vx=2.5)])))
+    (f,) = add_paper_columns(
+        transfer_rows(StoreData(runs=[a], evals=[_eval(a, "aliengo", 0.9, 0.5, 1.0, command_vx=2.5)]))
+    )
     assert f["paper_quantity"] == "v_x^max" and f["paper_table"] == "tab:cross_embodiment_baselines_25"
     assert f["paper_vx"] == 0.832 and f["paper_vx_std"] == 0.542 and f["paper_survival"] == 1.0
     assert f["vx"] == pytest.approx(0.9)
@@ -104,8 +137,10 @@ def test_transfer_table_bolds_best_speed_and_survival_per_robot_independently():
 
 
 def test_fixed_rollout_table_never_bolds_the_mc_reference():
-    rows = [{"preset": "cpu", "variant": v, "robot": "aliengo", "flip": f, "cos_grad": c, "actors": "film-s0"}
-            for v, f, c in (("mc", 0.0, 1.0), ("film", 0.25, 0.4), ("ppo", 0.3, -0.1))]
+    rows = [
+        {"preset": "cpu", "variant": v, "robot": "aliengo", "flip": f, "cos_grad": c, "actors": "film-s0"}
+        for v, f, c in (("mc", 0.0, 1.0), ("film", 0.25, 0.4), ("ppo", 0.3, -0.1))
+    ]
     table = fixed_rollout_table(rows)
     assert [r.label for r in table.rows] == ["MC", "PPO", "MorFiC-F"]
     assert table.groups == (("AlienGo", 2),)
@@ -119,23 +154,52 @@ def test_fixed_rollout_critics_on_different_actors_rollouts_are_never_averaged()
     film, ppo = _run("film", 0), _run("ppo", 0)
 
     def fixed(critic, actor, flip, cos):
-        return {"run": critic.name, "variant": critic.variant, "robot": "aliengo", "mode": "descriptor",
-                "actor": f"runs/{actor.name}", "actor_checkpoint": actor.checkpoint, "actor_variant": actor.variant,
-                "flip": flip, "cos_grad": cos, "asa": 0.5, "ev": 0.1}
+        return {
+            "run": critic.name,
+            "variant": critic.variant,
+            "robot": "aliengo",
+            "mode": "descriptor",
+            "actor": f"runs/{actor.name}",
+            "actor_checkpoint": actor.checkpoint,
+            "actor_variant": actor.variant,
+            "flip": flip,
+            "cos_grad": cos,
+            "asa": 0.5,
+            "ev": 0.1,
+        }
 
     # the film critic: Flip 0.2 on film's rollout, 0.6 on ppo's (averaged, it would read 0.4); ppo's critic 0.3, 0.5
-    data = StoreData(runs=[film, ppo], fixed=[fixed(film, film, 0.2, 0.4), fixed(film, ppo, 0.6, 0.1),
-                                             fixed(ppo, film, 0.3, 0.2), fixed(ppo, ppo, 0.5, 0.3)])
+    data = StoreData(
+        runs=[film, ppo],
+        fixed=[
+            fixed(film, film, 0.2, 0.4),
+            fixed(film, ppo, 0.6, 0.1),
+            fixed(ppo, film, 0.3, 0.2),
+            fixed(ppo, ppo, 0.5, 0.3),
+        ],
+    )
     rows = fixed_rollout_rows(data)
     assert [(r["actor_variant"], r["variant"], r["flip"]) for r in rows] == [
-        ("film", "ppo", 0.3), ("film", "film", 0.2), ("ppo", "ppo", 0.5), ("ppo", "film", 0.6)]  # film's actor first
+        ("film", "ppo", 0.3),
+        ("film", "film", 0.2),
+        ("ppo", "ppo", 0.5),
+        ("ppo", "film", 0.6),
+    ]  # film's actor first
     table = fixed_rollout_table(rows)
-    assert [r.label for r in table.rows] == ["PPO (MorFiC-F's rollout)", "MorFiC-F (MorFiC-F's rollout)",
-                                             "PPO (PPO's rollout)", "MorFiC-F (PPO's rollout)"]
+    assert [r.label for r in table.rows] == [
+        "PPO (MorFiC-F's rollout)",
+        "MorFiC-F (MorFiC-F's rollout)",
+        "PPO (PPO's rollout)",
+        "MorFiC-F (PPO's rollout)",
+    ]
     # bold within each actor's block: film's critic on film's rollout (0.2 < 0.3, 0.4 > 0.2); ppo's on ppo's (0.5 <
     # 0.6, 0.3 > 0.1)
-    assert [[c[0].bold for c in r.cells] for r in table.rows] == [[False, False], [True, True], [True, True],
-                                                                   [False, False]]
+    assert [[c[0].bold for c in r.cells] for r in table.rows] == [
+        [False, False],
+        [True, True],
+        [True, True],
+        [False, False],
+    ]
     one = fixed_rollout_table([r for r in rows if r["actor_variant"] == "film"])
     assert [r.label for r in one.rows] == ["PPO", "MorFiC-F"]  # one actor: the paper's labels
 
@@ -158,8 +222,7 @@ def test_latex_escaping_and_document():
     assert escape("mini_cheetah 50% & #1 ± σ") == r"mini\_cheetah 50\% \& \#1 $\pm$ $\sigma$"
     assert escape("run `morfic store ls`") == r"run \texttt{morfic store ls}"
     assert number_text(-0.0001, 2) == "0.00" and number_text(None, 2) == "-"
-    t = Table("k", "T", "c", "Target", ("A",), (Row("x_y", ((Part(1.0, None, 1, True),),)), Row("section")),
-              math=False)
+    t = Table("k", "T", "c", "Target", ("A",), (Row("x_y", ((Part(1.0, None, 1, True),),)), Row("section")), math=False)
     doc = document_latex("Title", [("S", table_latex(t))])
     assert r"\usepackage{booktabs}" in doc and r"x\_y & \textbf{1.0} \\" in doc
     assert r"\multicolumn{2}{l}{\textit{section}}" in doc
@@ -202,8 +265,11 @@ def test_the_report_adds_an_every_variant_table_when_runs_leave_the_main_tables_
     def keys(variants):
         runs = [_run(v, 0) for v in variants]
         data = StoreData(runs=runs, evals=[_eval(r, "go2", 1.0 + i / 10, 0.1, 1.0) for i, r in enumerate(runs)])
-        (sec,) = [s for s in _sections(data, {"transfer": transfer_rows(data)}, [], False)
-                  if s.heading == "Zero-shot transfer"]
+        (sec,) = [
+            s
+            for s in _sections(data, {"transfer": transfer_rows(data)}, [], False)
+            if s.heading == "Zero-shot transfer"
+        ]
         return {t.key: t for t in sec.tables}
 
     assert list(keys(["ppo", "film"])) == ["zero_shot_transfer"]  # the paper's main table holds them all
@@ -249,13 +315,30 @@ def test_a_runs_diagnoses_at_two_commands_are_never_pooled_as_seeds(tmp_path):
         return rows_to_csv(rows, list(dict.fromkeys(k for r in rows for k in r)))
 
     def diagnose(command_vx, ev, flip):  # one calibration and one fixed-rollout diagnosis at the command
-        base = {"robot": "aliengo", "mode": "descriptor", "command_vx": command_vx, "num_envs": 64, "steps": 500,
-                "actor": "runs/film-cpu-s0", "actor_variant": "film", "asa": 0.6, "ev": ev}
+        base = {
+            "robot": "aliengo",
+            "mode": "descriptor",
+            "command_vx": command_vx,
+            "num_envs": 64,
+            "steps": 500,
+            "actor": "runs/film-cpu-s0",
+            "actor_variant": "film",
+            "asa": 0.6,
+            "ev": ev,
+        }
         calib = {**base, "checkpoint": ckpt, "abs_nvb": 0.1, "nve": 0.5, "flip": flip, "cos_grad": 0.3, "d": 0.4}
         store.put_manifest("diagnosis", inputs={"checkpoint": ckpt}, files={"calibration.csv": csv([calib])})
-        fixed = [{**base, "critic": "mc", "variant": "mc", "checkpoint": None, "flip": 0.0, "cos_grad": 1.0},
-                 {**base, "critic": "runs/film-cpu-s0", "variant": "film", "checkpoint": ckpt, "flip": flip,
-                  "cos_grad": 0.4}]
+        fixed = [
+            {**base, "critic": "mc", "variant": "mc", "checkpoint": None, "flip": 0.0, "cos_grad": 1.0},
+            {
+                **base,
+                "critic": "runs/film-cpu-s0",
+                "variant": "film",
+                "checkpoint": ckpt,
+                "flip": flip,
+                "cos_grad": 0.4,
+            },
+        ]
         store.put_manifest("diagnosis", inputs={"actor": ckpt}, files={"fixed_rollout.csv": csv(fixed)})
 
     diagnose(2.0, -0.535, 0.31)
@@ -285,15 +368,22 @@ def test_a_runs_diagnoses_at_two_commands_are_never_pooled_as_seeds(tmp_path):
 
     sections = _sections(data, tables, [], True)
     crit, order = section(sections, "Critic diagnostics")
-    assert [k for k, src in order if src == "store"] == ["critic_ev", "critic_metrics_variants", "critic_ev_1_0",
-                                                         "critic_metrics_variants_1_0"]
+    assert [k for k, src in order if src == "store"] == [
+        "critic_ev",
+        "critic_metrics_variants",
+        "critic_ev_1_0",
+        "critic_metrics_variants_1_0",
+    ]
     assert order.index(("critic_ev_1_0", "store")) > max(i for i, (_, src) in enumerate(order) if src == "paper")
     assert crit["critic_ev"].title == "Explained variance of the critics"  # the paper's command: as before
     assert crit["critic_ev_1_0"].title == "Explained variance of the critics at 1.0 m/s"
     assert crit["critic_ev"].rows[0].cells[0][0].value == pytest.approx(-0.535)
     assert crit["critic_ev_1_0"].rows[0].cells[0][0].value == pytest.approx(0.023)
-    assert crit["critic_ev"].notes == crit["critic_ev_1_0"].notes == (
-        "Mean over 1 seed per cell; numbers from the artifacts listed under Provenance.",)
+    assert (
+        crit["critic_ev"].notes
+        == crit["critic_ev_1_0"].notes
+        == ("Mean over 1 seed per cell; numbers from the artifacts listed under Provenance.",)
+    )
     fx, order = section(sections, "Fixed-rollout diagnostic")
     assert [k for k, src in order] == ["causal_adv_all", "causal_adv_all", "causal_adv_all_1_0"]  # ours, paper's, ours
     assert fx["causal_adv_all"].title == "Fixed-rollout critic diagnostic"
@@ -302,6 +392,6 @@ def test_a_runs_diagnoses_at_two_commands_are_never_pooled_as_seeds(tmp_path):
     # a store with diagnoses at 2.0 m/s only renders as it always did: no table at another command
     only = StoreData(runs=data.runs, calibration=at_command(data.calibration, 2.0), fixed=at_command(data.fixed, 2.0))
     tables_2 = compare_tables(only)
-    assert [section(_sections(only, tables_2, [], False), h)[1] for h in ("Critic diagnostics",
-                                                                         "Fixed-rollout diagnostic")] == [
-        [("critic_ev", "store"), ("critic_metrics_variants", "store")], [("causal_adv_all", "store")]]
+    assert [
+        section(_sections(only, tables_2, [], False), h)[1] for h in ("Critic diagnostics", "Fixed-rollout diagnostic")
+    ] == [[("critic_ev", "store"), ("critic_metrics_variants", "store")], [("causal_adv_all", "store")]]

@@ -138,9 +138,20 @@ def test_urma_parameter_counts_by_hand():
 
     pools = (lin(18, 64) + 2 * 64 + lin(64, 64) + lin(3, 4) + 1) + (lin(6, 32) + 2 * 32 + lin(32, 32) + lin(2, 4) + 1)
     latent = 64 * 4 + 32 * 4 + 12
-    actor = (pools + lin(latent, 512) + 2 * 512 + lin(512, 256) + lin(256, 128)  # core
-             + lin(18, 128) + 2 * 128 + lin(128, 128)  # description latent
-             + lin(128 + 4 + 128, 128) + 2 * 128 + lin(128, 1) + 12)  # decoder, action stds
+    actor = (
+        pools
+        + lin(latent, 512)
+        + 2 * 512
+        + lin(512, 256)
+        + lin(256, 128)  # core
+        + lin(18, 128)
+        + 2 * 128
+        + lin(128, 128)  # description latent
+        + lin(128 + 4 + 128, 128)
+        + 2 * 128
+        + lin(128, 1)
+        + 12
+    )  # decoder, action stds
     critic = pools + lin(latent + 18, 512) + 2 * 512 + lin(512, 256) + lin(256, 128) + lin(128, 1)
     assert (actor, critic) == (428_395, 384_735)
     a, c = build_models(preset_cfg("smoke", "urma"))
@@ -168,8 +179,9 @@ def test_urma_pooling_weights_are_a_softmax_over_slots_with_the_learned_temperat
 def test_go2_description_by_hand():
     spec = load_robot("go2")
     model = build_model(spec, floor=True, sim_sensors=True)
-    joints, feet = body_description(model, mujoco.MjData(model), TemplateInfo.from_model(model), spec.default_qpos,
-                                    np.asarray(spec.velocity_limit))
+    joints, feet = body_description(
+        model, mujoco.MjData(model), TemplateInfo.from_model(model), spec.default_qpos, np.asarray(spec.velocity_limit)
+    )
     hip, thigh = joints[0], joints[1]  # FL hip, FL thigh
     np.testing.assert_allclose(hip[0:6], [*spec.hip_pos[0], 1.0, 0.0, 0.0], atol=1e-9)
     q = spec.default_qpos[0]  # the hip's default angle turns the thigh joint about x
@@ -177,9 +189,23 @@ def test_go2_description_by_hand():
     by_hand = spec.hip_pos[0] + [offset[0], offset[1] * math.cos(q), offset[1] * math.sin(q)]
     np.testing.assert_allclose(thigh[0:3], by_hand, atol=1e-9)
     np.testing.assert_allclose(thigh[3:6], [0.0, math.cos(q), math.sin(q)], atol=1e-9)
-    np.testing.assert_allclose(thigh[6:18], [1, spec.default_qpos[1], *spec.joint_range[0, 1], spec.torque_limit[1],
-                                             spec.velocity_limit[1], 0.0, spec.armature[1], spec.kp, spec.kd,
-                                             spec.descriptor[0], model.body_subtreemass[1]], rtol=1e-6)
+    np.testing.assert_allclose(
+        thigh[6:18],
+        [
+            1,
+            spec.default_qpos[1],
+            *spec.joint_range[0, 1],
+            spec.torque_limit[1],
+            spec.velocity_limit[1],
+            0.0,
+            spec.armature[1],
+            spec.kp,
+            spec.kd,
+            spec.descriptor[0],
+            model.body_subtreemass[1],
+        ],
+        rtol=1e-6,
+    )
     assert (spec.kp, spec.kd) == (20.0, 0.5)
     assert joints[2, 6] == 0 and joints[2, 16] == pytest.approx(spec.descriptor[1])  # calf: no child, calf mass
     np.testing.assert_allclose(feet[:, 3:5], [[spec.foot_radius, spec.descriptor[3]]] * 4, rtol=1e-6)
@@ -190,8 +216,10 @@ def test_env_describes_the_model_it_built():
     model (its gains, and its own thigh limit 4.189 rad where its descriptor says 3.142)."""
     cfg = dataclasses.replace(EnvCfg(num_envs=2), obs=dataclasses.replace(EnvCfg().obs, body_tokens=True))
     aliengo = load_robot("aliengo")
-    for mode, kp, upper in (("descriptor", 20.0, aliengo.descriptor[8]),
-                            ("full", aliengo.kp, aliengo.joint_range[0, 1, 1])):
+    for mode, kp, upper in (
+        ("descriptor", 20.0, aliengo.descriptor[8]),
+        ("full", aliengo.kp, aliengo.joint_range[0, 1, 1]),
+    ):
         env = LocomotionEnv(cfg, mode=mode, robot="aliengo")
         obs = env.get_observations()
         assert obs["joint_description"].shape == (2, 12, 18) and obs["foot_state"].shape == (2, 4, 2)
@@ -250,17 +278,26 @@ class _RandomEnv(VecEnv):
     def step(self, actions):
         self.step_count += 1
         n = self.num_envs
-        return (self.get_observations(), torch.randn(n), (torch.rand(n) < 0.2).long(),
-                {"time_outs": torch.zeros(n), "log": {}})
+        return (
+            self.get_observations(),
+            torch.randn(n),
+            (torch.rand(n) < 0.2).long(),
+            {"time_outs": torch.zeros(n), "log": {}},
+        )
 
 
 @pytest.mark.parametrize("variant", ["bot", "urma"])
 def test_morfic_ppo_trains_a_baseline_without_an_adaptation_module(variant):
     cfg = preset_cfg("smoke", variant)
     actor_cfg, critic_cfg, groups = STOCK[variant].model_cfgs()
-    runner_cfg = {"num_steps_per_env": 4, "save_interval": 100, "obs_groups": groups, "actor": actor_cfg,
-                  "critic": critic_cfg, "algorithm": {**algorithm_cfg(), "num_learning_epochs": 1,
-                                                      "num_mini_batches": 2, "use_mixed_precision": True}}
+    runner_cfg = {
+        "num_steps_per_env": 4,
+        "save_interval": 100,
+        "obs_groups": groups,
+        "actor": actor_cfg,
+        "critic": critic_cfg,
+        "algorithm": {**algorithm_cfg(), "num_learning_epochs": 1, "num_mini_batches": 2, "use_mixed_precision": True},
+    }
     torch.manual_seed(0)
     runner = OnPolicyRunner(_RandomEnv(cfg), runner_cfg, log_dir=None, device="cpu")
     assert isinstance(runner.alg, MorficPPO) and runner.alg.adaptation_optimizer is None
@@ -281,8 +318,21 @@ def test_morfic_ppo_trains_a_baseline_without_an_adaptation_module(variant):
 def test_smoke_train_then_full_mode_eval(run_cli, variant):
     code, out, err = run_cli("train", "--variant", variant, "--preset", "smoke", "--format", "json", "--quiet")
     assert code == 0, err
-    code, out, err = run_cli("eval", f"runs/{variant}-smoke-s0", "--robots", "aliengo", "--mode", "full", "--steps",
-                             "5", "--envs", "2", "--format", "json", "--quiet")
+    code, out, err = run_cli(
+        "eval",
+        f"runs/{variant}-smoke-s0",
+        "--robots",
+        "aliengo",
+        "--mode",
+        "full",
+        "--steps",
+        "5",
+        "--envs",
+        "2",
+        "--format",
+        "json",
+        "--quiet",
+    )
     assert code == 0, err
     (row,) = json.loads(out)
     assert row["robot"] == "aliengo" and row["mode"] == "full" and row["num_envs"] == 2
@@ -294,9 +344,24 @@ def test_a_urma_critic_is_scored_on_films_fixed_rollout(run_cli):
     for variant in ("film", "urma"):
         code, _, err = run_cli("train", "--variant", variant, "--preset", "smoke", "--quiet")
         assert code == 0, err
-    code, out, err = run_cli("diagnose", "--fixed-rollout", "go2", "--actor", "runs/film-smoke-s0", "--critics",
-                             "runs/urma-smoke-s0,runs/film-smoke-s0", "--steps", "30", "--envs", "2",
-                             "--trunc-eps", "0.9", "--format", "json", "--quiet")
+    code, out, err = run_cli(
+        "diagnose",
+        "--fixed-rollout",
+        "go2",
+        "--actor",
+        "runs/film-smoke-s0",
+        "--critics",
+        "runs/urma-smoke-s0,runs/film-smoke-s0",
+        "--steps",
+        "30",
+        "--envs",
+        "2",
+        "--trunc-eps",
+        "0.9",
+        "--format",
+        "json",
+        "--quiet",
+    )
     assert code == 0, err
     rows = {r["variant"]: r for r in json.loads(out)}
     assert set(rows) == {"mc", "urma", "film"}

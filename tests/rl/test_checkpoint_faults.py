@@ -41,22 +41,34 @@ REF = f"runs/{NAME}"
 # ------------------------------------------------------------------------------------------------ process helpers
 def _env(tmp_path: Path, **extra: str) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in ("MORFIC_DEBUG", "MORFIC_LOCK_TIMEOUT")}
-    env.update(MORFIC_STORE=str(tmp_path / "store"), MORFIC_LOG_DIR=str(tmp_path / "logs"), OMP_NUM_THREADS="1",
-               PYTHONUNBUFFERED="1", **extra)
+    env.update(
+        MORFIC_STORE=str(tmp_path / "store"),
+        MORFIC_LOG_DIR=str(tmp_path / "logs"),
+        OMP_NUM_THREADS="1",
+        PYTHONUNBUFFERED="1",
+        **extra,
+    )
     return env
 
 
 def _morfic(tmp_path: Path, *args: str, timeout: float = 300, **extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "morfic_cli", *args], env=_env(tmp_path, **extra),
-                          capture_output=True, text=True, timeout=timeout, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "morfic_cli", *args],
+        env=_env(tmp_path, **extra),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
 
 
 def _spawn(tmp_path: Path, tag: str, *args: str, **extra: str) -> subprocess.Popen:
     """``morfic ARGS`` in the background, stdout and stderr to files (read by :func:`_finish`)."""
     out = open(tmp_path / f"{tag}.out", "w")  # noqa: SIM115 -- closed by _finish
     err = open(tmp_path / f"{tag}.err", "w")  # noqa: SIM115
-    proc = subprocess.Popen([sys.executable, "-m", "morfic_cli", *args], env=_env(tmp_path, **extra), stdout=out,
-                            stderr=err, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "morfic_cli", *args], env=_env(tmp_path, **extra), stdout=out, stderr=err, text=True
+    )
     proc.files = (out, err)  # type: ignore[attr-defined]
     proc.tag = tag  # type: ignore[attr-defined]
     return proc
@@ -67,13 +79,26 @@ def _finish(tmp_path: Path, proc: subprocess.Popen, timeout: float = 300) -> sub
     for fh in proc.files:  # type: ignore[attr-defined]
         fh.close()
     tag = proc.tag  # type: ignore[attr-defined]
-    return subprocess.CompletedProcess(proc.args, proc.returncode, (tmp_path / f"{tag}.out").read_text(),
-                                       (tmp_path / f"{tag}.err").read_text())
+    return subprocess.CompletedProcess(
+        proc.args, proc.returncode, (tmp_path / f"{tag}.out").read_text(), (tmp_path / f"{tag}.err").read_text()
+    )
 
 
 def _train_args(iterations: int, name: str = NAME) -> list[str]:
-    return ["train", "--preset", "smoke", "--name", name, "--set", f"max_iterations={iterations}", "--set",
-            "save_interval=1", "-q", "-f", "json"]  # a checkpoint every iteration: kills land between them
+    return [
+        "train",
+        "--preset",
+        "smoke",
+        "--name",
+        name,
+        "--set",
+        f"max_iterations={iterations}",
+        "--set",
+        "save_interval=1",
+        "-q",
+        "-f",
+        "json",
+    ]  # a checkpoint every iteration: kills land between them
 
 
 def _ok(proc: subprocess.CompletedProcess) -> None:
@@ -194,8 +219,15 @@ def _wait_and_kill(tmp_path: Path, proc: subprocess.Popen, trigger: tuple[str, f
     return proc.returncode == -signal.SIGKILL
 
 
-def _kill_trial(tmp_path: Path, iterations: int, trigger: tuple[str, float], tally: Tally, *, gc: bool,
-                reference: bytes | None = None) -> None:
+def _kill_trial(
+    tmp_path: Path,
+    iterations: int,
+    trigger: tuple[str, float],
+    tally: Tally,
+    *,
+    gc: bool,
+    reference: bytes | None = None,
+) -> None:
     """One trial: train, kill -9 at ``trigger``, check the store, resume (or restart), check again."""
     import shutil
 
@@ -243,14 +275,18 @@ def _kill_trial(tmp_path: Path, iterations: int, trigger: tuple[str, float], tal
             assert json.loads(resume.stdout)["iteration"] == iterations
         tally.resumed += 1
     else:
-        _clean_error(resume, f"no artifact '{REF}'", "killed before its first checkpoint",
-                     f"start it afresh with `morfic train --name {NAME}`")
+        _clean_error(
+            resume,
+            f"no artifact '{REF}'",
+            "killed before its first checkpoint",
+            f"start it afresh with `morfic train --name {NAME}`",
+        )
         _ok(_morfic(tmp_path, *_train_args(iterations), MORFIC_LOCK_TIMEOUT="30"))
         tally.restarted += 1
     after = _history(root)
     lost = [entry for entry in kept if entry not in after]
     tally.versions_lost += len(lost)
-    assert after[:len(kept)] == kept, "a version written before the kill is gone"
+    assert after[: len(kept)] == kept, "a version written before the kill is gone"
     _assert_linear(root, iterations)
     if reference is not None:
         same = Store(root).read_file(REF, "model.pt") == reference
@@ -310,9 +346,13 @@ def test_two_trainings_into_one_run_at_once(tmp_path):
     loser = next(r for r in results if r.returncode == 1)
     _ok(winner)
     if "already exists" not in loser.stderr:  # it got past the start check: it lost at its first checkpoint
-        _clean_error(loser, f"run '{REF}' was created by another process",
-                     "two trainings cannot write one run", "without recording its checkpoint at iteration 1",
-                     "Give each training its own --name")
+        _clean_error(
+            loser,
+            f"run '{REF}' was created by another process",
+            "two trainings cannot write one run",
+            "without recording its checkpoint at iteration 1",
+            "Give each training its own --name",
+        )
     else:
         _clean_error(loser, f"run '{REF}' already exists")
     history = _assert_linear(tmp_path / "store", 3)
@@ -376,8 +416,12 @@ _HOLD = textwrap.dedent(
 
 def _hold(tmp_path: Path, mode: str) -> tuple[subprocess.Popen, Path]:
     ready, go = tmp_path / f"{mode}.ready", tmp_path / f"{mode}.go"
-    proc = subprocess.Popen([sys.executable, "-c", _HOLD, str(tmp_path / "store"), mode, str(ready), str(go)],
-                            env=_env(tmp_path), stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _HOLD, str(tmp_path / "store"), mode, str(ready), str(go)],
+        env=_env(tmp_path),
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     while not ready.exists():
         assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
         time.sleep(0.01)
@@ -390,8 +434,13 @@ def test_gc_waits_for_a_writer_and_times_out_cleanly(tmp_path):
     store = Store(tmp_path / "store")
     [pending] = list(store.index.ids())  # put, not yet named by a ref: what gc would delete
     gc = _morfic(tmp_path, "store", "gc", "--yes", MORFIC_LOCK_TIMEOUT="1")
-    _clean_error(gc, "timed out after 1 s waiting for the exclusive lock", "locks/store.lock",
-                 "another morfic process is using the store (a writer", "MORFIC_LOCK_TIMEOUT=SECONDS")
+    _clean_error(
+        gc,
+        "timed out after 1 s waiting for the exclusive lock",
+        "locks/store.lock",
+        "another morfic process is using the store (a writer",
+        "MORFIC_LOCK_TIMEOUT=SECONDS",
+    )
     assert store.has(pending) and store.read_manifest(pending).kind == "table"
     waiting = _spawn(tmp_path, "gc", "store", "gc", "--yes", MORFIC_LOCK_TIMEOUT="120")
     time.sleep(0.5)  # (gc is most likely waiting now; either order must keep the write)
@@ -404,8 +453,10 @@ def test_gc_waits_for_a_writer_and_times_out_cleanly(tmp_path):
 
 
 def test_a_bad_lock_timeout_is_an_error(tmp_path):
-    _clean_error(_morfic(tmp_path, "store", "verify", MORFIC_LOCK_TIMEOUT="soon"),
-                 "MORFIC_LOCK_TIMEOUT='soon' is not a number of seconds")
+    _clean_error(
+        _morfic(tmp_path, "store", "verify", MORFIC_LOCK_TIMEOUT="soon"),
+        "MORFIC_LOCK_TIMEOUT='soon' is not a number of seconds",
+    )
 
 
 def test_a_checkpoint_that_waits_for_gc_too_long_stops_the_training_cleanly(tmp_path):
@@ -413,9 +464,14 @@ def test_a_checkpoint_that_waits_for_gc_too_long_stops_the_training_cleanly(tmp_
     start afresh (it had no checkpoint), and a fresh start works once gc is done."""
     holder, go = _hold(tmp_path, "gc")
     train = _morfic(tmp_path, *_train_args(2), MORFIC_LOCK_TIMEOUT="2")
-    _clean_error(train, "timed out after 2 s waiting for the shared lock", "locks/store.lock", "`morfic store gc`",
-                 "This training stopped at iteration 1 without writing that checkpoint",
-                 f"it has no checkpoint yet: start it again with `morfic train --name {NAME}`")
+    _clean_error(
+        train,
+        "timed out after 2 s waiting for the shared lock",
+        "locks/store.lock",
+        "`morfic store gc`",
+        "This training stopped at iteration 1 without writing that checkpoint",
+        f"it has no checkpoint yet: start it again with `morfic train --name {NAME}`",
+    )
     assert _history(tmp_path / "store") == []
     go.touch()
     assert holder.wait(timeout=60) == 0
@@ -466,8 +522,11 @@ def test_gc_in_a_loop_during_an_import_loses_nothing(tmp_path):
     importer = _spawn(tmp_path, "import", "store", "import", *map(str, tars))
     gcs, during = [], 0
     while importer.poll() is None:
-        staging = [n for n in os.listdir(tmp_path / "store" / "tmp") if n.startswith("import-")] \
-            if (tmp_path / "store" / "tmp").is_dir() else []
+        staging = (
+            [n for n in os.listdir(tmp_path / "store" / "tmp") if n.startswith("import-")]
+            if (tmp_path / "store" / "tmp").is_dir()
+            else []
+        )
         if (tmp_path / "store" / "locks").is_dir():
             during += bool(staging)
             gcs.append(_morfic(tmp_path, "store", "gc", "--yes"))

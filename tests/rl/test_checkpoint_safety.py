@@ -81,8 +81,11 @@ def test_a_pickle_payload_in_a_bundle_never_runs(trained, tmp_path, run_cli, lay
     if layout == "trainer state":
         state = src.read_manifest(inputs["trainer_state"])
         inputs["trainer_state"] = src.put_manifest(
-            "checkpoint", config=state.config, meta=state.meta,
-            files={"trainer.json": src.read_file(state.id, "trainer.json"), "trainer-tensors.pt": _evil_pickle(marker)})
+            "checkpoint",
+            config=state.config,
+            meta=state.meta,
+            files={"trainer.json": src.read_file(state.id, "trainer.json"), "trainer-tensors.pt": _evil_pickle(marker)},
+        )
     elif layout == "legacy resume/ trainer.pt":
         inputs = {}
     else:
@@ -91,9 +94,15 @@ def test_a_pickle_payload_in_a_bundle_never_runs(trained, tmp_path, run_cli, lay
     evil = src.put_manifest("checkpoint", config=ckpt.config, meta=meta, inputs=inputs, files=files)
     src.set_ref("runs/evil", evil)
     if layout == "legacy resume/ trainer.pt":  # the layout of runs written before the one-ref checkpoint
-        src.set_ref("resume/evil", src.put_manifest("checkpoint", config={"role": "trainer-state"},
-                                                    inputs={"checkpoint": evil},
-                                                    files={"trainer.pt": _evil_pickle(marker)}))
+        src.set_ref(
+            "resume/evil",
+            src.put_manifest(
+                "checkpoint",
+                config={"role": "trainer-state"},
+                inputs={"checkpoint": evil},
+                files={"trainer.pt": _evil_pickle(marker)},
+            ),
+        )
         refs.append("resume/evil")
     bundle = _bundle_of(src, refs, tmp_path)
     dst = tmp_path / "dst"
@@ -115,8 +124,7 @@ def test_an_exported_run_now_carries_its_trainer_state_and_resumes(trained, tmp_
     bundle = src.export_tar(["runs/film-s0"], tmp_path / "b.tar", latest=True).path
     dst = tmp_path / "dst"
     assert run_cli("store", "import", str(bundle), "--store", str(dst))[0] == 0
-    code, _, err = run_cli("train", "--resume", "runs/film-s0", "--set", "max_iterations=2", "-q",
-                           "--store", str(dst))
+    code, _, err = run_cli("train", "--resume", "runs/film-s0", "--set", "max_iterations=2", "-q", "--store", str(dst))
     assert code == 0, err
     assert Store(dst).read_manifest("runs/film-s0").meta["iteration"] == 2
 
@@ -191,12 +199,26 @@ def test_a_kill_at_every_point_between_the_checkpoint_writes_leaves_the_run_resu
 
 def test_trainer_state_round_trip_is_exact():
     state = {
-        "iteration": 7, "learning_rate": 3e-4, "nan": math.nan, "inf": -math.inf, "none": None, "flag": True,
-        "alg": {"optimizer_state_dict": {"state": {0: {"step": torch.tensor(3.0), "exp_avg": torch.randn(4, 3)}},
-                                         "param_groups": [{"lr": 1e-3, "params": [0], "betas": (0.9, 0.999)}]}},
-        "env": {"generator": torch.Generator().manual_seed(5).get_state(), "command_vx": (-1.0, 1.5),
-                "counters": {"step": 2**40}, "array": np.arange(6, dtype=np.int16).reshape(2, 3)},
-        "rng": torch.get_rng_state(), "tricky": {"__tensor__": "not a marker"},
+        "iteration": 7,
+        "learning_rate": 3e-4,
+        "nan": math.nan,
+        "inf": -math.inf,
+        "none": None,
+        "flag": True,
+        "alg": {
+            "optimizer_state_dict": {
+                "state": {0: {"step": torch.tensor(3.0), "exp_avg": torch.randn(4, 3)}},
+                "param_groups": [{"lr": 1e-3, "params": [0], "betas": (0.9, 0.999)}],
+            }
+        },
+        "env": {
+            "generator": torch.Generator().manual_seed(5).get_state(),
+            "command_vx": (-1.0, 1.5),
+            "counters": {"step": 2**40},
+            "array": np.arange(6, dtype=np.int16).reshape(2, 3),
+        },
+        "rng": torch.get_rng_state(),
+        "tricky": {"__tensor__": "not a marker"},
     }
     files = trainer_state.encode(state)
     assert set(files) == {"trainer.json", "trainer-tensors.pt"}
@@ -204,8 +226,9 @@ def test_trainer_state_round_trip_is_exact():
     assert back["iteration"] == 7 and back["learning_rate"] == 3e-4 and back["none"] is None and back["flag"] is True
     assert math.isnan(back["nan"]) and back["inf"] == -math.inf
     opt = back["alg"]["optimizer_state_dict"]
-    assert list(opt["state"]) == [0] and torch.equal(opt["state"][0]["exp_avg"],
-                                                     state["alg"]["optimizer_state_dict"]["state"][0]["exp_avg"])
+    assert list(opt["state"]) == [0] and torch.equal(
+        opt["state"][0]["exp_avg"], state["alg"]["optimizer_state_dict"]["state"][0]["exp_avg"]
+    )
     assert opt["param_groups"][0]["betas"] == (0.9, 0.999)
     assert torch.equal(back["env"]["generator"], state["env"]["generator"])
     assert back["env"]["generator"].dtype == torch.uint8
@@ -214,8 +237,15 @@ def test_trainer_state_round_trip_is_exact():
     assert torch.equal(back["rng"], state["rng"]) and back["tricky"] == {"__tensor__": "not a marker"}
 
 
-@pytest.mark.parametrize("json_bytes", [b"{", b"[]", b'{"format": 1, "state": {"__tensor__": "t99"}}',
-                                        b'{"format": 1, "state": {"__dict__": [[["unhashable"], 1]]}}'])
+@pytest.mark.parametrize(
+    "json_bytes",
+    [
+        b"{",
+        b"[]",
+        b'{"format": 1, "state": {"__tensor__": "t99"}}',
+        b'{"format": 1, "state": {"__dict__": [[["unhashable"], 1]]}}',
+    ],
+)
 def test_a_damaged_trainer_state_is_an_error(json_bytes):
     tensors = trainer_state.encode({})["trainer-tensors.pt"]
     with pytest.raises(MorficError, match="trainer state of test is damaged"):
@@ -227,23 +257,32 @@ def test_a_run_in_the_old_two_ref_layout_still_resumes(trained, tmp_path):
     src = _copy(trained, tmp_path)
     ckpt = src.read_manifest("runs/film-s0")
     state = src.read_manifest(ckpt.inputs["trainer_state"])
-    trainer = trainer_state.decode(src.read_file(state.id, "trainer.json"),
-                                   src.read_file(state.id, "trainer-tensors.pt"), "test")
+    trainer = trainer_state.decode(
+        src.read_file(state.id, "trainer.json"), src.read_file(state.id, "trainer-tensors.pt"), "test"
+    )
     buf = io.BytesIO()
     torch.save(trainer, buf)  # exactly what morfic wrote as trainer.pt before the one-ref layout
     files = {name: src.read_file(ckpt.id, name) for name in ckpt.files}
     meta = dict(ckpt.meta, run="old")
     old = src.put_manifest("checkpoint", config=ckpt.config, meta=meta, files=files)
     src.set_ref("runs/old", old)
-    src.set_ref("resume/old", src.put_manifest("checkpoint", config={"role": "trainer-state"},
-                                               inputs={"checkpoint": old}, files={"trainer.pt": buf.getvalue()}))
+    src.set_ref(
+        "resume/old",
+        src.put_manifest(
+            "checkpoint",
+            config={"role": "trainer-state"},
+            inputs={"checkpoint": old},
+            files={"trainer.pt": buf.getvalue()},
+        ),
+    )
     resumed = resume_run(src, "runs/old")
     assert resumed.iteration == 1
     for key, value in resumed.runner.alg.optimizer.state_dict()["state"].items():
         assert torch.equal(value["exp_avg"], trainer["alg"]["optimizer_state_dict"]["state"][key]["exp_avg"])
     resumed.env.close()
     # the old layout's kill window: runs/old moved on, resume/old did not; the error names the way out
-    src.set_ref("runs/old", src.put_manifest("checkpoint", config=ckpt.config, meta=dict(meta, iteration=2),
-                                             files=files))
+    src.set_ref(
+        "runs/old", src.put_manifest("checkpoint", config=ckpt.config, meta=dict(meta, iteration=2), files=files)
+    )
     with pytest.raises(MorficError, match=r"no trainer state.*--resume runs/old@1"):
         resume_run(src, "runs/old")

@@ -49,9 +49,28 @@ def test_torchrun_world_size_1_trains_and_rank_0_writes_the_checkpoint(tmp_path)
     store = tmp_path / "store"
     env = {k: v for k, v in os.environ.items() if k not in ("WORLD_SIZE", "RANK", "LOCAL_RANK")}
     env["OMP_NUM_THREADS"] = "1"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes", "1", "--nproc_per_node", "1",
-           "-m", "morfic_cli", "train", "--preset", "smoke", "--set", "max_iterations=1", "--store", str(store),
-           "--format", "json", "-q"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--standalone",
+        "--nnodes",
+        "1",
+        "--nproc_per_node",
+        "1",
+        "-m",
+        "morfic_cli",
+        "train",
+        "--preset",
+        "smoke",
+        "--set",
+        "max_iterations=1",
+        "--store",
+        str(store),
+        "--format",
+        "json",
+        "-q",
+    ]
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     result = json.loads(proc.stdout)

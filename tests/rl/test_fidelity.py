@@ -57,8 +57,9 @@ def test_film_and_film_scaled_differ_only_in_the_trunk():
     assert {k for k in film if film[k] != scaled[k]} == {"hidden_dims"}
     _, critic = build_models(preset_cfg("smoke", "film"))
     assert [m.scale for m in critic.modulators] == [0.1, 0.1, 0.1]
-    other = dataclasses.replace(preset_cfg("smoke", "film"), model=dataclasses.replace(
-        preset_cfg("smoke", "film").model, film_scale=1.0))  # the other reading, one config field
+    other = dataclasses.replace(
+        preset_cfg("smoke", "film"), model=dataclasses.replace(preset_cfg("smoke", "film").model, film_scale=1.0)
+    )  # the other reading, one config field
     assert [m.scale for m in build_models(other)[1].modulators] == [1.0, 1.0, 1.0]
 
 

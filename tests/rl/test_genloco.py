@@ -42,8 +42,21 @@ def test_train_genloco_smoke_and_evaluate_it_on_one_robot(run_cli):
     store = Store(os.environ["MORFIC_STORE"])
     config = store.read_manifest("runs/genloco-smoke-s0").config
     assert config["variant"] == "genloco" and config["env"]["rand"]["geometry"]["enabled"] is True
-    code, out, err = run_cli("eval", "runs/genloco-smoke-s0", "--robots", "go1", "--envs", "2", "--steps", "20",
-                             "--mode", "both", "--format", "json", "--quiet")
+    code, out, err = run_cli(
+        "eval",
+        "runs/genloco-smoke-s0",
+        "--robots",
+        "go1",
+        "--envs",
+        "2",
+        "--steps",
+        "20",
+        "--mode",
+        "both",
+        "--format",
+        "json",
+        "--quiet",
+    )
     assert code == 0, err
     rows = json.loads(out)
     assert sorted((r["robot"], r["mode"]) for r in rows) == [("go1", "descriptor"), ("go1", "full")]
@@ -62,8 +75,9 @@ def test_a_run_recorded_before_procedural_geometry_is_the_same_experiment(tmp_pa
         del doc["env"]["rand"]["geometry"]
         return SimpleNamespace(config=doc, meta={"finished": True, "iteration": 2}, id="abc")
 
-    store = SimpleNamespace(root=tmp_path, has_ref=lambda spec: True,
-                            read_manifest=lambda spec: manifest(spec.split("/")[1].split("-")[0]))
+    store = SimpleNamespace(
+        root=tmp_path, has_ref=lambda spec: True, read_manifest=lambda spec: manifest(spec.split("/")[1].split("-")[0])
+    )
     pipeline = Pipeline(store, ReproduceCfg(preset="smoke", variants=("film", "genloco")))
     assert pipeline.stored_train("film", 0, "runs/film-smoke-s0").status == "skipped"
     with pytest.raises(MorficError, match="another config"):  # it reads as geometry off: not genloco's experiment

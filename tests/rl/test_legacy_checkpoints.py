@@ -47,8 +47,12 @@ def test_weights_that_do_not_fit_name_the_version_that_wrote_them(tmp_path):
     buf = io.BytesIO()
     torch.save({"actor": {"mlp.0.weight": torch.zeros(1)}, "critic": {}}, buf)
     with store.writing():
-        ckpt = store.put_manifest("checkpoint", config=train_cfg_to_dict(preset_cfg("smoke", "film")), meta={},
-                                  files={"model.pt": buf.getvalue()})
+        ckpt = store.put_manifest(
+            "checkpoint",
+            config=train_cfg_to_dict(preset_cfg("smoke", "film")),
+            meta={},
+            files={"model.pt": buf.getvalue()},
+        )
     with pytest.raises(MorficError, match=f"written by morfic {__version__}"):
         load_trained(store, ckpt)
 
@@ -60,8 +64,27 @@ def test_the_shipped_bundle_evaluates_as_before(tmp_path):
     env = dict(os.environ, MORFIC_STORE=str(tmp_path / "store"), OMP_NUM_THREADS="1")
     morfic = [sys.executable, "-m", "morfic_cli"]
     subprocess.run([*morfic, "store", "import", str(BUNDLE)], env=env, check=True, capture_output=True)
-    out = subprocess.run([*morfic, "eval", "runs/film-cpu", "--robots", "go2", "--command-vx", "1.0", "--envs", "16",
-                          "--steps", "250", "--format", "json"], env=env, check=True, capture_output=True, text=True)
+    out = subprocess.run(
+        [
+            *morfic,
+            "eval",
+            "runs/film-cpu",
+            "--robots",
+            "go2",
+            "--command-vx",
+            "1.0",
+            "--envs",
+            "16",
+            "--steps",
+            "250",
+            "--format",
+            "json",
+        ],
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     row = json.loads(out.stdout)[0]
     assert row["vx_mean"] == pytest.approx(0.9356, abs=5e-4)
     assert row["survival"] == 1.0

@@ -30,11 +30,26 @@ def test_train_writes_tensorboard_curves_into_the_run_folder(run_cli, tmp_path):
     assert "it 3/3" in err and "nan" not in err and "  ep -  " in err and "reward -" in err  # no episode ended yet
     acc = _scalars(folder)
     tags = set(acc.Tags()["scalars"])
-    assert {"Loss/value", "Loss/surrogate", "Loss/entropy", "Loss/learning_rate", "PPO/explained_variance",
-            "PPO/kl", "PPO/clip_fraction", "Loss/adaptation_error", "Policy/mean_std", "Perf/total_fps",
-            "Perf/collection_time", "Perf/learning_time", "Curriculum/vx_max", "Metrics/vx_error",
-            "Train/mean_reward", "Train/mean_episode_length", "Train/mean_reward/time",
-            "Train/mean_episode_length/time"} <= tags
+    assert {
+        "Loss/value",
+        "Loss/surrogate",
+        "Loss/entropy",
+        "Loss/learning_rate",
+        "PPO/explained_variance",
+        "PPO/kl",
+        "PPO/clip_fraction",
+        "Loss/adaptation_error",
+        "Policy/mean_std",
+        "Perf/total_fps",
+        "Perf/collection_time",
+        "Perf/learning_time",
+        "Curriculum/vx_max",
+        "Metrics/vx_error",
+        "Train/mean_reward",
+        "Train/mean_episode_length",
+        "Train/mean_reward/time",
+        "Train/mean_episode_length/time",
+    } <= tags
     assert any(t.startswith("Step_Reward/") for t in tags) and any(t.startswith("Step_Reward_Raw/") for t in tags)
     assert not {"Loss/value_loss", "Loss/explained_variance", "Loss/kl"} & tags  # no copy of Loss/value
     assert not any(t.startswith(("curriculum/", "episode_reward/", "termination/")) for t in tags)
@@ -74,26 +89,59 @@ def test_tags_follow_rsl_rl_and_isaac_lab():
     from morfic_cli.rl.live_log import write_iteration
 
     w = _Writer()
-    losses = {"value": 0.5, "value_loss": 0.5, "surrogate": -0.01, "entropy": 17.0, "adaptation_error": 0.2,
-              "explained_variance": 0.8, "kl": 0.004, "clip_fraction": 0.1}
-    extras = {"/episode_reward/track_lin_vel": 0.9, "/termination/base_contact": 0.25, "/termination/time_out": 0.75,
-              "/curriculum/vx_max": 1.5, "/curriculum/lin_tracking": 0.7, "/tracking/vx_error": 0.3,
-              "/episode/length_s": 12.0,
-              "/reward/track_lin_vel": 0.01, "/reward_raw/track_lin_vel": 0.5, "/env/nonfinite_resets": 0.0,
-              "plain": 2.0}
+    losses = {
+        "value": 0.5,
+        "value_loss": 0.5,
+        "surrogate": -0.01,
+        "entropy": 17.0,
+        "adaptation_error": 0.2,
+        "explained_variance": 0.8,
+        "kl": 0.004,
+        "clip_fraction": 0.1,
+    }
+    extras = {
+        "/episode_reward/track_lin_vel": 0.9,
+        "/termination/base_contact": 0.25,
+        "/termination/time_out": 0.75,
+        "/curriculum/vx_max": 1.5,
+        "/curriculum/lin_tracking": 0.7,
+        "/tracking/vx_error": 0.3,
+        "/episode/length_s": 12.0,
+        "/reward/track_lin_vel": 0.01,
+        "/reward_raw/track_lin_vel": 0.5,
+        "/env/nonfinite_resets": 0.0,
+        "plain": 2.0,
+    }
     write_iteration(w, 4, 1000, 1.5, 0.5, losses, 1e-3, 0.8, extras, -3.0, 250.0, wall_time_s=75.9)
     assert w.scalars.pop("Train/mean_reward/time") == [(75, -3.0)]  # rsl-rl's: whole seconds of wall time
     assert w.scalars.pop("Train/mean_episode_length/time") == [(75, 250.0)]
     assert {tag: v for tag, [(step, v)] in w.scalars.items() if step == 4} == {
-        "Loss/value": 0.5, "Loss/surrogate": -0.01, "Loss/entropy": 17.0, "Loss/adaptation_error": 0.2,
-        "PPO/explained_variance": 0.8, "PPO/kl": 0.004, "PPO/clip_fraction": 0.1,
-        "Episode_Reward/track_lin_vel": 0.9, "Episode_Termination/base_contact": 0.25,
-        "Episode_Termination/time_out": 0.75, "Curriculum/vx_max": 1.5, "Curriculum/lin_tracking": 0.7,
+        "Loss/value": 0.5,
+        "Loss/surrogate": -0.01,
+        "Loss/entropy": 17.0,
+        "Loss/adaptation_error": 0.2,
+        "PPO/explained_variance": 0.8,
+        "PPO/kl": 0.004,
+        "PPO/clip_fraction": 0.1,
+        "Episode_Reward/track_lin_vel": 0.9,
+        "Episode_Termination/base_contact": 0.25,
+        "Episode_Termination/time_out": 0.75,
+        "Curriculum/vx_max": 1.5,
+        "Curriculum/lin_tracking": 0.7,
         "Metrics/vx_error": 0.3,
-        "Episode/length_s": 12.0, "Step_Reward/track_lin_vel": 0.01, "Step_Reward_Raw/track_lin_vel": 0.5,
-        "Env/nonfinite_resets": 0.0, "Episode/plain": 2.0,
-        "Loss/learning_rate": 1e-3, "Policy/mean_std": 0.8, "Perf/total_fps": 500, "Perf/collection_time": 1.5,
-        "Perf/learning_time": 0.5, "Train/mean_reward": -3.0, "Train/mean_episode_length": 250.0}
+        "Episode/length_s": 12.0,
+        "Step_Reward/track_lin_vel": 0.01,
+        "Step_Reward_Raw/track_lin_vel": 0.5,
+        "Env/nonfinite_resets": 0.0,
+        "Episode/plain": 2.0,
+        "Loss/learning_rate": 1e-3,
+        "Policy/mean_std": 0.8,
+        "Perf/total_fps": 500,
+        "Perf/collection_time": 1.5,
+        "Perf/learning_time": 0.5,
+        "Train/mean_reward": -3.0,
+        "Train/mean_episode_length": 250.0,
+    }
 
 
 def test_logger_none_writes_no_folder(run_cli):

@@ -246,8 +246,9 @@ def test_mixed_precision_mini_batches_run_on_the_updated_weights():
     kls = {}
     for mixed in (False, True):
         torch.manual_seed(0)
-        cfg = tiny_train_cfg("film", num_learning_epochs=1, num_mini_batches=2, use_mixed_precision=mixed,
-                             schedule="fixed")
+        cfg = tiny_train_cfg(
+            "film", num_learning_epochs=1, num_mini_batches=2, use_mixed_precision=mixed, schedule="fixed"
+        )
         cfg["actor"]["latent_dropout"] = 0.0
         runner = OnPolicyRunner(DummyEnv(), cfg, log_dir=None, device="cpu")
         losses = []

@@ -24,13 +24,16 @@ from morfic_cli.store import Store
 BF16 = torch.bfloat16
 
 
-@pytest.mark.parametrize(("device", "kernels", "mode"), [
-    ("cpu", False, FLOAT32),   # AVX2 only: emulate
-    ("cpu", True, NATIVE),     # AVX512-BF16 / AMX
-    ("cpu", None, NATIVE),     # unknown: leave torch alone
-    ("cuda", False, NATIVE),   # a GPU has its own bf16 units
-    ("cuda:1", False, NATIVE),
-])
+@pytest.mark.parametrize(
+    ("device", "kernels", "mode"),
+    [
+        ("cpu", False, FLOAT32),  # AVX2 only: emulate
+        ("cpu", True, NATIVE),  # AVX512-BF16 / AMX
+        ("cpu", None, NATIVE),  # unknown: leave torch alone
+        ("cuda", False, NATIVE),  # a GPU has its own bf16 units
+        ("cuda:1", False, NATIVE),
+    ],
+)
 def test_bf16_matmul_is_float32_only_on_a_cpu_without_kernels(device, kernels, mode):
     assert bf16_matmul(device, kernels) == mode
     assert (float32_note(mode) is not None) is (mode == FLOAT32)
@@ -85,8 +88,9 @@ def _rel(a: list[torch.Tensor], b: list[torch.Tensor]) -> list[float]:
 
 def test_an_autocast_mlp_pass_is_the_native_one_up_to_the_order_of_sums():
     torch.manual_seed(0)
-    model = torch.nn.Sequential(torch.nn.Linear(48, 64), torch.nn.ELU(), torch.nn.Linear(64, 32), torch.nn.ELU(),
-                                torch.nn.Linear(32, 8))
+    model = torch.nn.Sequential(
+        torch.nn.Linear(48, 64), torch.nn.ELU(), torch.nn.Linear(64, 32), torch.nn.ELU(), torch.nn.Linear(32, 8)
+    )
     x = torch.randn(96, 48)
     native = _autocast_pass(model, x, NATIVE)
     emulated = _autocast_pass(model, x, FLOAT32)
@@ -108,7 +112,7 @@ def test_a_whole_einsum_with_mixed_operands_is_autocasts_bf16_product():
     # under inference_mode einsum reaches the mode whole, before autocast casts its operands (urma's attention pool:
     # float32 softmax weights, bf16 values); autocast would round both to bf16 and multiply
     w = torch.tensor([[[0.5, 1.0 / 3.0], [0.5, 2.0 / 3.0]]])  # (n=1, t=2, s=2), float32; 1/3 is not a bf16 number
-    v = torch.tensor([[[2.0], [4.0]]], dtype=BF16)              # (n=1, t=2, v=1)
+    v = torch.tensor([[[2.0], [4.0]]], dtype=BF16)  # (n=1, t=2, v=1)
     third, two_thirds = float(torch.tensor(1.0 / 3.0).to(BF16)), float(torch.tensor(2.0 / 3.0).to(BF16))
     hand = [[[0.5 * 2 + 0.5 * 4], [third * 2 + two_thirds * 4]]]
     with torch.inference_mode(), torch.autocast("cpu", dtype=BF16):
@@ -131,16 +135,27 @@ def test_urmas_attention_pool_runs_in_the_rollout_on_a_cpu_without_kernels():
         with Bf16MatmulInFloat32():
             emulated, _ = pool(description, state)
     assert emulated.shape == native.shape == (5, 4 * 4) and emulated.dtype == native.dtype
-    assert float((emulated.float() - native.float()).abs().max()) <= 2 ** -7 * float(native.float().abs().max())
+    assert float((emulated.float() - native.float()).abs().max()) <= 2**-7 * float(native.float().abs().max())
 
 
-@pytest.mark.parametrize(("kernels", "mixed", "mode"), [(False, "true", FLOAT32), (True, "true", NATIVE),
-                                                        (False, "false", None)])
+@pytest.mark.parametrize(
+    ("kernels", "mixed", "mode"), [(False, "true", FLOAT32), (True, "true", NATIVE), (False, "false", None)]
+)
 def test_train_records_how_its_bf16_products_ran(run_cli, monkeypatch, kernels, mixed, mode):
     monkeypatch.setattr(ppo_module, "cpu_bf16_kernels", lambda: kernels)
-    code, out, err = run_cli("train", "--preset", "smoke", "--set", "max_iterations=1", "--set",
-                             f"ppo.use_mixed_precision={mixed}", "--name", f"bf16-{kernels}-{mixed}",
-                             "--format", "json")
+    code, out, err = run_cli(
+        "train",
+        "--preset",
+        "smoke",
+        "--set",
+        "max_iterations=1",
+        "--set",
+        f"ppo.use_mixed_precision={mixed}",
+        "--name",
+        f"bf16-{kernels}-{mixed}",
+        "--format",
+        "json",
+    )
     assert code == 0, err
     meta = Store(os.environ["MORFIC_STORE"]).read_manifest(json.loads(out)["id"]).meta
     assert meta.get("bf16_matmul") == mode
@@ -154,13 +169,19 @@ def test_reproduce_notes_it_only_while_a_bf16_run_is_left_to_train(tmp_path, run
     bf16 = ("ppo.use_mixed_precision=true",)
     assert Pipeline(store, reproduce_cfg("cpu", variants=("film", "ppo"))).trains_in_bf16()  # the cpu preset's bf16
     assert not Pipeline(store, reproduce_cfg("smoke", variants=("film",))).trains_in_bf16()  # smoke: float32
-    assert not Pipeline(store, dataclasses.replace(reproduce_cfg("cpu", variants=("film",)),
-                                                   train_overrides=("ppo.use_mixed_precision=false",))).trains_in_bf16()
+    assert not Pipeline(
+        store,
+        dataclasses.replace(
+            reproduce_cfg("cpu", variants=("film",)), train_overrides=("ppo.use_mixed_precision=false",)
+        ),
+    ).trains_in_bf16()
     smoke_bf16 = dataclasses.replace(reproduce_cfg("smoke", variants=("film",)), train_overrides=bf16)
     assert Pipeline(store, smoke_bf16).trains_in_bf16()
-    code, _, err = run_cli("train", "--preset", "smoke", "--set", bf16[0], "--name", "film-smoke-s0",
-                           "--store", str(store.root), "-q")
+    code, _, err = run_cli(
+        "train", "--preset", "smoke", "--set", bf16[0], "--name", "film-smoke-s0", "--store", str(store.root), "-q"
+    )
     assert code == 0, err
     assert not Pipeline(store, smoke_bf16).trains_in_bf16()  # film-smoke-s0 is finished: nothing left to train
-    assert not Pipeline(store, dataclasses.replace(reproduce_cfg("cpu", variants=("film",)),
-                                                   bundles=tmp_path)).trains_in_bf16()  # shipped: imports, no training
+    assert not Pipeline(
+        store, dataclasses.replace(reproduce_cfg("cpu", variants=("film",)), bundles=tmp_path)
+    ).trains_in_bf16()  # shipped: imports, no training

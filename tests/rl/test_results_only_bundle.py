@@ -24,9 +24,21 @@ HEAVY = ("model.pt", "rollout.mcap", "obs.npz")
 def _pipeline(store: Store, seeds: int):
     from morfic_cli.pipeline import Pipeline, ReproduceCfg
 
-    cfg = ReproduceCfg(preset="smoke", variants=("film",), seeds=seeds, robots=("go2", "aliengo"), command_vx=(2.0,),
-                       modes=("descriptor",), eval_envs=2, eval_steps=5, diagnose_envs=2, diagnose_steps=80,
-                       trunc_eps=0.5, fixed_rollout_robots=("aliengo",), torch_threads=1)
+    cfg = ReproduceCfg(
+        preset="smoke",
+        variants=("film",),
+        seeds=seeds,
+        robots=("go2", "aliengo"),
+        command_vx=(2.0,),
+        modes=("descriptor",),
+        eval_envs=2,
+        eval_steps=5,
+        diagnose_envs=2,
+        diagnose_steps=80,
+        trunc_eps=0.5,
+        fixed_rollout_robots=("aliengo",),
+        torch_threads=1,
+    )
     return Pipeline(store, cfg)
 
 
@@ -69,8 +81,11 @@ def test_the_bundle_holds_the_results_and_none_of_the_weights_or_logs(bundles):
     for oid in src.index.ids():
         manifest = src.read_manifest(oid)
         heavy |= {e.id for n, e in manifest.files.items() if n in HEAVY}
-        figures |= {e.id: n for n, e in manifest.files.items()
-                    if n.endswith((".png", ".pdf")) and manifest.kind in ("rollout", "diagnosis", "checkpoint")}
+        figures |= {
+            e.id: n
+            for n, e in manifest.files.items()
+            if n.endswith((".png", ".pdf")) and manifest.kind in ("rollout", "diagnosis", "checkpoint")
+        }
         if manifest.config.get("role") == "trainer-state":
             states |= {oid, *(e.id for e in manifest.files.values())}
     curves0 = {seed0.files["curve.csv"].id}
@@ -78,20 +93,28 @@ def test_the_bundle_holds_the_results_and_none_of_the_weights_or_logs(bundles):
     assert in_tar and not in_tar & (heavy | states | curves0 | set(figures))
     # the figures of the run's results are left out and listed as such, under their own names
     results_of_run = [src.read_manifest(r) for r in ("evals/film-smoke-s1", "diagnoses/calibration")]
-    run_figures = {e.id: n for m in [*results_of_run, *(src.read_manifest(i) for r in results_of_run
-                                                        for i in r.inputs.values())]
-                   for n, e in m.files.items() if n.endswith((".png", ".pdf"))}
+    run_figures = {
+        e.id: n
+        for m in [*results_of_run, *(src.read_manifest(i) for r in results_of_run for i in r.inputs.values())]
+        for n, e in m.files.items()
+        if n.endswith((".png", ".pdf"))
+    }
     assert {"speed.png", "speed.pdf", "ev.png", "ev.pdf"} <= set(run_figures.values())
     assert {oid: results.omitted_files[oid] for oid in run_figures} == run_figures
     # seed 0's checkpoint comes along (the frozen actor, the first calibration's critic), without its curve
     assert seed0.id in in_tar and curves0 <= set(results.omitted_files)
     assert set(results.omitted_files) <= heavy | curves0 | set(figures) and set(results.omitted) <= states
-    assert {results.omitted_files[e.id] for e in src.read_manifest(RUN).files.values() if e.id in
-            results.omitted_files} == {"model.pt", "curve.png"}
+    assert {
+        results.omitted_files[e.id] for e in src.read_manifest(RUN).files.values() if e.id in results.omitted_files
+    } == {"model.pt", "curve.png"}
     # the results are in: the eval table, both calibration tables, the fixed-rollout table, the run's curve
-    for ref, file in (("evals/film-smoke-s1", "eval.csv"), ("diagnoses/calibration", "calibration.csv"),
-                      ("diagnoses/calibration@1", "calibration.csv"), ("diagnoses/fixed-rollout/aliengo",
-                                                                        "fixed_rollout.csv"), (RUN, "curve.csv")):
+    for ref, file in (
+        ("evals/film-smoke-s1", "eval.csv"),
+        ("diagnoses/calibration", "calibration.csv"),
+        ("diagnoses/calibration@1", "calibration.csv"),
+        ("diagnoses/fixed-rollout/aliengo", "fixed_rollout.csv"),
+        (RUN, "curve.csv"),
+    ):
         assert src.read_manifest(ref).files[file].id in in_tar, ref
     # sizes: the whole results bundle is smaller than the run's weights file alone
     model = src.read_manifest(RUN).files["model.pt"]
@@ -105,7 +128,8 @@ def test_import_gives_the_same_refs_and_ids(bundles, tmp_path):
     assert dst.list_refs() == results.refs
     for name in results.refs[:-1]:
         assert [(e.version, e.id, e.time) for e in dst.ref_history(name)] == [
-            (e.version, e.id, e.time) for e in src.ref_history(name)], name
+            (e.version, e.id, e.time) for e in src.ref_history(name)
+        ], name
     last = src.ref_history(RUN)[-1]
     assert [(e.version, e.id, e.time) for e in dst.ref_history(RUN)] == [(1, last.id, last.time)]
     assert dst.get_bytes(last.id) == src.get_bytes(last.id)
@@ -116,8 +140,9 @@ def test_import_gives_the_same_refs_and_ids(bundles, tmp_path):
 
 
 def _report_md(run_cli, store: Store, out) -> str:
-    code, _, err = run_cli("report", RUN, "--markdown", "--figures", "--out", str(out), "--store", str(store.root),
-                           "-q")
+    code, _, err = run_cli(
+        "report", RUN, "--markdown", "--figures", "--out", str(out), "--store", str(store.root), "-q"
+    )
     assert code == 0, err
     return (out / "report.md").read_text()
 
@@ -150,15 +175,32 @@ def test_report_over_the_imported_results_is_the_sources(run_cli, bundles, tmp_p
     rollout = src.read_manifest(row["artifact"]).inputs["rollout/aliengo/descriptor/vx2"]
     for suffix, data in zip((".png", ".pdf"), drawn, strict=True):
         assert (tmp_path / "mine" / "figures" / f"speed-film-smoke-s1-aliengo{suffix}").read_bytes() == data
-        assert (tmp_path / "source" / "figures" / f"speed-film-smoke-s1-aliengo{suffix}").read_bytes() == \
-            src.read_file(rollout, f"speed{suffix}") != data
+        assert (
+            (tmp_path / "source" / "figures" / f"speed-film-smoke-s1-aliengo{suffix}").read_bytes()
+            == src.read_file(rollout, f"speed{suffix}")
+            != data
+        )
 
 
 COMMANDS = {
     "eval": ("eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "4", "-q"),
     "diagnose": ("diagnose", RUN, "--robots", "go2", "--envs", "2", "--steps", "30", "--trunc-eps", "0.8", "-q"),
-    "fixed-rollout": ("diagnose", "--fixed-rollout", "aliengo", "--actor", RUN, "--critics", RUN, "--envs", "2",
-                      "--steps", "30", "--trunc-eps", "0.8", "-q"),
+    "fixed-rollout": (
+        "diagnose",
+        "--fixed-rollout",
+        "aliengo",
+        "--actor",
+        RUN,
+        "--critics",
+        RUN,
+        "--envs",
+        "2",
+        "--steps",
+        "30",
+        "--trunc-eps",
+        "0.8",
+        "-q",
+    ),
     "resume": ("train", "--resume", RUN, "-q"),
     "play": ("play", RUN, "--robot", "go2", "--steps", "1", "-q"),
     "export-rsl-rl": ("export", RUN, "--to", "rsl-rl", "--out", "OUT"),
@@ -174,10 +216,13 @@ def test_what_needs_the_weights_is_an_error_and_changes_nothing(run_cli, bundles
     args = [str(tmp_path / "out") if a == "OUT" else a for a in COMMANDS[what]]
     code, out, err = run_cli(*args, "--store", str(dst.root))
     assert code == 1 and out == ""
-    assert err.startswith(f"Error: {RUN} was imported from a results-only bundle: its weights (model.pt) and trainer "
-                          "state were left out"), err
-    assert "Import a bundle with its weights first: its weights-only bundle (made by `morfic store export " \
-           f"{RUN} --latest --without-trainer-state`" in " ".join(err.split())
+    assert err.startswith(
+        f"Error: {RUN} was imported from a results-only bundle: its weights (model.pt) and trainer state were left out"
+    ), err
+    assert (
+        "Import a bundle with its weights first: its weights-only bundle (made by `morfic store export "
+        f"{RUN} --latest --without-trainer-state`" in " ".join(err.split())
+    )
     assert listing(dst.root) == before and not (tmp_path / "out").exists()
 
 
@@ -185,8 +230,9 @@ def test_the_weights_only_bundle_on_top_makes_it_evaluate(run_cli, bundles, tmp_
     _, results, weights, _ = bundles
     dst = _imported(tmp_path, results, weights)
     assert dst.ref_history(RUN)[-1].version == 1 and dst.verify().ok
-    code, _, err = run_cli("eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "4", "-q", "--store",
-                           str(dst.root))
+    code, _, err = run_cli(
+        "eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "4", "-q", "--store", str(dst.root)
+    )
     assert code == 0, err
     code, _, err = run_cli("train", "--resume", RUN, "-q", "--store", str(dst.root))
     assert code == 1 and "was imported without its trainer state (a weights-only bundle)" in err
@@ -207,8 +253,18 @@ def test_a_fixed_rollout_whose_log_was_left_out_is_collected_again(run_cli, bund
     assert dst.has(samples.id) and "rollout.mcap" in dst.omitted_files(samples)
     assert find_rollout(dst, checkpoint, samples.config) is None
     settings = ("--envs", "2", "--steps", "80", "--trunc-eps", "0.5", "--command-vx", "2.0", "-q")
-    code, _, err = run_cli("diagnose", "--fixed-rollout", "aliengo", "--actor", "runs/film-smoke-s0", "--critics",
-                           "runs/film-smoke-s0", *settings, "--store", str(dst.root))
+    code, _, err = run_cli(
+        "diagnose",
+        "--fixed-rollout",
+        "aliengo",
+        "--actor",
+        "runs/film-smoke-s0",
+        "--critics",
+        "runs/film-smoke-s0",
+        *settings,
+        "--store",
+        str(dst.root),
+    )
     assert code == 0, err
     again = dst.read_manifest("diagnoses/fixed-rollout/aliengo").inputs["rollout"]
     assert again != samples.id and find_rollout(dst, checkpoint, samples.config) == again
@@ -221,9 +277,21 @@ def test_reuse_false_scores_the_critics_again_as_a_new_analysis(bundles, tmp_pat
     src = bundles[0]
     shutil.copytree(src.root, tmp_path / "copy")
     store = Store(tmp_path / "copy")
-    cfg = ReproduceCfg(preset="smoke", variants=("film",), seeds=1, robots=("go2", "aliengo"), command_vx=(2.0,),
-                        modes=("descriptor",), eval_envs=2, eval_steps=5, diagnose_envs=2, diagnose_steps=80,
-                        trunc_eps=0.5, fixed_rollout_robots=("aliengo",), torch_threads=1)
+    cfg = ReproduceCfg(
+        preset="smoke",
+        variants=("film",),
+        seeds=1,
+        robots=("go2", "aliengo"),
+        command_vx=(2.0,),
+        modes=("descriptor",),
+        eval_envs=2,
+        eval_steps=5,
+        diagnose_envs=2,
+        diagnose_steps=80,
+        trunc_eps=0.5,
+        fixed_rollout_robots=("aliengo",),
+        torch_threads=1,
+    )
     pipe = Pipeline(store, cfg)
     skipped = pipe.fixed_rollout("aliengo")
     assert skipped.status == "skipped"
@@ -263,4 +331,6 @@ def test_the_1_0_diagnosis_needs_the_weights_and_is_found_once_made(bundles, tmp
     assert et.trained_regime_diagnosis(store, pipe, RUN, run_missing=True) == made
     rows = list(csv.DictReader(io.StringIO((tmp_path / "film-smoke-s1-calibration-1.0.csv").read_text())))
     assert [(r["run"], r["robot"], float(r["command_vx"])) for r in rows] == [
-        ("film-smoke-s1", "go2", 1.0), ("film-smoke-s1", "aliengo", 1.0)]
+        ("film-smoke-s1", "go2", 1.0),
+        ("film-smoke-s1", "aliengo", 1.0),
+    ]

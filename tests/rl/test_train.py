@@ -86,8 +86,9 @@ def test_resume_after_interruption_equals_an_uninterrupted_run():
             assert torch.equal(a[part][key], b[part][key]), f"{part}.{key} differs after resume"
     rows_a = read_curve_csv(store.read_file("runs/straight", "curve.csv"))
     rows_b = read_curve_csv(store.read_file("runs/stopped", "curve.csv"))
-    assert [{k: v for k, v in r.items() if k not in TIMING} for r in rows_a] == \
-        [{k: v for k, v in r.items() if k not in TIMING} for r in rows_b]
+    assert [{k: v for k, v in r.items() if k not in TIMING} for r in rows_a] == [
+        {k: v for k, v in r.items() if k not in TIMING} for r in rows_b
+    ]
 
 
 def test_the_training_clock_counts_what_the_user_waits_for():
@@ -120,8 +121,13 @@ def test_the_training_clock_counts_what_the_user_waits_for():
     assert all(b["wall_time_s"] - a["wall_time_s"] >= 0.4 for a, b in zip(rows, rows[1:], strict=False))
     # curve.png only in the last checkpoint of each training (drawn off the loop); curve.csv in every one
     files = [set(store.read_manifest(e.id).files) for e in store.ref_history("runs/clocked")]
-    assert [("curve.png" in f, "curve.csv" in f) for f in files] == [(False, True), (False, True), (True, True),
-                                                                      (False, True), (True, True)]
+    assert [("curve.png" in f, "curve.csv" in f) for f in files] == [
+        (False, True),
+        (False, True),
+        (True, True),
+        (False, True),
+        (True, True),
+    ]
 
 
 def test_resume_extends_a_finished_run_with_set(run_cli):
@@ -179,9 +185,11 @@ def test_sigint_writes_a_checkpoint_and_exits_cleanly(tmp_path):
     store_dir = tmp_path / "sig"
     env = dict(os.environ, MORFIC_STORE=str(store_dir))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "morfic_cli", "train", "--preset", "smoke", "--set", "max_iterations=500",
-         "-f", "json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        [sys.executable, "-m", "morfic_cli", "train", "--preset", "smoke", "--set", "max_iterations=500", "-f", "json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
     )
     deadline = time.time() + 120
     while time.time() < deadline and not (store_dir / "refs").exists():  # the first checkpoint is written

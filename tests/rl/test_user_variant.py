@@ -22,9 +22,11 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 VARIANT = "gated_lab:GatedCritic"
 RUN = "runs/gated_lab.GatedCritic-smoke-s0"
-SENTINEL = ("import os as _os, pathlib as _pathlib\n"
-            "if _os.environ.get('GATED_LAB_MARKER'):\n"
-            "    _pathlib.Path(_os.environ['GATED_LAB_MARKER']).write_text('imported')\n")
+SENTINEL = (
+    "import os as _os, pathlib as _pathlib\n"
+    "if _os.environ.get('GATED_LAB_MARKER'):\n"
+    "    _pathlib.Path(_os.environ['GATED_LAB_MARKER']).write_text('imported')\n"
+)
 """Top-level code put after the example's: the marker that says the module was imported."""
 
 
@@ -35,8 +37,15 @@ def morfic(tmp: Path, *args: str, pythonpath: Path | None, marker: Path | None =
         env["PYTHONPATH"] = str(pythonpath)
     if marker is not None:
         env["GATED_LAB_MARKER"] = str(marker)
-    return subprocess.run([sys.executable, "-m", "morfic_cli", *args], env=env, cwd=tmp, capture_output=True,
-                          text=True, timeout=600, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "morfic_cli", *args],
+        env=env,
+        cwd=tmp,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -60,13 +69,29 @@ def test_a_user_variant_trains_evaluates_diagnoses_exports_and_compares(trained)
     critic = manifest["meta"]["model"]["critic"]
     assert critic["class_name"] == "gated_lab:GatedCritic" and critic["conditioning"] == "gated"
 
-    ev = morfic(tmp, "eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "10", "-f", "json", "-q",
-                pythonpath=mods)
+    ev = morfic(
+        tmp, "eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "10", "-f", "json", "-q", pythonpath=mods
+    )
     assert ev.returncode == 0, ev.stderr
     assert json.loads(ev.stdout)[0]["robot"] == "go2"
 
-    diag = morfic(tmp, "diagnose", RUN, "--robots", "go2", "--envs", "2", "--steps", "30", "--trunc-eps", "0.8",
-                  "-f", "json", "-q", pythonpath=mods)
+    diag = morfic(
+        tmp,
+        "diagnose",
+        RUN,
+        "--robots",
+        "go2",
+        "--envs",
+        "2",
+        "--steps",
+        "30",
+        "--trunc-eps",
+        "0.8",
+        "-f",
+        "json",
+        "-q",
+        pythonpath=mods,
+    )
     assert diag.returncode == 0, diag.stderr
     row = json.loads(diag.stdout)[0]
     assert row["variant"] == VARIANT and row["robot"] == "go2"
@@ -83,8 +108,10 @@ def test_a_user_variant_trains_evaluates_diagnoses_exports_and_compares(trained)
 
 def test_a_missing_user_module_is_an_error_naming_the_path(trained):
     tmp, _, _ = trained
-    for argv in (("eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "10"),
-                 ("train", "--variant", VARIANT, "--preset", "smoke", "--name", "other")):
+    for argv in (
+        ("eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "10"),
+        ("train", "--variant", VARIANT, "--preset", "smoke", "--name", "other"),
+    ):
         proc = morfic(tmp, *argv, pythonpath=None)
         assert proc.returncode == 1
         assert proc.stderr.startswith("Error: ") and "Traceback" not in proc.stderr
@@ -97,8 +124,9 @@ def test_weights_that_no_longer_fit_the_class_are_an_error(trained, tmp_path):
     changed.mkdir()
     source = (mods / "gated_lab.py").read_text()
     # the user's class changed after training: a wider gate generator
-    source = source.replace('c["generator_hidden_dim"], c["activation"])',
-                            '2 * c["generator_hidden_dim"], c["activation"])')
+    source = source.replace(
+        'c["generator_hidden_dim"], c["activation"])', '2 * c["generator_hidden_dim"], c["activation"])'
+    )
     (changed / "gated_lab.py").write_text(source)
     proc = morfic(tmp, "eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "10", pythonpath=changed)
     assert proc.returncode == 1
@@ -124,23 +152,39 @@ def test_train_trusts_the_variant_it_names(trained):
 def test_an_imported_user_variant_run_evaluates_only_with_consent(trained, tmp_path):
     """Another user imports the run's bundle: nothing of gated_lab is imported until they name it (issue 36)."""
     tmp, mods, _ = trained
-    exp = morfic(tmp, "store", "export", RUN, "--latest", "--without-trainer-state", "--out", str(tmp_path / "b"),
-                 pythonpath=None)
+    exp = morfic(
+        tmp,
+        "store",
+        "export",
+        RUN,
+        "--latest",
+        "--without-trainer-state",
+        "--out",
+        str(tmp_path / "b"),
+        pythonpath=None,
+    )
     assert exp.returncode == 0, exp.stderr
     tar = tmp_path / "b" / "gated_lab.GatedCritic-smoke-s0.tar"
     other, marker = tmp_path / "other", tmp_path / "imported"  # their own store and config folder
     other.mkdir()
     imp = morfic(other, "store", "import", str(tar), pythonpath=mods, marker=marker)
     assert imp.returncode == 0, imp.stderr
-    assert f"needs the user variant {VARIANT} (code morfic imports to rebuild the models) for {RUN}; NOT trusted " \
-           "here" in imp.stderr
+    assert (
+        f"needs the user variant {VARIANT} (code morfic imports to rebuild the models) for {RUN}; NOT trusted "
+        "here" in imp.stderr
+    )
     ev = ("eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "10", "-q")
-    for argv in (ev, ("diagnose", RUN, "--robots", "go2", "--envs", "2", "--steps", "30", "--trunc-eps", "0.8"),
-                 ("export", RUN, "--robot", "go2", "--out", str(other / "deploy"))):
+    for argv in (
+        ev,
+        ("diagnose", RUN, "--robots", "go2", "--envs", "2", "--steps", "30", "--trunc-eps", "0.8"),
+        ("export", RUN, "--robot", "go2", "--out", str(other / "deploy")),
+    ):
         proc = morfic(other, *argv, pythonpath=mods, marker=marker)
         assert proc.returncode == 1, proc.stderr
-        assert proc.stderr.startswith(f"Error: run {RUN} needs the user variant {VARIANT}; morfic will not import code "
-                                      f"named by a stored run without --trust-variant {VARIANT}"), proc.stderr
+        assert proc.stderr.startswith(
+            f"Error: run {RUN} needs the user variant {VARIANT}; morfic will not import code "
+            f"named by a stored run without --trust-variant {VARIANT}"
+        ), proc.stderr
         assert not marker.exists() and not (other / "deploy").exists()
     proc = morfic(other, *ev, "--trust-variant", VARIANT, pythonpath=mods, marker=marker)
     assert proc.returncode == 0, proc.stderr

@@ -21,16 +21,19 @@ def test_every_preset_passes():
         V.validate_train_cfg(preset_cfg(preset))
 
 
-@pytest.mark.parametrize(("rule", "good", "bad"), [
-    (V.number(0, 1, lo_open=True), [1e-12, 0.5, 1], [0, -1, 1.0000001, math.nan, math.inf, True, "0.5", None]),
-    (V.number(0, 1), [0, 1], [-1e-9, 1.5]),
-    (V.number(0, 1, lo_open=True, hi_open=True), [0.5], [0, 1]),
-    (V.integer(1, 3), [1, 3], [0, 4, 2.0, True]),
-    (V.one_of("adaptive", "fixed"), ["fixed"], ["Fixed", "", None]),
-    (V.LAYERS, [[1], (512, 256, 128)], [[], [0], [1.5], [16385], "512", [1] * 9]),
-    (V.ordered_pair(-10, 10), [[-1, 1], (2, 2)], [[2, 1], [1], [-11, 0], [0, math.nan]]),
-    (V.optional(V.number(0, lo_open=True)), [None, 3.0], [0, -1]),
-])
+@pytest.mark.parametrize(
+    ("rule", "good", "bad"),
+    [
+        (V.number(0, 1, lo_open=True), [1e-12, 0.5, 1], [0, -1, 1.0000001, math.nan, math.inf, True, "0.5", None]),
+        (V.number(0, 1), [0, 1], [-1e-9, 1.5]),
+        (V.number(0, 1, lo_open=True, hi_open=True), [0.5], [0, 1]),
+        (V.integer(1, 3), [1, 3], [0, 4, 2.0, True]),
+        (V.one_of("adaptive", "fixed"), ["fixed"], ["Fixed", "", None]),
+        (V.LAYERS, [[1], (512, 256, 128)], [[], [0], [1.5], [16385], "512", [1] * 9]),
+        (V.ordered_pair(-10, 10), [[-1, 1], (2, 2)], [[2, 1], [1], [-11, 0], [0, math.nan]]),
+        (V.optional(V.number(0, lo_open=True)), [None, 3.0], [0, -1]),
+    ],
+)
 def test_rule_boundaries(rule, good, bad):
     assert all(rule.test(v) for v in good), [v for v in good if not rule.test(v)]
     assert not any(rule.test(v) for v in bad), [v for v in bad if rule.test(v)]
@@ -84,20 +87,26 @@ def test_the_network_bound_applies_to_training_configs_too():
     # (15 x 48 + 128) x 16384 + 16384 x 2048 = 47448064 <= 2^26 = 67108864
     apply_overrides(cfg, ["model.actor_hidden_dims=[16384,2048]"])
     # (15 x 48 + 128) x 16384 + 16384 x 16384 = 13893632 + 268435456 = 282329088
-    with pytest.raises(MorficError, match=r"model.actor_hidden_dims = \[16384, 16384\] with env.obs.history_len = "
-                                          r"15: 282329088 weights, more than the 67108864"):
+    with pytest.raises(
+        MorficError,
+        match=r"model.actor_hidden_dims = \[16384, 16384\] with env.obs.history_len = "
+        r"15: 282329088 weights, more than the 67108864",
+    ):
         apply_overrides(cfg, ["model.actor_hidden_dims=[16384,16384]"])
 
 
-@pytest.mark.parametrize(("change", "problem"), [
-    ({"model.actor_hidden_dims": [-5]}, "model.actor_hidden_dims = [-5]: must be a list of 1 to 8 layer widths"),
-    ({"env.obs.history_len": -3}, "env.obs.history_len = -3: must be an integer in [1, 1000]"),
-    ({"env.sim.physics_dt": 0}, "env.sim.physics_dt = 0.0: must be a finite number in (0, 0.1]"),
-    ({"model.critic_hidden_dims": []}, "model.critic_hidden_dims = []: must be null or a list of 1 to 8"),
-    ({"variants": ["film"]}, "unknown config key 'variants'"),
-    ({"seed": "0"}, "config key 'seed' takes an integer; got '0'"),
-    ({"env": {}}, None),  # every field missing: the legacy values fill them (a record of an older morfic)
-])
+@pytest.mark.parametrize(
+    ("change", "problem"),
+    [
+        ({"model.actor_hidden_dims": [-5]}, "model.actor_hidden_dims = [-5]: must be a list of 1 to 8 layer widths"),
+        ({"env.obs.history_len": -3}, "env.obs.history_len = -3: must be an integer in [1, 1000]"),
+        ({"env.sim.physics_dt": 0}, "env.sim.physics_dt = 0.0: must be a finite number in (0, 0.1]"),
+        ({"model.critic_hidden_dims": []}, "model.critic_hidden_dims = []: must be null or a list of 1 to 8"),
+        ({"variants": ["film"]}, "unknown config key 'variants'"),
+        ({"seed": "0"}, "config key 'seed' takes an integer; got '0'"),
+        ({"env": {}}, None),  # every field missing: the legacy values fill them (a record of an older morfic)
+    ],
+)
 def test_a_stored_config_is_checked_like_a_training_config(change, problem):
     from crafted_bundles import run_config
 

@@ -13,8 +13,8 @@ from morfic_cli.runs import run_name, run_of
 def test_the_registry_holds_the_papers_seven_in_table_order():
     assert V.VARIANTS[:7] == ("ppo", "actor-only", "concat", "film", "film-scaled", "hyper", "adaln")
     n_ext = len(V.table_variants("external"))
-    assert set(V.VARIANTS[7:7 + n_ext]) == set(V.table_variants("external"))  # then the external baselines
-    assert V.VARIANTS[7 + n_ext:] == V.table_variants("actuation") == ("film-act", "ppo-act")  # then issue 58's
+    assert set(V.VARIANTS[7 : 7 + n_ext]) == set(V.table_variants("external"))  # then the external baselines
+    assert V.VARIANTS[7 + n_ext :] == V.table_variants("actuation") == ("film-act", "ppo-act")  # then issue 58's
     assert V.table_variants("main") == paper.ZERO_SHOT_TRANSFER.columns
     assert V.table_variants("ablation") == paper.CRITIC_CONDITIONING_ABLATION.columns
     assert [V.variant_order(v) for v in V.VARIANTS] == list(range(len(V.VARIANTS)))
@@ -40,15 +40,18 @@ def test_a_user_class_becomes_a_variant_with_the_stock_actor():
     assert groups["critic"] == ["critic", "privileged", "morphology"]
 
 
-@pytest.mark.parametrize(("name", "needle"), [
-    ("film-xl", "unknown variant 'film-xl'"),
-    ("no_such_module_xyz:Critic", "cannot import module 'no_such_module_xyz'"),
-    ("collections:NoSuchClass", "has no 'NoSuchClass'"),
-    ("collections:abc", "not a class"),
-    ("collections:OrderedDict", "class OrderedDict is not a critic model: a torch.nn.Module subclass"),  # issue 53
-    ("torch.nn:Linear", "class Linear is not a critic model"),
-    (":Critic", "not an import path"),
-])
+@pytest.mark.parametrize(
+    ("name", "needle"),
+    [
+        ("film-xl", "unknown variant 'film-xl'"),
+        ("no_such_module_xyz:Critic", "cannot import module 'no_such_module_xyz'"),
+        ("collections:NoSuchClass", "has no 'NoSuchClass'"),
+        ("collections:abc", "not a class"),
+        ("collections:OrderedDict", "class OrderedDict is not a critic model: a torch.nn.Module subclass"),  # issue 53
+        ("torch.nn:Linear", "class Linear is not a critic model"),
+        (":Critic", "not an import path"),
+    ],
+)
 def test_bad_variant_names_are_user_errors(name, needle):
     with V.consent_scope([name] if ":" in name[1:] else []), pytest.raises(MorficError, match=needle):
         V.resolve_variant(name)
@@ -69,7 +72,8 @@ def sentinel(tmp_path, monkeypatch):
     (tmp_path / "mods").mkdir()
     (tmp_path / "mods" / "sentinel_critic.py").write_text(
         f"import pathlib\npathlib.Path({str(marker)!r}).write_text('imported')\n"
-        "from morfic_cli.rl.models import MorficCritic\nclass Critic(MorficCritic):\n    pass\n")
+        "from morfic_cli.rl.models import MorficCritic\nclass Critic(MorficCritic):\n    pass\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path / "mods"))
     monkeypatch.delitem(__import__("sys").modules, "sentinel_critic", raising=False)
     return "sentinel_critic:Critic", marker
@@ -85,8 +89,10 @@ def test_a_user_variant_is_imported_only_with_consent(sentinel):
     name, marker = sentinel
     with V.consent_scope(), pytest.raises(V.UntrustedVariantError) as info:
         V.resolve_variant(name, source="runs/x")
-    assert str(info.value).startswith(f"run runs/x needs the user variant {name}; morfic will not import code named "
-                                      f"by a stored run without --trust-variant {name}")
+    assert str(info.value).startswith(
+        f"run runs/x needs the user variant {name}; morfic will not import code named "
+        f"by a stored run without --trust-variant {name}"
+    )
     assert f"morfic trust {name}" in str(info.value)
     assert not _imported(marker)
     with V.consent_scope([name]):
@@ -125,11 +131,34 @@ def test_consent_ends_with_its_scope_and_stock_names_need_none():
         assert all(V.is_trusted(v) and V.resolve_variant(v, source="runs/x").stock for v in V.VARIANTS)
 
 
-@pytest.mark.parametrize("name", [
-    ".relative:Critic", "..up:Critic", "pkg..mod:Critic", "pkg.:Critic", "pkg:", ":Critic", "pkg:Critic.",
-    "pkg:Cri tic", " pkg:Critic", "pkg:Critic\n", "pkg/mod:Critic", "pkg:Critic:X", "os;rm:X", "pkg:Critïc",
-    "class:X", "a" * 190 + ".b:" + "C" * 10, "-film", "film xl", "", "x\x1b[31m", 3, None, ["film"],
-])
+@pytest.mark.parametrize(
+    "name",
+    [
+        ".relative:Critic",
+        "..up:Critic",
+        "pkg..mod:Critic",
+        "pkg.:Critic",
+        "pkg:",
+        ":Critic",
+        "pkg:Critic.",
+        "pkg:Cri tic",
+        " pkg:Critic",
+        "pkg:Critic\n",
+        "pkg/mod:Critic",
+        "pkg:Critic:X",
+        "os;rm:X",
+        "pkg:Critïc",
+        "class:X",
+        "a" * 190 + ".b:" + "C" * 10,
+        "-film",
+        "film xl",
+        "",
+        "x\x1b[31m",
+        3,
+        None,
+        ["film"],
+    ],
+)
 def test_malformed_names_are_refused_before_any_import(name):
     with pytest.raises(MorficError) as info:
         V.check_variant_name(name)
@@ -138,15 +167,19 @@ def test_malformed_names_are_refused_before_any_import(name):
         V.resolve_variant(name, source="runs/x")  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("name", [*V.VARIANTS, "gated", "my-lab.gated_v2", "pkg.mod:Critic", "_p.m2:Outer.Inner",
-                                  "a" * 180 + ":C"])
+@pytest.mark.parametrize(
+    "name", [*V.VARIANTS, "gated", "my-lab.gated_v2", "pkg.mod:Critic", "_p.m2:Outer.Inner", "a" * 180 + ":C"]
+)
 def test_well_formed_names_pass(name):
     assert V.check_variant_name(name) == name
 
 
 def test_stored_variants_lists_config_and_meta_names_checked():
-    assert V.stored_variants({"variant": "film"}, {"variant": "film", "variants": ["ppo", "a:B"]}) == \
-        ["film", "ppo", "a:B"]
+    assert V.stored_variants({"variant": "film"}, {"variant": "film", "variants": ["ppo", "a:B"]}) == [
+        "film",
+        "ppo",
+        "a:B",
+    ]
     assert V.stored_variants({}, {}) == []
     with pytest.raises(MorficError, match="not an import path"):
         V.stored_variants({"variant": "film"}, {"variant": ".x:Y"})

@@ -57,7 +57,8 @@ def test_the_weights_only_bundle_is_the_run_without_its_trainer_state(bundles, t
     assert dst.get_bytes(ckpt.id) == src.get_bytes(ckpt.id)
     assert [e.id for e in dst.ref_history(RUN)] == [ckpt.id]
     assert list(dst.omitted.ids()) == [state.id] and dst.omitted_inputs(dst.read_manifest(RUN)) == {
-        "trainer_state": state.id}
+        "trainer_state": state.id
+    }
     assert dst.read_file(RUN, "model.pt") == src.read_file(RUN, "model.pt")
 
 
@@ -65,13 +66,29 @@ def test_a_weights_only_run_evaluates_diagnoses_and_exports(run_cli, bundles, tm
     _, _, shallow = bundles
     dst = _imported(tmp_path, shallow)
     root = str(dst.root)
-    code, out, err = run_cli("eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "4", "--store", root,
-                             "-f", "json", "-q")
+    code, out, err = run_cli(
+        "eval", RUN, "--robots", "go2", "--envs", "2", "--steps", "4", "--store", root, "-f", "json", "-q"
+    )
     assert code == 0, err
     assert [(r["robot"], r["mode"]) for r in json.loads(out)] == [("go2", "descriptor")]
     assert dst.read_manifest("evals/film-s0").inputs["checkpoint"] == dst.resolve(RUN)
-    code, out, err = run_cli("diagnose", RUN, "--robots", "go2", "--envs", "2", "--steps", "30", "--trunc-eps", "0.8",
-                             "--store", root, "-f", "json", "-q")
+    code, out, err = run_cli(
+        "diagnose",
+        RUN,
+        "--robots",
+        "go2",
+        "--envs",
+        "2",
+        "--steps",
+        "30",
+        "--trunc-eps",
+        "0.8",
+        "--store",
+        root,
+        "-f",
+        "json",
+        "-q",
+    )
     assert code == 0, err
     assert [r["robot"] for r in json.loads(out)] == ["go2"]
     # rsl-rl's layout needs an optimiser state: a fresh one, said so
@@ -91,13 +108,16 @@ def test_a_weights_only_run_exports_to_onnx(run_cli, bundles, tmp_path):
     src, _, shallow = bundles
     dst = _imported(tmp_path, shallow)
     out = tmp_path / "deploy"
-    code, stdout, err = run_cli("export", RUN, "--robot", "go2", "--out", str(out), "--store", str(dst.root),
-                                "-f", "json")
+    code, stdout, err = run_cli(
+        "export", RUN, "--robot", "go2", "--out", str(out), "--store", str(dst.root), "-f", "json"
+    )
     assert code == 0, err
     assert json.loads(stdout)["verification"]["ok"]
     manifest = dst.read_manifest("exports/film-s0/go2-onnx")
     assert manifest.inputs == {"checkpoint": src.resolve(RUN)} and sorted(p.name for p in out.iterdir()) == [
-        "policy.json", "policy.onnx"]
+        "policy.json",
+        "policy.onnx",
+    ]
 
 
 def test_resume_of_a_weights_only_run_is_an_error_and_changes_nothing(run_cli, bundles, tmp_path):
@@ -106,8 +126,10 @@ def test_resume_of_a_weights_only_run_is_an_error_and_changes_nothing(run_cli, b
     before = listing(dst.root)
     code, out, err = run_cli("train", "--resume", RUN, "--store", str(dst.root), "-q")
     assert code == 1 and out == ""
-    assert err.startswith(f"Error: {RUN} was imported without its trainer state (a weights-only bundle); it "
-                          "evaluates and exports, but cannot be resumed. Import the full bundle")
+    assert err.startswith(
+        f"Error: {RUN} was imported without its trainer state (a weights-only bundle); it "
+        "evaluates and exports, but cannot be resumed. Import the full bundle"
+    )
     assert listing(dst.root) == before
 
 

@@ -30,11 +30,19 @@ def _repo_with_queue(tmp_path: Path) -> Path:
 
 def _finished_run(store: Store, name: str) -> None:
     """runs/<name>: a finished checkpoint with weights and a curve, and evals/<name> of it."""
-    ckpt = store.put_manifest("checkpoint", config={"variant": "film"}, meta={"finished": True},
-                              files={"model.pt": name.encode() * 1000, "curve.csv": f"it,{name}".encode()})
+    ckpt = store.put_manifest(
+        "checkpoint",
+        config={"variant": "film"},
+        meta={"finished": True},
+        files={"model.pt": name.encode() * 1000, "curve.csv": f"it,{name}".encode()},
+    )
     store.set_ref(f"runs/{name}", ckpt)
-    store.set_ref(f"evals/{name}", store.put_manifest("eval", config={"run": name}, inputs={"checkpoint": ckpt},
-                                                       files={"eval.csv": f"robot\ngo2,{name}".encode()}))
+    store.set_ref(
+        f"evals/{name}",
+        store.put_manifest(
+            "eval", config={"run": name}, inputs={"checkpoint": ckpt}, files={"eval.csv": f"robot\ngo2,{name}".encode()}
+        ),
+    )
 
 
 def test_a_results_only_run_stops_the_queue_before_anything_is_written(tmp_path):
@@ -53,8 +61,13 @@ def test_a_results_only_run_stops_the_queue_before_anything_is_written(tmp_path)
     walk.write_text('{"kept": true}')
     env = {**os.environ, "MORFIC_STORE": str(dst.root)}
     # the run with weights first: every item is checked before the first is trained or evaluated
-    got = subprocess.run(["bash", str(repo / "scripts" / "experiment_queue.sh"), "ppo:2", "film:1"], env=env,
-                         capture_output=True, text=True, timeout=120)
+    got = subprocess.run(
+        ["bash", str(repo / "scripts" / "experiment_queue.sh"), "ppo:2", "film:1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert got.returncode == 1, got.stdout + got.stderr
     assert got.stderr.startswith("Error: runs/film-cpu-s1 ") and "results-only bundle" in got.stderr
     assert "artifacts/bundles/results/film-cpu-s1.tar" in got.stderr
@@ -72,8 +85,13 @@ def test_a_second_queue_waits_for_the_evaluation_lock_before_it_evaluates(tmp_pa
     env = {**os.environ, "MORFIC_STORE": str(store.root), "MORFIC_QUEUE_LOCK": str(lock)}
     with lock.open("a") as held:
         fcntl.flock(held, fcntl.LOCK_EX)  # the other queue's evaluation
-        queue = subprocess.Popen(["bash", str(repo / "scripts" / "experiment_queue.sh"), "ppo:2"], env=env,
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        queue = subprocess.Popen(
+            ["bash", str(repo / "scripts" / "experiment_queue.sh"), "ppo:2"],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         first = queue.stdout.readline()
         assert "ppo-cpu-s2 waits for another queue's evaluation" in first and str(lock) in first
         time.sleep(1.0)
@@ -110,10 +128,20 @@ def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_pat
     (bin_dir / "morfic").write_text(FAKE_MORFIC)
     (bin_dir / "morfic").chmod(0o755)
     calls = tmp_path / "calls.txt"
-    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}", "MORFIC_CALLS": str(calls),
-           "MORFIC_STORE": str(tmp_path / "store"), "MORFIC_QUEUE_LOCK": str(tmp_path / "queue.lock")}
-    got = subprocess.run(["bash", str(repo / "scripts" / "experiment_queue.sh"), "film:0", "ppo:1"], env=env,
-                         capture_output=True, text=True, timeout=120)
+    env = {
+        **os.environ,
+        "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
+        "MORFIC_CALLS": str(calls),
+        "MORFIC_STORE": str(tmp_path / "store"),
+        "MORFIC_QUEUE_LOCK": str(tmp_path / "queue.lock"),
+    }
+    got = subprocess.run(
+        ["bash", str(repo / "scripts" / "experiment_queue.sh"), "film:0", "ppo:1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert got.returncode == 0, got.stdout + got.stderr
     exports = [line for line in calls.read_text().splitlines() if line.startswith("store export")]
     assert exports == [
@@ -124,6 +152,12 @@ def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_pat
     ]
     bundles = repo / "artifacts" / "bundles"
     assert sorted(str(p.relative_to(bundles)) for p in bundles.rglob("*.tar")) == [
-        "film-cpu-s0.tar", "results/film-cpu-s0.tar", "results/ppo-cpu-s1.tar", "weights/ppo-cpu-s1.tar"]
-    assert "done film-cpu-s0" in got.stdout and "artifacts/bundles/results/film-cpu-s0.tar and " \
-        "artifacts/bundles/film-cpu-s0.tar" in got.stdout
+        "film-cpu-s0.tar",
+        "results/film-cpu-s0.tar",
+        "results/ppo-cpu-s1.tar",
+        "weights/ppo-cpu-s1.tar",
+    ]
+    assert (
+        "done film-cpu-s0" in got.stdout
+        and "artifacts/bundles/results/film-cpu-s0.tar and artifacts/bundles/film-cpu-s0.tar" in got.stdout
+    )

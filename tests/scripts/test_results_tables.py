@@ -20,7 +20,8 @@ def _runs(tmp_path: Path) -> Path:
     (tmp_path / "film-cpu-s0-eval.csv").write_text(EVAL_HEAD + "aliengo,descriptor,2.0,0.324,1.6449,0.6351,0.0,falls\n")
     (tmp_path / "ppo-cpu-s0-eval.csv").write_text(EVAL_HEAD + "aliengo,descriptor,2.0,0.324,1.2,0.48,0.421875,falls\n")
     (tmp_path / "film-cpu-s0-calibration.csv").write_text(
-        "robot,ev,abs_nvb,nve,asa\ngo2,0.37296,0.33255,0.85886,0.53106\n")
+        "robot,ev,abs_nvb,nve,asa\ngo2,0.37296,0.33255,0.85886,0.53106\n"
+    )
     return tmp_path
 
 
@@ -28,8 +29,10 @@ def test_transfer_table_orders_runs_as_the_paper_and_adds_its_columns(tmp_path):
     lines = rt.transfer_table(rt.load(_runs(tmp_path), "eval"), "descriptor", 2.0)
     assert lines[0] == "| robot | d | `ppo` (s0) | `film` (s0) | paper ppo | paper film |"
     # ours rounded to 2/2/3 places with the verdict; the paper's AlienGo cells (zero-shot table)
-    assert lines[2] == ("| aliengo | 0.324 | 1.20 ± 0.48 / 0.422 (falls) | 1.64 ± 0.64 / 0.000 (falls) | "
-                        "0.27 ± 0.07 / 0.000 | 1.98 ± 0.51 / 1.000 |")
+    assert lines[2] == (
+        "| aliengo | 0.324 | 1.20 ± 0.48 / 0.422 (falls) | 1.64 ± 0.64 / 0.000 (falls) | "
+        "0.27 ± 0.07 / 0.000 | 1.98 ± 0.51 / 1.000 |"
+    )
 
 
 def test_seeds_of_a_variant_pool_into_mean_and_std(tmp_path):
@@ -37,7 +40,8 @@ def test_seeds_of_a_variant_pool_into_mean_and_std(tmp_path):
     _runs(tmp_path)
     for seed, vx, s in ((1, 1.0, 0.5), (2, 1.3, 0.25)):
         (tmp_path / f"film-cpu-s{seed}-eval.csv").write_text(
-            EVAL_HEAD + f"aliengo,descriptor,2.0,0.324,{vx},0.5,{s},falls\n")
+            EVAL_HEAD + f"aliengo,descriptor,2.0,0.324,{vx},0.5,{s},falls\n"
+        )
     lines = rt.transfer_table(rt.load(tmp_path, "eval"), "descriptor", 2.0)
     assert lines[0] == "| robot | d | `ppo` (s0) | `film` (n=3) | paper ppo | paper film |"
     # v_x 1.6449, 1.0, 1.3: mean 1.3150, std sqrt(((.3299)^2 + (.315)^2 + (.015)^2) / 3) = 0.2634
@@ -65,9 +69,11 @@ def test_claims_are_judged_at_2_and_at_1_m_s_from_the_eval_1_0_files(tmp_path):
                 src = (tmp_path / f"{run}-cpu-s0-eval.csv").read_text()
                 (tmp_path / f"{run}-cpu-s1-eval.csv").write_text(src)
         (tmp_path / f"film-cpu-s{seed}-eval-1.0.csv").write_text(
-            EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.9,0.1,1.0,walks\n")
+            EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.9,0.1,1.0,walks\n"
+        )
         (tmp_path / f"ppo-cpu-s{seed}-eval-1.0.csv").write_text(
-            EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.5,0.1,0.8,walks\n")
+            EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.5,0.1,0.8,walks\n"
+        )
     (tmp_path / "film-cpu-s0-artifacts.json").write_text(json.dumps({"eval": "e" * 64, "eval-1.0": "f" * 64}))
     # the tables read <run>-eval.csv only; the claims both
     assert set(rt.load(tmp_path, "eval")["command_vx"]) == {2.0}
@@ -76,13 +82,16 @@ def test_claims_are_judged_at_2_and_at_1_m_s_from_the_eval_1_0_files(tmp_path):
     assert text.startswith("| claim | 2.0 m/s | 1.0 m/s |\n|---|---|---|\n")
     # 2.0 m/s: 0.00 - 0.51 on AlienGo, exact (both sides repeat one value): 1 of 9 comparisons against, the
     # others without a test -> partly reversed; 1.0 m/s: 0.90 - 0.40 beats ppo, 1 of 9 for -> holds partly
-    assert ("| (b) MorFiC-F transfers better than ppo, actor-only, concat | **partly reversed** | **holds partly** |"
-            in text)
+    assert (
+        "| (b) MorFiC-F transfers better than ppo, actor-only, concat | **partly reversed** | **holds partly** |"
+        in text
+    )
     at2, at1 = text.split("### At 2.0 m/s")[1].split("### At 1.0 m/s")
     assert "film - ppo -0.51 [-0.51, -0.51] (n 2 vs 2, p 0, Holm 0)" in at2 and "`eeeeeeeeeeee`" in at2
     assert "**(b) MorFiC-F transfers better than PPO, actor-only and concat (v_x x S at 1.0 m/s" in at1
-    assert ("film - ppo +0.50 [+0.50, +0.50] (n 2 vs 2, p 0, Holm 0); film - actor-only (no test: actor-only not "
-            "evaluated)") in at1
+    assert (
+        "film - ppo +0.50 [+0.50, +0.50] (n 2 vs 2, p 0, Holm 0); film - actor-only (no test: actor-only not evaluated)"
+    ) in at1
     assert "`ffffffffffff`" in at1 and "`film-cpu-s1-eval-1.0.csv`" in at1 and "eeeeeeeeeeee" not in at1
 
 
@@ -141,8 +150,10 @@ def test_fixed_rollout_rows_merge_per_samples_and_the_reference_row_is_read(tmp_
     path = tmp_path / "fixed-rollout-aliengo.csv"
 
     def rows(*critics, rollout="r1"):
-        return [{**_fixed(c, f), "robot": "aliengo", "actor_variant": "film", "cos_grad": cos, "rollout": rollout}
-                for c, f, cos in critics]
+        return [
+            {**_fixed(c, f), "robot": "aliengo", "actor_variant": "film", "cos_grad": cos, "rollout": rollout}
+            for c, f, cos in critics
+        ]
 
     et.write_csv(path, et.merge_fixed_rows(path, rows(("MC", 0, 1), ("film-cpu-s0", 0.4, 0.3)), cols, "s1"), cols)
     # another store's rollout manifest (other id) of the same samples: merged; a critic's new row replaces its old
@@ -150,18 +161,31 @@ def test_fixed_rollout_rows_merge_per_samples_and_the_reference_row_is_read(tmp_
     assert [r["critic"] for r in merged] == ["MC", "film-cpu-s0", "ppo-cpu-s0"] and merged[0]["rollout"] == "r2"
     et.write_csv(path, merged, cols)
     # other samples (another machine's rollout): kept beside the reference rows, the sidecar names both
-    merged = et.merge_fixed_rows(path, rows(("MC", 0, 1), ("film-cpu-s0", 0.43, 0.25), ("concat-cpu-s1", 0.3, 0.6),
-                                            rollout="r3"), cols, "s2")
+    merged = et.merge_fixed_rows(
+        path, rows(("MC", 0, 1), ("film-cpu-s0", 0.43, 0.25), ("concat-cpu-s1", 0.3, 0.6), rollout="r3"), cols, "s2"
+    )
     assert [(r["critic"], r["samples"]) for r in merged] == [
-        ("MC", "s1"), ("film-cpu-s0", "s1"), ("ppo-cpu-s0", "s1"), ("MC", "s2"), ("film-cpu-s0", "s2"),
-        ("concat-cpu-s1", "s2")]
+        ("MC", "s1"),
+        ("film-cpu-s0", "s1"),
+        ("ppo-cpu-s0", "s1"),
+        ("MC", "s2"),
+        ("film-cpu-s0", "s2"),
+        ("concat-cpu-s1", "s2"),
+    ]
     assert json.loads(path.with_suffix(".json").read_text()) == {
-        "samples": "s1", "rollouts": ["r1", "r2"], "other_samples": {"s2": ["r3"]}}
+        "samples": "s1",
+        "rollouts": ["r1", "r2"],
+        "other_samples": {"s2": ["r3"]},
+    }
     et.write_csv(path, merged, cols)
     # one row per critic, the reference one where there is one; the samples' effect from film, scored on both
     fixed = rt.load_fixed(tmp_path)
     assert [(r.critic, r.samples, r.reference) for r in fixed.itertuples()] == [
-        ("MC", "s1", True), ("film-cpu-s0", "s1", True), ("ppo-cpu-s0", "s1", True), ("concat-cpu-s1", "s2", False)]
+        ("MC", "s1", True),
+        ("film-cpu-s0", "s1", True),
+        ("ppo-cpu-s0", "s1", True),
+        ("concat-cpu-s1", "s2", False),
+    ]
     effect = rt.sample_effect(tmp_path)
     assert effect[["critic", "samples"]].values.tolist() == [["film-cpu-s0", "s2"]]
     assert effect["d_flip"].iloc[0] == pytest.approx(0.03) and effect["d_cos"].iloc[0] == pytest.approx(-0.05)
@@ -177,19 +201,20 @@ def test_fixed_rollout_rows_merge_per_samples_and_the_reference_row_is_read(tmp_
 def test_curve_rows_keep_the_main_columns_to_five_digits():
     text = "iteration,env_steps,mean_reward,value_loss\n1,12288,0.123456789,3.0\n"
     rows = et.curve_rows(text)
-    assert rows == [{**dict.fromkeys(et.CURVE_COLUMNS, ""), "iteration": "1", "env_steps": "12288",
-                     "mean_reward": "0.12346"}]
+    assert rows == [
+        {**dict.fromkeys(et.CURVE_COLUMNS, ""), "iteration": "1", "env_steps": "12288", "mean_reward": "0.12346"}
+    ]
 
 
 def test_walk_table_checks_the_bar_and_finds_when_the_curriculum_opened(tmp_path):
     walk = {"vx_mean": 0.93, "vx_std": 0.18, "survival": 1.0, "verdict": "ok"}
     (tmp_path / "film-cpu-s0-walk.json").write_text(json.dumps([walk]))
     (tmp_path / "ppo-cpu-s0-walk.json").write_text(json.dumps([{**walk, "vx_mean": 0.79}]))  # below 0.8: no
-    (tmp_path / "film-cpu-s0-curve.csv").write_text(
-        "iteration,curriculum.vx_max\n1,1.0\n2,1.0\n3,1.5\n4,2.0\n")
+    (tmp_path / "film-cpu-s0-curve.csv").write_text("iteration,curriculum.vx_max\n1,1.0\n2,1.0\n3,1.5\n4,2.0\n")
     (tmp_path / "film-cpu-s0-eval.csv").write_text(  # the template at 2.0 m/s: the descriptor row, not full's
         EVAL_HEAD + "go2,full,2.0,0.0,1.1,0.3,0.5,ok\ngo2,descriptor,2.5,0.0,0.7,0.3,0.2,falls\n"
-        "go2,descriptor,2.0,0.0,1.4567,0.3,0.65625,falls\naliengo,descriptor,2.0,0.324,1.6,0.6,0.0,falls\n")
+        "go2,descriptor,2.0,0.0,1.4567,0.3,0.65625,falls\naliengo,descriptor,2.0,0.324,1.6,0.6,0.0,falls\n"
+    )
     lines = rt.walk_table(tmp_path)
     assert lines[2] == "| `ppo-cpu-s0` | 0.79 ± 0.18 | 1.000 | ok | **no** | - | - | - |"  # paper order: ppo first
     assert lines[3] == "| `film-cpu-s0` | 0.93 ± 0.18 | 1.000 | ok | yes | 3 | 2 m/s | 1.46 / 0.656 |"
@@ -204,29 +229,49 @@ class _Store:
     def read_manifest(self, spec):
         from morfic_cli.errors import ArtifactNotFoundError
 
-        if spec[len("runs/"):] not in self.runs:
+        if spec[len("runs/") :] not in self.runs:
             raise ArtifactNotFoundError(spec)
         return spec
 
     def weights_omitted(self, spec):
-        return self.runs[spec[len("runs/"):]]
+        return self.runs[spec[len("runs/") :]]
 
 
 def test_seed0_critics_with_weights_are_rescored_on_other_samples(tmp_path):
     cols = ["critic", "samples"]
     (tmp_path / "fixed-rollout-aliengo.json").write_text(json.dumps({"samples": "s1", "rollouts": []}))
-    et.write_csv(tmp_path / "fixed-rollout-aliengo.csv",
-                 [{"critic": c, "samples": s} for c, s in (
-                     ("MC", "s1"), ("film-cpu-s0", "s1"), ("ppo-cpu-s0", "s1"), ("adaln-cpu-s0", "s1"),
-                     ("hyper-cpu-s0", "s1"), ("film-cpu-s1", "s1"), ("MC", "s2"), ("concat-cpu-s1", "s2"),
-                     ("film-cpu-s0", "s2"))], cols)
+    et.write_csv(
+        tmp_path / "fixed-rollout-aliengo.csv",
+        [
+            {"critic": c, "samples": s}
+            for c, s in (
+                ("MC", "s1"),
+                ("film-cpu-s0", "s1"),
+                ("ppo-cpu-s0", "s1"),
+                ("adaln-cpu-s0", "s1"),
+                ("hyper-cpu-s0", "s1"),
+                ("film-cpu-s1", "s1"),
+                ("MC", "s2"),
+                ("concat-cpu-s1", "s2"),
+                ("film-cpu-s0", "s2"),
+            )
+        ],
+        cols,
+    )
     for run in ("film", "ppo", "adaln", "hyper", "actor-only"):
         (tmp_path / f"{run}-cpu-s0-artifacts.json").write_text("{}")
     (tmp_path / "film-cpu-s1-artifacts.json").write_text("{}")
     # film: already on s2; adaln: weights left out; hyper: not in the store; actor-only: no reference row;
     # film-cpu-s1: not seed 0. Only ppo is scored again.
-    store = _Store({"film-cpu-s0": False, "ppo-cpu-s0": False, "adaln-cpu-s0": True, "actor-only-cpu-s0": False,
-                    "film-cpu-s1": False})
+    store = _Store(
+        {
+            "film-cpu-s0": False,
+            "ppo-cpu-s0": False,
+            "adaln-cpu-s0": True,
+            "actor-only-cpu-s0": False,
+            "film-cpu-s1": False,
+        }
+    )
     assert et.seed0_to_rescore(store, tmp_path, {"aliengo": "s2"}) == ["ppo-cpu-s0"]
     # a critic scored on the reference samples: nothing to measure
     assert et.seed0_to_rescore(store, tmp_path, {"aliengo": "s1"}) == []
@@ -259,8 +304,16 @@ def test_the_1_0_diagnosis_is_the_papers_protocol_at_one_metre_per_second(tmp_pa
     from morfic_cli.store import Store
 
     pipe = et.one_run_pipeline(Store(tmp_path / "store"), "concat", 1, "runs/concat-cpu-s1")
-    paper = {"robots": ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c"), "mode": "descriptor",
-             "command_vx": 2.0, "num_envs": 64, "steps": 800, "seed": 0, "trunc_eps": 0.05, "sigma_eps": 1e-08}
+    paper = {
+        "robots": ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c"),
+        "mode": "descriptor",
+        "command_vx": 2.0,
+        "num_envs": 64,
+        "steps": 800,
+        "seed": 0,
+        "trunc_eps": 0.05,
+        "sigma_eps": 1e-08,
+    }
     assert diagnose_config(pipe.diagnose_cfg(pipe.cfg.robots)) == paper
     assert diagnose_config(et.trained_regime_diagnose_cfg(pipe)) == {**paper, "command_vx": 1.0}
 
@@ -272,8 +325,15 @@ def test_the_queue_evaluates_at_one_metre_per_second_as_the_seed0_runs_were():
     from morfic_cli.pipeline import _json
 
     assert _json(eval_config("runs/film-cpu-s1", et.trained_regime_cfg())) == {
-        "spec": "runs/film-cpu-s1", "robots": ["go2", "a1", "aliengo", "anymal_c", "b1", "go1", "mini_cheetah"],
-        "modes": ["descriptor"], "command_vx": [1.0], "num_envs": 64, "steps": 500, "seed": 0, "scene_envs": 4}
+        "spec": "runs/film-cpu-s1",
+        "robots": ["go2", "a1", "aliengo", "anymal_c", "b1", "go1", "mini_cheetah"],
+        "modes": ["descriptor"],
+        "command_vx": [1.0],
+        "num_envs": 64,
+        "steps": 500,
+        "seed": 0,
+        "scene_envs": 4,
+    }
 
 
 def test_a_run_retrained_under_its_name_replaces_the_lost_runs_rows_unless_its_weights_are_the_same(tmp_path):
@@ -289,10 +349,15 @@ def test_a_run_retrained_under_its_name_replaces_the_lost_runs_rows_unless_its_w
     # reference row goes, ppo's stays
     merged = et.merge_fixed_rows(path, [row("MC", 0, ""), row("film-cpu-s1", 0.45, "new")], cols, "intel")
     assert [(r["critic"], r["checkpoint"], r["samples"]) for r in merged] == [
-        ("MC", "", "amd"), ("ppo-cpu-s0", "p0", "amd"), ("MC", "", "intel"), ("film-cpu-s1", "new", "intel")]
+        ("MC", "", "amd"),
+        ("ppo-cpu-s0", "p0", "amd"),
+        ("MC", "", "intel"),
+        ("film-cpu-s1", "new", "intel"),
+    ]
     # ppo-cpu-s0 retrained bit for bit (same weights under checkpoint "p0b"): its reference row is kept beside the new
-    merged = et.merge_fixed_rows(path, [row("MC", 0, ""), row("ppo-cpu-s0", 0.36, "p0b")], cols, "intel",
-                                 same_weights=frozenset({"p0"}))
+    merged = et.merge_fixed_rows(
+        path, [row("MC", 0, ""), row("ppo-cpu-s0", 0.36, "p0b")], cols, "intel", same_weights=frozenset({"p0"})
+    )
     assert ("ppo-cpu-s0", "p0", "amd") in [(r["critic"], r["checkpoint"], r["samples"]) for r in merged]
 
 
@@ -302,18 +367,28 @@ def test_claim_c_is_judged_at_1_m_s_from_the_fixed_rollout_1_0_files(tmp_path):
     (tmp_path / "film-cpu-s0-eval-1.0.csv").write_text(EVAL_HEAD + "aliengo,descriptor,1.0,0.324,0.9,0.1,1.0,walks\n")
     cols = ["critic", "variant", "robot", "actor", "actor_variant", "flip", "cos_grad", "command_vx", "rollout"]
     # (flip, cos) per variant: 2.0 m/s film 0.40/0.30, ppo 0.45/0.20; 1.0 m/s film 0.20/0.70, ppo 0.30/0.50
-    for vx, values in ((2.0, {"film": (0.40, 0.30), "ppo": (0.45, 0.20)}),
-                       (1.0, {"film": (0.20, 0.70), "ppo": (0.30, 0.50)})):
+    for vx, values in (
+        (2.0, {"film": (0.40, 0.30), "ppo": (0.45, 0.20)}),
+        (1.0, {"film": (0.20, 0.70), "ppo": (0.30, 0.50)}),
+    ):
         rows = [{"critic": "MC", "variant": "mc", "flip": 0.0, "cos_grad": 1.0}]
-        rows += [{"critic": f"{v}-cpu-s{s}", "variant": v, "flip": f, "cos_grad": c}
-                 for v, (f, c) in values.items() for s in (0, 1)]
-        rows = [{**r, "robot": "aliengo", "actor": "film-cpu-s0", "actor_variant": "film", "command_vx": vx,
-                 "rollout": "r"} for r in rows]
+        rows += [
+            {"critic": f"{v}-cpu-s{s}", "variant": v, "flip": f, "cos_grad": c}
+            for v, (f, c) in values.items()
+            for s in (0, 1)
+        ]
+        rows = [
+            {**r, "robot": "aliengo", "actor": "film-cpu-s0", "actor_variant": "film", "command_vx": vx, "rollout": "r"}
+            for r in rows
+        ]
         et.write_csv(et.fixed_rollout_path(tmp_path, "aliengo", vx), rows, cols)
     assert [p.name for p in sorted(tmp_path.glob("fixed-rollout-*.csv"))] == [
-        "fixed-rollout-1.0-aliengo.csv", "fixed-rollout-aliengo.csv"]
-    (tmp_path / "film-cpu-s1-artifacts.json").write_text(json.dumps(
-        {"fixed_rollout": {"aliengo": "a" * 64}, et.fixed_rollout_key(1.0): {"aliengo": "b" * 64}}))
+        "fixed-rollout-1.0-aliengo.csv",
+        "fixed-rollout-aliengo.csv",
+    ]
+    (tmp_path / "film-cpu-s1-artifacts.json").write_text(
+        json.dumps({"fixed_rollout": {"aliengo": "a" * 64}, et.fixed_rollout_key(1.0): {"aliengo": "b" * 64}})
+    )
     fixed = rt.load_fixed(tmp_path)  # one row per command, robot and critic: MC and four critics at each command
     assert sorted(fixed.groupby("command_vx").size().to_dict().items()) == [(1.0, 5), (2.0, 5)]
     # each command's table pools its own seeds; the paper's columns at 2.0 only
@@ -332,10 +407,8 @@ def test_claim_c_is_judged_at_1_m_s_from_the_fixed_rollout_1_0_files(tmp_path):
     text = rt.render_claims(tmp_path)
     on2, on1 = text.split("### At 2.0 m/s")[1].split("### At 1.0 m/s")
     # 2.0: 0.40 - 0.45 = -0.05 Flip, 0.30 - 0.20 = +0.10 Cos; 1.0: 0.20 - 0.30 = -0.10, 0.70 - 0.50 = +0.20
-    assert ("aliengo: film - ppo Flip -0.050 [-0.050, -0.050] (n 2 vs 2, p 0, Holm 0); film - ppo Cos +0.100"
-            in on2)
-    assert ("aliengo: film - ppo Flip -0.100 [-0.100, -0.100] (n 2 vs 2, p 0, Holm 0); film - ppo Cos +0.200"
-            in on1)
+    assert "aliengo: film - ppo Flip -0.050 [-0.050, -0.050] (n 2 vs 2, p 0, Holm 0); film - ppo Cos +0.100" in on2
+    assert "aliengo: film - ppo Flip -0.100 [-0.100, -0.100] (n 2 vs 2, p 0, Holm 0); film - ppo Cos +0.200" in on1
     assert "`bbbbbbbbbbbb`" in on1 and "aaaaaaaaaaaa" not in on1
 
 
@@ -345,15 +418,27 @@ def test_the_1_0_fixed_rollout_is_the_papers_analysis_at_one_metre_per_second_an
 
     pipe = et.one_run_pipeline(Store(tmp_path / "store"), "concat", 1, "runs/concat-cpu-s1")
     # written out by hand: the paper's analysis on one robot (64 envs x 800 steps, eps 0.05), the command changed
-    paper = {"robots": ("aliengo",), "mode": "descriptor", "command_vx": 2.0, "num_envs": 64, "steps": 800,
-             "seed": 0, "trunc_eps": 0.05, "sigma_eps": 1e-08}
+    paper = {
+        "robots": ("aliengo",),
+        "mode": "descriptor",
+        "command_vx": 2.0,
+        "num_envs": 64,
+        "steps": 800,
+        "seed": 0,
+        "trunc_eps": 0.05,
+        "sigma_eps": 1e-08,
+    }
     assert diagnose_config(pipe.diagnose_cfg(("aliengo",))) == paper
     assert diagnose_config(pipe.diagnose_cfg(("aliengo",), 1.0)) == {**paper, "command_vx": 1.0}
     assert et.fixed_rollout_path(tmp_path, "b1").name == "fixed-rollout-b1.csv"
     assert et.fixed_rollout_path(tmp_path, "b1", 1.0).name == "fixed-rollout-1.0-b1.csv"
     assert (et.fixed_rollout_key(), et.fixed_rollout_key(1.0)) == ("fixed_rollout", "fixed_rollout-1.0")
-    for argv in (["--fixed-rollout-only", "--fixed-rollout-1.0-only"], ["--diagnosis-1.0-only", "--rescore"],
-                 ["--rescore"], ["--run-missing", "--rescore"]):
+    for argv in (
+        ["--fixed-rollout-only", "--fixed-rollout-1.0-only"],
+        ["--diagnosis-1.0-only", "--rescore"],
+        ["--rescore"],
+        ["--run-missing", "--rescore"],
+    ):
         with pytest.raises(SystemExit) as exit_:
             et.main(["concat-cpu-s1", *argv, "--store", str(tmp_path / "store")])
         assert exit_.value.code == 2, argv
@@ -368,19 +453,38 @@ def test_the_answer_and_the_readme_headline_are_written_from_the_verdicts(tmp_pa
     answer = rt.render_answer(tmp_path)
     assert "(2 variants x 2 seeds)" in answer
     assert "**At 2.0 m/s (the paper's command): (b) partly reversed; (a), (c), (d) and (e) cannot tell.**" in answer
-    assert "| (b) MorFiC-F transfers better than ppo, actor-only, concat | **partly reversed** | " \
-           "AlienGo film - ppo -0.51 [-0.51, -0.51] (Holm p 0, against the claim) at 2.0 m/s |" in answer
+    assert (
+        "| (b) MorFiC-F transfers better than ppo, actor-only, concat | **partly reversed** | "
+        "AlienGo film - ppo -0.51 [-0.51, -0.51] (Holm p 0, against the claim) at 2.0 m/s |" in answer
+    )
     assert "none: its test is over the robots, and seeds add no robots" in answer
     head = rt.render_headline(tmp_path)
-    assert head.startswith("- The paper's five claims on the trained policies (2 variants x 2 seeds, the `cpu` "
-                           "preset), read with Holm-corrected Welch and t-contrast tests over seeds: at 2.0 m/s (b) "
-                           "partly reversed; (a), (c), (d) and (e) cannot tell.")
+    assert head.startswith(
+        "- The paper's five claims on the trained policies (2 variants x 2 seeds, the `cpu` "
+        "preset), read with Holm-corrected Welch and t-contrast tests over seeds: at 2.0 m/s (b) "
+        "partly reversed; (a), (c), (d) and (e) cannot tell."
+    )
     readme, doc = tmp_path / "README.md", tmp_path / "results.md"
     readme.write_text(f"# x\n\n## What the experiment found\n\n{rt.HEADLINE_BEGIN}\nold\n{rt.HEADLINE_END}\nkept\n")
-    doc.write_text(f"{rt.BEGIN}\n{rt.END}\n{rt.CLAIMS_BEGIN}\n{rt.CLAIMS_END}\n{rt.WALK_BEGIN}\n{rt.WALK_END}\n"
-                   f"{rt.BUNDLES_BEGIN}\n{rt.BUNDLES_END}\n## The answer\n{rt.ANSWER_BEGIN}\nold\n{rt.ANSWER_END}\n")
-    assert rt.main(["--results", str(tmp_path), "--write", str(doc), "--readme", str(readme),
-                    "--bundles", str(tmp_path / "none")]) == 0
+    doc.write_text(
+        f"{rt.BEGIN}\n{rt.END}\n{rt.CLAIMS_BEGIN}\n{rt.CLAIMS_END}\n{rt.WALK_BEGIN}\n{rt.WALK_END}\n"
+        f"{rt.BUNDLES_BEGIN}\n{rt.BUNDLES_END}\n## The answer\n{rt.ANSWER_BEGIN}\nold\n{rt.ANSWER_END}\n"
+    )
+    assert (
+        rt.main(
+            [
+                "--results",
+                str(tmp_path),
+                "--write",
+                str(doc),
+                "--readme",
+                str(readme),
+                "--bundles",
+                str(tmp_path / "none"),
+            ]
+        )
+        == 0
+    )
     assert "old" not in readme.read_text() and readme.read_text().endswith(f"{rt.HEADLINE_END}\nkept\n")
     assert head in readme.read_text() and answer in doc.read_text()
 

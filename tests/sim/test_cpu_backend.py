@@ -29,9 +29,14 @@ def _backend(name: str = "go2", n: int = 4, *, template: bool = True, threads: i
 def _reset_home(backend: CpuBackend, height: float | None = None) -> None:
     n, p = backend.num_envs, backend.params()
     z = backend.robot.init_height if height is None else height
-    backend.reset_envs(torch.arange(n), torch.tensor([[0.0, 0.0, z]]).repeat(n, 1),
-                       torch.tensor([[1.0, 0.0, 0.0, 0.0]]).repeat(n, 1), torch.zeros(n, 6),
-                       p.default_joint_pos, torch.zeros(n, 12))
+    backend.reset_envs(
+        torch.arange(n),
+        torch.tensor([[0.0, 0.0, z]]).repeat(n, 1),
+        torch.tensor([[1.0, 0.0, 0.0, 0.0]]).repeat(n, 1),
+        torch.zeros(n, 6),
+        p.default_joint_pos,
+        torch.zeros(n, 12),
+    )
 
 
 def _stand(backend: CpuBackend, physics_steps: int) -> SimFrame:
@@ -63,10 +68,21 @@ def test_protocol_shapes_and_factory():
     assert backend.num_envs == 3 and backend.physics_dt == 0.005 and backend.morphology_mutable
     assert backend.device == torch.device("cpu")
     frame = backend.step(backend.params().default_joint_pos, DECIMATION)
-    shapes = {"base_pos_w": (3, 3), "base_quat_w": (3, 4), "base_lin_vel_w": (3, 3), "base_lin_vel_b": (3, 3),
-              "base_ang_vel_b": (3, 3), "joint_pos": (3, 12), "joint_vel": (3, 12), "joint_torque": (3, 12),
-              "foot_pos_w": (3, 4, 3), "foot_vel_w": (3, 4, 3), "foot_force_w": (3, 4, 3),
-              "body_contact_force": (3, len(CONTACT_BODIES)), "bad": (3,)}
+    shapes = {
+        "base_pos_w": (3, 3),
+        "base_quat_w": (3, 4),
+        "base_lin_vel_w": (3, 3),
+        "base_lin_vel_b": (3, 3),
+        "base_ang_vel_b": (3, 3),
+        "joint_pos": (3, 12),
+        "joint_vel": (3, 12),
+        "joint_torque": (3, 12),
+        "foot_pos_w": (3, 4, 3),
+        "foot_vel_w": (3, 4, 3),
+        "foot_force_w": (3, 4, 3),
+        "body_contact_force": (3, len(CONTACT_BODIES)),
+        "bad": (3,),
+    }
     for name, shape in shapes.items():
         assert tuple(getattr(frame, name).shape) == shape, name
     assert frame.bad.dtype == torch.bool and frame.joint_pos.dtype == torch.float32
@@ -80,8 +96,9 @@ def test_protocol_shapes_and_factory():
 
 def test_go2_template_stands_for_1000_physics_steps():
     backend = _backend("go2", 6)
-    descriptors = np.vstack([load_robot("go2").descriptor, TRAIN_MIN, TRAIN_MAX,
-                             sample_uniform(3, np.random.default_rng(0))])
+    descriptors = np.vstack(
+        [load_robot("go2").descriptor, TRAIN_MIN, TRAIN_MAX, sample_uniform(3, np.random.default_rng(0))]
+    )
     backend.set_morphology(torch.arange(6), torch.as_tensor(descriptors))
     _reset_home(backend)
     frame = _stand(backend, 1000)
@@ -133,9 +150,13 @@ def _scenario(threads: int, nan_env: int | None = None) -> list[SimFrame]:
     backend = _backend("go2", 5, threads=threads)
     rng = np.random.default_rng(7)
     backend.set_morphology(torch.arange(5), torch.as_tensor(sample_uniform(5, rng)))
-    backend.set_dynamics(torch.arange(5), torch.as_tensor(rng.uniform(0.5, 1.25, 5)),
-                         torch.as_tensor(rng.uniform(0.0, 0.4, 5)), torch.as_tensor(rng.uniform(-0.03, 0.03, (5, 3))),
-                         torch.as_tensor(rng.uniform(0.0, 0.2, (5, 12))))
+    backend.set_dynamics(
+        torch.arange(5),
+        torch.as_tensor(rng.uniform(0.5, 1.25, 5)),
+        torch.as_tensor(rng.uniform(0.0, 0.4, 5)),
+        torch.as_tensor(rng.uniform(-0.03, 0.03, (5, 3))),
+        torch.as_tensor(rng.uniform(0.0, 0.2, (5, 12))),
+    )
     _reset_home(backend)
     q0 = backend.params().default_joint_pos
     frames = []
@@ -181,26 +202,38 @@ def test_bad_targets_and_diverging_states_are_flagged():
     assert not backend.step(q0, DECIMATION).bad.any()  # restored to its home state
     # a freshly reset env (time 0) diverging in a single physics step is caught too
     p = backend.params()
-    backend.reset_envs(torch.tensor([2]), torch.tensor([[0.0, 0.0, 0.34]]), torch.tensor([[1.0, 0.0, 0.0, 0.0]]),
-                       torch.zeros(1, 6), p.default_joint_pos[2:], torch.zeros(1, 12))
+    backend.reset_envs(
+        torch.tensor([2]),
+        torch.tensor([[0.0, 0.0, 0.34]]),
+        torch.tensor([[1.0, 0.0, 0.0, 0.0]]),
+        torch.zeros(1, 6),
+        p.default_joint_pos[2:],
+        torch.zeros(1, 12),
+    )
     backend.state[2, backend._qvel0 + 8] = 1e12
     assert backend.step(q0, 1).bad.tolist() == [False, False, True]
     backend.close()
 
 
 def test_restitution_maps_to_the_damping_ratio_by_hand():
-    np.testing.assert_allclose(restitution_to_dampratio(np.array([0.0, math.exp(-math.pi), 1e-300])),
-                               [1.0, 1.0 / math.sqrt(2.0), 1.0], rtol=1e-3)
+    np.testing.assert_allclose(
+        restitution_to_dampratio(np.array([0.0, math.exp(-math.pi), 1e-300])),
+        [1.0, 1.0 / math.sqrt(2.0), 1.0],
+        rtol=1e-3,
+    )
     e = 0.3
-    assert restitution_to_dampratio(np.array(e)) == pytest.approx(-math.log(e) / math.sqrt(math.pi**2 + math.log(e)**2))
+    assert restitution_to_dampratio(np.array(e)) == pytest.approx(
+        -math.log(e) / math.sqrt(math.pi**2 + math.log(e) ** 2)
+    )
 
 
 def test_set_dynamics_changes_only_that_envs_model():
     backend = _backend("go2", 3)
     before = [m.__copy__() for m in backend.models]
     com = torch.tensor([[0.01, -0.02, 0.03]])
-    backend.set_dynamics(torch.tensor([1]), torch.tensor([0.6]), torch.tensor([math.exp(-math.pi)]), com,
-                         torch.full((1, 12), 0.15))
+    backend.set_dynamics(
+        torch.tensor([1]), torch.tensor([0.6]), torch.tensor([math.exp(-math.pi)]), com, torch.full((1, 12), 0.15)
+    )
     m0, m1, base = backend.models[0], backend.models[1], backend.info.base_body
     np.testing.assert_allclose(m1.geom_friction[:, 0], 0.6, rtol=1e-6)  # geom_friction is float32
     np.testing.assert_allclose(m1.geom_solref[:, 1], 1.0 / math.sqrt(2.0))
@@ -217,8 +250,9 @@ def test_set_dynamics_changes_only_that_envs_model():
     np.testing.assert_allclose(p.com_offset[1].numpy(), com[0].numpy(), rtol=1e-6)
     assert p.joint_friction[1].tolist() == pytest.approx([0.15] * 12) and p.joint_friction[0].abs().sum() == 0
     with pytest.raises(ValueError):
-        backend.set_dynamics(torch.tensor([0]), torch.tensor([1.0]), torch.tensor([1.0]), torch.zeros(1, 3),
-                             torch.zeros(1, 12))
+        backend.set_dynamics(
+            torch.tensor([0]), torch.tensor([1.0]), torch.tensor([1.0]), torch.zeros(1, 3), torch.zeros(1, 12)
+        )
     backend.close()
 
 
@@ -277,8 +311,14 @@ def test_body_contact_force_when_dropped_upside_down():
     n = 2
     p = backend.params()
     upside_down = torch.tensor([[0.0, 1.0, 0.0, 0.0]])  # 180 degrees about x
-    backend.reset_envs(torch.tensor([1]), torch.tensor([[0.0, 0.0, 0.3]]), upside_down, torch.zeros(1, 6),
-                       p.default_joint_pos[:1], torch.zeros(1, 12))
+    backend.reset_envs(
+        torch.tensor([1]),
+        torch.tensor([[0.0, 0.0, 0.3]]),
+        upside_down,
+        torch.zeros(1, 6),
+        p.default_joint_pos[:1],
+        torch.zeros(1, 12),
+    )
     peak = torch.zeros(n, len(CONTACT_BODIES))
     for _ in range(40):
         frame = backend.step(p.default_joint_pos, DECIMATION)

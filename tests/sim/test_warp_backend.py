@@ -58,8 +58,16 @@ STEP_TOL: dict[str, float] = {
 """Largest difference allowed after one policy step from the same state, per frame field (its units)."""
 
 RUN_TOL: dict[str, float] = {
-    "base_pos_w": 1e-3, "base_quat_w": 1e-3, "base_lin_vel_b": 1e-2, "base_ang_vel_b": 5e-2, "joint_pos": 2e-3,
-    "joint_vel": 5e-2, "joint_torque": 0.1, "foot_pos_w": 1e-3, "foot_vel_w": 2e-2, "foot_force_w": 1.0,
+    "base_pos_w": 1e-3,
+    "base_quat_w": 1e-3,
+    "base_lin_vel_b": 1e-2,
+    "base_ang_vel_b": 5e-2,
+    "joint_pos": 2e-3,
+    "joint_vel": 5e-2,
+    "joint_torque": 0.1,
+    "foot_pos_w": 1e-3,
+    "foot_vel_w": 2e-2,
+    "foot_force_w": 1.0,
     "body_contact_force": 1.0,
 }
 """Largest difference allowed over 25 free-running policy steps (0.5 s), per frame field (its units)."""
@@ -81,8 +89,12 @@ def _pair(robot: str, n: int, *, template: bool, seed: int = 0) -> tuple[WarpBac
         desc = lo + (hi - lo) * torch.rand(n, 11, generator=gen, dtype=torch.float64)
         for b in (warp, cpu):
             b.set_morphology(ids, desc)
-    dyn = (0.5 + 0.75 * torch.rand(n, generator=gen), 0.3 * torch.rand(n, generator=gen),
-           0.03 * (2 * torch.rand(n, 3, generator=gen) - 1), 0.1 * torch.rand(n, 12, generator=gen))
+    dyn = (
+        0.5 + 0.75 * torch.rand(n, generator=gen),
+        0.3 * torch.rand(n, generator=gen),
+        0.03 * (2 * torch.rand(n, 3, generator=gen) - 1),
+        0.1 * torch.rand(n, 12, generator=gen),
+    )
     for b in (warp, cpu):
         b.set_dynamics(ids, *dyn)
     p = cpu.params()
@@ -185,10 +197,21 @@ def test_per_world_morphology_really_differs_and_matches_mj_setconst():
         p = warp.params()
         torch.testing.assert_close(masses.double().cpu(), p.base_mass.cpu(), rtol=1e-6, atol=0)
         joints = torch.tensor(warp.info.joint_ids.reshape(-1))
-        torch.testing.assert_close(warp.fields["jnt_range"][:, joints].double().cpu(), p.joint_range.cpu(),
-                                   rtol=1e-6, atol=1e-7)
-        for name in ("joint_range", "default_joint_pos", "total_mass", "base_mass", "nominal_height", "friction",
-                     "restitution", "com_offset", "joint_friction", "descriptor"):
+        torch.testing.assert_close(
+            warp.fields["jnt_range"][:, joints].double().cpu(), p.joint_range.cpu(), rtol=1e-6, atol=1e-7
+        )
+        for name in (
+            "joint_range",
+            "default_joint_pos",
+            "total_mass",
+            "base_mass",
+            "nominal_height",
+            "friction",
+            "restitution",
+            "com_offset",
+            "joint_friction",
+            "descriptor",
+        ):
             torch.testing.assert_close(getattr(p, name).cpu(), getattr(cpu.params(), name), rtol=1e-12, atol=1e-12)
     finally:
         warp.close()
@@ -265,15 +288,18 @@ def test_factory_full_mode_and_bad_input():
             backend.push(torch.tensor([5]), torch.zeros(1, 2))
     finally:
         backend.close()
-    assert isinstance(make_backend(SimCfg(backend="gpu", device=DEVICE), load_robot("go2"), 1, template=True),
-                      WarpBackend)
+    assert isinstance(
+        make_backend(SimCfg(backend="gpu", device=DEVICE), load_robot("go2"), 1, template=True), WarpBackend
+    )
 
 
 @pytest.mark.slow
 def test_the_env_is_the_same_code_on_both_backends():
     """LocomotionEnv on warp vs cpu: same seed, same random draws, observations within the parity tolerance."""
-    envs = [LocomotionEnv(EnvCfg(num_envs=4, sim=SimCfg(num_threads=1, backend=b, device=d)), mode="train", seed=0)
-            for b, d in (("warp", DEVICE), ("cpu", "cpu"))]
+    envs = [
+        LocomotionEnv(EnvCfg(num_envs=4, sim=SimCfg(num_threads=1, backend=b, device=d)), mode="train", seed=0)
+        for b, d in (("warp", DEVICE), ("cpu", "cpu"))
+    ]
     try:
         gen = torch.Generator().manual_seed(0)
         for _ in range(10):
@@ -287,4 +313,3 @@ def test_the_env_is_the_same_code_on_both_backends():
     finally:
         for env in envs:
             env.close()
-

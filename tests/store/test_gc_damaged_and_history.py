@@ -101,8 +101,10 @@ def test_verify_detects_a_rewritten_or_truncated_history(store, case):
     _rewrite(store, lambda lines: TAMPER[case](lines, ids))
     report = store.verify()
     assert not report.ok
-    assert any("runs/h" in p and ("chain" in p or "truncated" in p or "rewritten" in p or "version" in p)
-               for p in report.problems), report.problems
+    assert any(
+        "runs/h" in p and ("chain" in p or "truncated" in p or "rewritten" in p or "version" in p)
+        for p in report.problems
+    ), report.problems
 
 
 def test_verify_detects_a_line_cut_short(store):

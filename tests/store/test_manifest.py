@@ -27,16 +27,23 @@ def store(tmp_path):
 
 
 def test_canonical_json_bytes_by_hand():
-    doc = build_manifest("table", created=CREATED, morfic_version="0.1.0", config={"b": 1, "a": [1.5, None]},
-                         files={"t.csv": FileEntry(id=CSV_ID, size=4)}, meta={"note": "café"})
+    doc = build_manifest(
+        "table",
+        created=CREATED,
+        morfic_version="0.1.0",
+        config={"b": 1, "a": [1.5, None]},
+        files={"t.csv": FileEntry(id=CSV_ID, size=4)},
+        meta={"note": "café"},
+    )
     assert canonical_json(doc) == EXPECTED
 
 
 def test_put_manifest_id_is_sha256_of_canonical_json(store, monkeypatch):
     monkeypatch.setattr("morfic_cli.store.utc_now", lambda: CREATED)
     monkeypatch.setattr("morfic_cli.store.__version__", "0.1.0")
-    mid = store.put_manifest("table", config={"b": 1, "a": [1.5, None]}, files={"t.csv": b"x,y\n"},
-                             meta={"note": "café"})
+    mid = store.put_manifest(
+        "table", config={"b": 1, "a": [1.5, None]}, files={"t.csv": b"x,y\n"}, meta={"note": "café"}
+    )
     assert mid == hashlib.sha256(EXPECTED).hexdigest()
     assert store.get_bytes(mid) == EXPECTED
     assert store.get_bytes(CSV_ID) == b"x,y\n"
@@ -47,8 +54,13 @@ def test_read_manifest_fields(store, tmp_path):
     path = tmp_path / "model.pt"
     path.write_bytes(b"weights")
     ckpt = store.put_manifest("checkpoint", files={"model.pt": path})
-    run = store.put_manifest("run", config={"variant": "film"}, inputs={"checkpoint": ckpt},
-                             files={"curves.csv": b"it,r\n0,1.0\n"}, meta={"seed": 0})
+    run = store.put_manifest(
+        "run",
+        config={"variant": "film"},
+        inputs={"checkpoint": ckpt},
+        files={"curves.csv": b"it,r\n0,1.0\n"},
+        meta={"seed": 0},
+    )
     m = store.read_manifest(run)
     assert isinstance(m, Manifest)
     assert (m.id, m.kind, m.schema) == (run, "run", 1)

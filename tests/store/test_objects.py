@@ -92,6 +92,7 @@ def test_missing_object_and_corruption_on_read(store):
 
 def test_rename_failure_leaves_no_object(store, monkeypatch):
     """A crash between temp write and rename: nothing visible, no temp left, store consistent."""
+
     def boom(src, dst):
         raise OSError(errno.EIO, "I/O error")
 

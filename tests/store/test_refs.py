@@ -33,8 +33,9 @@ def test_valid_ref_names(store, name):
     assert name in store.list_refs()
 
 
-@pytest.mark.parametrize("name", ["", "/runs", "runs/", "runs//x", "runs/../x", "a..b", "runs/x@1", "sp ace",
-                                  "runs/.", "é"])
+@pytest.mark.parametrize(
+    "name", ["", "/runs", "runs/", "runs//x", "runs/../x", "a..b", "runs/x@1", "sp ace", "runs/.", "é"]
+)
 def test_invalid_ref_names(store, name):
     (mid,) = _manifests(store, 1)
     with pytest.raises(StoreError, match="invalid ref name"):
@@ -176,8 +177,7 @@ WORKER = textwrap.dedent(
 def test_two_processes_appending_to_one_ref_lose_nothing(store, tmp_path):
     store.put_bytes(b"create the layout")
     go = tmp_path / "go"
-    procs = [subprocess.Popen([sys.executable, "-c", WORKER, str(store.root), tag, str(go)])
-             for tag in ("a", "b")]
+    procs = [subprocess.Popen([sys.executable, "-c", WORKER, str(store.root), tag, str(go)]) for tag in ("a", "b")]
     time.sleep(0.3)  # both interpreters are up and waiting
     go.touch()
     assert [p.wait(timeout=120) for p in procs] == [0, 0]

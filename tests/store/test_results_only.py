@@ -26,30 +26,56 @@ STATE = "trainer_state"
 def _run(store: Store, name: str) -> dict[str, str]:
     """runs/<name> -> one checkpoint (its state, weights, curve), its rollout (log, obs, figure) and evals/<name>."""
     ids = {}
-    ids["state"] = store.put_manifest("checkpoint", config={"role": "trainer-state"},
-                                      files={"trainer.json": b"{}", "trainer-tensors.pt": name.encode() * 3000})
-    ids["ckpt"] = store.put_manifest("checkpoint", config={"variant": "film"}, inputs={STATE: ids["state"]},
-                                     files={"model.pt": name.encode() * 1000, "curve.csv": f"it,{name}".encode(),
-                                            "curve.png": b"png" + name.encode()})
+    ids["state"] = store.put_manifest(
+        "checkpoint",
+        config={"role": "trainer-state"},
+        files={"trainer.json": b"{}", "trainer-tensors.pt": name.encode() * 3000},
+    )
+    ids["ckpt"] = store.put_manifest(
+        "checkpoint",
+        config={"variant": "film"},
+        inputs={STATE: ids["state"]},
+        files={
+            "model.pt": name.encode() * 1000,
+            "curve.csv": f"it,{name}".encode(),
+            "curve.png": b"png" + name.encode(),
+        },
+    )
     store.set_ref(f"runs/{name}", ids["ckpt"])
-    ids["rollout"] = store.put_manifest("rollout", config={"run": name}, inputs={"checkpoint": ids["ckpt"]},
-                                        files={"rollout.mcap": name.encode() * 2000, "obs.npz": name.encode() * 500,
-                                               "speed.png": b"speed" + name.encode()})
-    ids["eval"] = store.put_manifest("eval", config={"run": name},
-                                     inputs={"checkpoint": ids["ckpt"], "rollout/go2/descriptor/vx2": ids["rollout"]},
-                                     files={"eval.csv": f"robot\ngo2,{name}".encode()})
+    ids["rollout"] = store.put_manifest(
+        "rollout",
+        config={"run": name},
+        inputs={"checkpoint": ids["ckpt"]},
+        files={
+            "rollout.mcap": name.encode() * 2000,
+            "obs.npz": name.encode() * 500,
+            "speed.png": b"speed" + name.encode(),
+        },
+    )
+    ids["eval"] = store.put_manifest(
+        "eval",
+        config={"run": name},
+        inputs={"checkpoint": ids["ckpt"], "rollout/go2/descriptor/vx2": ids["rollout"]},
+        files={"eval.csv": f"robot\ngo2,{name}".encode()},
+    )
     store.set_ref(f"evals/{name}", ids["eval"])
     return ids
 
 
 def _diagnosis(store: Store, name: str, ckpt: str) -> tuple[str, str]:
     """A calibration diagnosis of one checkpoint with its diagnostic rollout -> (diagnosis, rollout)."""
-    rollout = store.put_manifest("rollout", config={"diag": name}, inputs={"checkpoint": ckpt},
-                                 files={"rollout.mcap": b"D" * 700 + name.encode(),
-                                        "obs.npz": b"O" * 300 + name.encode()})
-    diag = store.put_manifest("diagnosis", config={"specs": [name]},
-                              inputs={f"checkpoint/runs/{name}": ckpt, f"rollout/runs/{name}/go2": rollout},
-                              files={"calibration.csv": f"checkpoint\n{ckpt}".encode()})
+    rollout = store.put_manifest(
+        "rollout",
+        config={"diag": name},
+        inputs={"checkpoint": ckpt},
+        files={"rollout.mcap": b"D" * 700 + name.encode(), "obs.npz": b"O" * 300 + name.encode()},
+    )
+    diag = store.put_manifest(
+        "diagnosis",
+        config={"specs": [name]},
+        inputs={f"checkpoint/runs/{name}": ckpt, f"rollout/runs/{name}/go2": rollout},
+        files={"calibration.csv": f"checkpoint\n{ckpt}".encode()},
+    )
     return diag, rollout
 
 
@@ -61,16 +87,28 @@ def src(tmp_path):
     store.set_ref("diagnoses/calibration", a["diag"])
     b["diag"], b["drollout"] = _diagnosis(store, "b", b["ckpt"])
     store.set_ref("diagnoses/calibration", b["diag"])
-    fixed = store.put_manifest("diagnosis", config={"robot": "x"}, inputs={
-        "actor": a["ckpt"], "rollout": a["drollout"], "critic/runs/a": a["ckpt"], "critic/runs/b": b["ckpt"]},
-        files={"fixed_rollout.csv": b"critic\nMC"})
+    fixed = store.put_manifest(
+        "diagnosis",
+        config={"robot": "x"},
+        inputs={"actor": a["ckpt"], "rollout": a["drollout"], "critic/runs/a": a["ckpt"], "critic/runs/b": b["ckpt"]},
+        files={"fixed_rollout.csv": b"critic\nMC"},
+    )
     store.set_ref("diagnoses/fixed-rollout/x", fixed)
-    a["check"] = store.put_manifest("table", config={"check": "training-conditions"}, inputs={"checkpoint": a["ckpt"]},
-                                    files={"training_check.csv": b"vx\n1"})
+    a["check"] = store.put_manifest(
+        "table",
+        config={"check": "training-conditions"},
+        inputs={"checkpoint": a["ckpt"]},
+        files={"training_check.csv": b"vx\n1"},
+    )
     store.set_ref("checks/training-conditions/a", a["check"])
-    store.set_ref("tables/compare-baselines", store.put_manifest(  # made from the results: rebuilt by a report
-        "table", inputs={"checkpoint/a": a["ckpt"], "checkpoint/b": b["ckpt"], "eval/a": a["eval"],
-                         "eval/b": b["eval"]}, files={"t.csv": b"1"}))
+    store.set_ref(
+        "tables/compare-baselines",
+        store.put_manifest(  # made from the results: rebuilt by a report
+            "table",
+            inputs={"checkpoint/a": a["ckpt"], "checkpoint/b": b["ckpt"], "eval/a": a["eval"], "eval/b": b["eval"]},
+            files={"t.csv": b"1"},
+        ),
+    )
     store.ids = {"a": a, "b": b, "fixed": fixed}
     return store
 
@@ -81,8 +119,12 @@ def _members(path) -> tuple[dict, list[str], list[str], list[str]]:
         header = json.loads(tar.extractfile("morfic-export.json").read())
         names = tar.getnames()
     objects = sorted(n[8:10] + n[11:] for n in names if n.startswith("objects/"))
-    return (header, objects, sorted(n[10:] for n in names if n.startswith("manifests/")),
-            sorted(n[5:] for n in names if n.startswith("refs/")))
+    return (
+        header,
+        objects,
+        sorted(n[10:] for n in names if n.startswith("manifests/")),
+        sorted(n[5:] for n in names if n.startswith("refs/")),
+    )
 
 
 def _files(store: Store, oid: str, *names: str) -> list[str]:
@@ -101,8 +143,12 @@ def test_the_refs_of_a_runs_results_and_how_much_of_each_history(src):
     # calibration@1 only, the fixed rollout (it names a) whole; compare-baselines (a table made from the evals)
     # and b's run and evals stay out
     assert {name: [e.id for e in h] for name, h in got.items()} == {
-        "runs/a": [a["ckpt"]], "evals/a": [a["eval"]], "diagnoses/calibration": [a["diag"]],
-        "diagnoses/fixed-rollout/x": [src.ids["fixed"]], "checks/training-conditions/a": [a["check"]]}
+        "runs/a": [a["ckpt"]],
+        "evals/a": [a["eval"]],
+        "diagnoses/calibration": [a["diag"]],
+        "diagnoses/fixed-rollout/x": [src.ids["fixed"]],
+        "checks/training-conditions/a": [a["check"]],
+    }
     assert got["runs/a"][0].version == 1 and got["runs/a"][0].time == src.ref_history("runs/a")[-1].time
     assert got["diagnoses/calibration"] == src.ref_history("diagnoses/calibration")[:1]
     got = results_histories(src, ["runs/b"])
@@ -119,27 +165,56 @@ def test_a_results_only_bundle_leaves_out_weights_states_and_logs(src, tmp_path)
     # weights, a's curve (b's table stays: b is the run exported; its figure curve.png does not), every rollout log
     # and observation file (b's and a's eval rollouts are not reached: evals/a is not in), every rendered figure
     assert report.omitted == dict(sorted({a["state"]: STATE, b["state"]: STATE}.items()))
-    left_files = {**dict(zip(_files(src, a["ckpt"], "model.pt", "curve.csv", "curve.png"),
-                             ("model.pt", "curve.csv", "curve.png"), strict=True)),
-                  **dict(zip(_files(src, b["ckpt"], "model.pt", "curve.png"), ("model.pt", "curve.png"), strict=True)),
-                  **dict.fromkeys(_files(src, b["rollout"], "speed.png"), "speed.png")}
+    left_files = {
+        **dict(
+            zip(
+                _files(src, a["ckpt"], "model.pt", "curve.csv", "curve.png"),
+                ("model.pt", "curve.csv", "curve.png"),
+                strict=True,
+            )
+        ),
+        **dict(zip(_files(src, b["ckpt"], "model.pt", "curve.png"), ("model.pt", "curve.png"), strict=True)),
+        **dict.fromkeys(_files(src, b["rollout"], "speed.png"), "speed.png"),
+    }
     for rollout in (b["rollout"], a["drollout"], b["drollout"]):
         mcap, obs = _files(src, rollout, "rollout.mcap", "obs.npz")
         left_files |= {mcap: "rollout.mcap", obs: "obs.npz"}
     assert report.omitted_files == dict(sorted(left_files.items()))
-    assert header == {"format": 1, "morfic_version": header["morfic_version"], "objects": len(objects),
-                      "refs": refs, "omitted": report.omitted, "omitted_files": report.omitted_files}
+    assert header == {
+        "format": 1,
+        "morfic_version": header["morfic_version"],
+        "objects": len(objects),
+        "refs": refs,
+        "omitted": report.omitted,
+        "omitted_files": report.omitted_files,
+    }
     # what goes in: 9 manifests and their kept files, nothing else
-    manifests = sorted([a["ckpt"], b["ckpt"], b["rollout"], b["eval"], a["drollout"], b["drollout"], a["diag"],
-                        b["diag"], src.ids["fixed"]])
-    kept = [*_files(src, b["ckpt"], "curve.csv"), *_files(src, b["eval"], "eval.csv"),
-            *_files(src, a["diag"], "calibration.csv"), *_files(src, b["diag"], "calibration.csv"),
-            *_files(src, src.ids["fixed"], "fixed_rollout.csv")]
+    manifests = sorted(
+        [
+            a["ckpt"],
+            b["ckpt"],
+            b["rollout"],
+            b["eval"],
+            a["drollout"],
+            b["drollout"],
+            a["diag"],
+            b["diag"],
+            src.ids["fixed"],
+        ]
+    )
+    kept = [
+        *_files(src, b["ckpt"], "curve.csv"),
+        *_files(src, b["eval"], "eval.csv"),
+        *_files(src, a["diag"], "calibration.csv"),
+        *_files(src, b["diag"], "calibration.csv"),
+        *_files(src, src.ids["fixed"], "fixed_rollout.csv"),
+    ]
     assert markers == manifests and objects == sorted([*manifests, *kept])
     assert not set(objects) & (set(left_files) | set(report.omitted))
     assert report.bytes == sum(src.objects.size(oid) for oid in objects)
-    assert sum(src.objects.size(oid) for oid in left_files) == (2 * 1000 + 4 + 4 + 2000 + 500 + 2 * (701 + 301)
-                                                                + len(b"pngb") + len(b"speedb"))
+    assert sum(src.objects.size(oid) for oid in left_files) == (
+        2 * 1000 + 4 + 4 + 2000 + 500 + 2 * (701 + 301) + len(b"pngb") + len(b"speedb")
+    )
 
 
 def test_import_gives_the_same_refs_and_ids_and_every_walk_knows_the_gaps(src, tmp_path):
@@ -154,22 +229,24 @@ def test_import_gives_the_same_refs_and_ids_and_every_walk_knows_the_gaps(src, t
     assert _history(dst, "runs/b") == [(1, b["ckpt"], src.ref_history("runs/b")[-1].time)]
     for oid in (b["ckpt"], b["eval"], b["diag"], src.ids["fixed"]):
         assert dst.get_bytes(oid) == src.get_bytes(oid)
-    assert sorted(p.name for p in (dst.root / "shallow").iterdir()) == sorted([*report.omitted,
-                                                                                *report.omitted_files])
+    assert sorted(p.name for p in (dst.root / "shallow").iterdir()) == sorted([*report.omitted, *report.omitted_files])
     check = dst.verify()
     assert check.ok and check.omitted == 2 and check.omitted_files == len(report.omitted_files) == 12
     assert dst.gc(dry_run=False).removed == [] and dst.gc(dry_run=True).omitted == 14
     assert sorted(dst.omitted.ids()) == sorted([*report.omitted, *report.omitted_files])
     reached = walk(dst, [b["ckpt"]])
     model, curve_png = _files(src, b["ckpt"], "model.pt", "curve.png")
-    assert reached.absent == {b["state"]: STATE} and reached.absent_files == {model: "model.pt",
-                                                                              curve_png: "curve.png"}
+    assert reached.absent == {b["state"]: STATE} and reached.absent_files == {model: "model.pt", curve_png: "curve.png"}
     # what is there reads; what was left out says so
     assert dst.read_file("runs/b", "curve.csv") == b"it,b"
     assert dst.describe("runs/b")["omitted_files"] == {"curve.png": curve_png, "model.pt": model}
-    assert dst.omitted_files(dst.read_manifest(b["rollout"])) == dict(zip(
-        ("rollout.mcap", "obs.npz", "speed.png"), _files(src, b["rollout"], "rollout.mcap", "obs.npz", "speed.png"),
-        strict=True))
+    assert dst.omitted_files(dst.read_manifest(b["rollout"])) == dict(
+        zip(
+            ("rollout.mcap", "obs.npz", "speed.png"),
+            _files(src, b["rollout"], "rollout.mcap", "obs.npz", "speed.png"),
+            strict=True,
+        )
+    )
     for reader in (dst.read_file, dst.file_path):
         with pytest.raises(ArtifactNotFoundError, match="a results-only bundle left it out"):
             reader("runs/b", "model.pt")
@@ -204,8 +281,15 @@ def test_two_runs_bundles_import_in_either_order(src, tmp_path):
         dst = Store(tmp_path / f"dst-{order[0].stem}")
         statuses.append([dst.import_tar(p).refs["diagnoses/calibration"] for p in order])
         stores.append(dst)
-        assert dst.list_refs() == ["checks/training-conditions/a", "diagnoses/calibration",
-                                   "diagnoses/fixed-rollout/x", "evals/a", "evals/b", "runs/a", "runs/b"]
+        assert dst.list_refs() == [
+            "checks/training-conditions/a",
+            "diagnoses/calibration",
+            "diagnoses/fixed-rollout/x",
+            "evals/a",
+            "evals/b",
+            "runs/a",
+            "runs/b",
+        ]
         assert _history(dst, "diagnoses/calibration") == _history(src, "diagnoses/calibration")
         assert dst.verify().ok
     # a first: calibration@1, then b's bundle extends it; b first: a's bundle holds a prefix, unchanged
@@ -227,10 +311,13 @@ def test_a_weights_only_bundle_on_top_fills_the_weights(src, tmp_path):
     assert dst.is_omitted(b["state"]) and dst.verify().ok and dst.verify().omitted_files == 10
 
 
-@pytest.mark.parametrize(("spec", "needle"), [
-    ("rollouts/a", r"'rollouts/a' is neither \(it is a rollout artifact\): name the runs \(runs/NAME"),
-    ("runs/nope", "no ref 'runs/nope'"),
-])
+@pytest.mark.parametrize(
+    ("spec", "needle"),
+    [
+        ("rollouts/a", r"'rollouts/a' is neither \(it is a rollout artifact\): name the runs \(runs/NAME"),
+        ("runs/nope", "no ref 'runs/nope'"),
+    ],
+)
 def test_results_only_takes_runs_or_results(src, tmp_path, spec, needle):
     src.set_ref("rollouts/a", src.put_manifest("rollout", config={"x": 1}))
     before = listing(src.root)
@@ -251,23 +338,47 @@ def test_results_only_leaves_out_only_what_shallow_names():
     assert RESULTS_ONLY.roles == {STATE} and RESULTS_ONLY.files == {"model.pt", "rollout.mcap", "obs.npz", "curve.png"}
     assert RESULTS_ONLY.foreign_files == {"curve.csv"} and not RESULTS_ONLY.own and RESULTS_ONLY.figures
     kept = RESULTS_ONLY.keeping(frozenset({"k"}))
-    cases = {("k", "curve.csv", "checkpoint"): False, ("o", "curve.csv", "checkpoint"): True,
-             ("k", "model.pt", "checkpoint"): True, ("o", "eval.csv", "eval"): False,
-             ("k", "curve.png", "checkpoint"): True, ("r", "speed.png", "rollout"): True,
-             ("r", "speed.pdf", "rollout"): True, ("d", "ev.PNG", "diagnosis"): True,
-             ("d", "calibration.csv", "diagnosis"): False, ("m", "video.mp4", "media"): False,
-             ("p", "figures/ev.pdf", "report"): True, ("c", "x.png", "checkpoint"): False}
+    cases = {
+        ("k", "curve.csv", "checkpoint"): False,
+        ("o", "curve.csv", "checkpoint"): True,
+        ("k", "model.pt", "checkpoint"): True,
+        ("o", "eval.csv", "eval"): False,
+        ("k", "curve.png", "checkpoint"): True,
+        ("r", "speed.png", "rollout"): True,
+        ("r", "speed.pdf", "rollout"): True,
+        ("d", "ev.PNG", "diagnosis"): True,
+        ("d", "calibration.csv", "diagnosis"): False,
+        ("m", "video.mp4", "media"): False,
+        ("p", "figures/ev.pdf", "report"): True,
+        ("c", "x.png", "checkpoint"): False,
+    }
     assert {case: kept.leaves_out(*case) for case in cases} == cases
     assert not WEIGHTS_ONLY.leaves_out("r", "speed.png", "rollout")
 
 
 def test_only_results_figures_and_the_named_files_may_be_missing():
-    assert [omittable_file(k, n) for k, n in (("rollout", "speed.png"), ("diagnosis", "critic_study.png"),
-                                              ("eval", "x.gif"), ("report", "figures/ev.pdf"),
-                                              ("checkpoint", "curve.png"), ("table", "model.pt"))] == [True] * 6
-    assert [omittable_file(k, n) for k, n in (("checkpoint", "x.png"), ("media", "video.mp4"), ("table", "t.png"),
-                                              ("diagnosis", "calibration.csv"), ("rollout", "speed.png.csv"),
-                                              ("eval", "eval.csv"))] == [False] * 6
+    assert [
+        omittable_file(k, n)
+        for k, n in (
+            ("rollout", "speed.png"),
+            ("diagnosis", "critic_study.png"),
+            ("eval", "x.gif"),
+            ("report", "figures/ev.pdf"),
+            ("checkpoint", "curve.png"),
+            ("table", "model.pt"),
+        )
+    ] == [True] * 6
+    assert [
+        omittable_file(k, n)
+        for k, n in (
+            ("checkpoint", "x.png"),
+            ("media", "video.mp4"),
+            ("table", "t.png"),
+            ("diagnosis", "calibration.csv"),
+            ("rollout", "speed.png.csv"),
+            ("eval", "eval.csv"),
+        )
+    ] == [False] * 6
 
 
 # -- hand-made bundles: only the weight and log files may be left out, and only when the header says so ----------
@@ -278,35 +389,52 @@ _GONE = b"weights that are not in the bundle"
 
 def _file_bundle(path, name: str, omitted_files: object, *, hold: bool = False):
     """runs/evil -> a checkpoint naming the object of ``_GONE`` as file ``name`` (held in the tar with ``hold``)."""
-    ckpt = manifest_bytes(kind="checkpoint", files={name: {"id": oid_of(_GONE), "size": len(_GONE)},
-                                                    "curve.csv": {"id": oid_of(_CURVE), "size": len(_CURVE)}})
+    ckpt = manifest_bytes(
+        kind="checkpoint",
+        files={
+            name: {"id": oid_of(_GONE), "size": len(_GONE)},
+            "curve.csv": {"id": oid_of(_CURVE), "size": len(_CURVE)},
+        },
+    )
     blobs = [_CURVE, _GONE] if hold else [_CURVE]
     header = {"format": 1, "morfic_version": "0.1.0", "objects": 1 + len(blobs), "refs": ["runs/evil"]}
     if omitted_files is not None:
         header["omitted_files"] = omitted_files
-    return write_bundle(path, blobs=blobs, manifests=[ckpt], refs={"runs/evil": history_bytes([oid_of(ckpt)])},
-                        header=header), oid_of(ckpt)
+    return write_bundle(
+        path, blobs=blobs, manifests=[ckpt], refs={"runs/evil": history_bytes([oid_of(ckpt)])}, header=header
+    ), oid_of(ckpt)
 
 
 REFUSED = {
-    "a-file-name-that-may-not-be-left-out": (dict(name="eval.csv", omitted_files={oid_of(_GONE): "eval.csv"}),
-                                             "may only leave out curve.csv, curve.png, model.pt, obs.npz, rollout.mcap "
-                                             r"and rendered figures \(png/pdf/gif/mp4 of diagnosis, eval, report, "
-                                             r"rollout artifacts\) files"),
-    "declared-as-another-file": (dict(name="eval.csv", omitted_files={oid_of(_GONE): "model.pt"}),
-                                 "names the left-out file"),
+    "a-file-name-that-may-not-be-left-out": (
+        dict(name="eval.csv", omitted_files={oid_of(_GONE): "eval.csv"}),
+        "may only leave out curve.csv, curve.png, model.pt, obs.npz, rollout.mcap "
+        r"and rendered figures \(png/pdf/gif/mp4 of diagnosis, eval, report, "
+        r"rollout artifacts\) files",
+    ),
+    "declared-as-another-file": (
+        dict(name="eval.csv", omitted_files={oid_of(_GONE): "model.pt"}),
+        "names the left-out file",
+    ),
     "undeclared-gap": (dict(name="model.pt", omitted_files=None), "the export is incomplete"),
-    "declared-but-named-by-nothing": (dict(name="model.pt", omitted_files={oid_of(_GONE): "model.pt",
-                                                                           "cd" * 32: "obs.npz"}),
-                                      "no manifest in it names that file"),
-    "declared-yet-held": (dict(name="model.pt", omitted_files={oid_of(_GONE): "model.pt"}, hold=True),
-                          "yet it holds it"),
+    "declared-but-named-by-nothing": (
+        dict(name="model.pt", omitted_files={oid_of(_GONE): "model.pt", "cd" * 32: "obs.npz"}),
+        "no manifest in it names that file",
+    ),
+    "declared-yet-held": (
+        dict(name="model.pt", omitted_files={oid_of(_GONE): "model.pt"}, hold=True),
+        "yet it holds it",
+    ),
     "not-a-map": (dict(name="model.pt", omitted_files=[oid_of(_GONE)]), "invalid morfic-export.json"),
     # a figure may be left out of a result (rollout, eval, diagnosis, report), not of a checkpoint
-    "a-checkpoints-figure": (dict(name="x.png", omitted_files={oid_of(_GONE): "x.png"}),
-                             r"names the left-out file \w+ as 'x.png' \(a checkpoint artifact\), but only"),
-    "a-figure-label-that-is-no-plain-name": (dict(name="model.pt", omitted_files={oid_of(_GONE): "../x.png"}),
-                                             "as '../x.png', but a bundle may only leave out"),
+    "a-checkpoints-figure": (
+        dict(name="x.png", omitted_files={oid_of(_GONE): "x.png"}),
+        r"names the left-out file \w+ as 'x.png' \(a checkpoint artifact\), but only",
+    ),
+    "a-figure-label-that-is-no-plain-name": (
+        dict(name="model.pt", omitted_files={oid_of(_GONE): "../x.png"}),
+        "as '../x.png', but a bundle may only leave out",
+    ),
 }
 
 
@@ -334,12 +462,27 @@ def test_a_well_formed_results_only_bundle_imports(tmp_path):
 def test_a_results_figures_may_be_left_out_and_verify_counts_them(tmp_path):
     """A diagnosis whose ev.png the header lists as left out imports; verify counts the gap, gc keeps the rest."""
     table = b"robot,ev\ngo2,0.5\n"
-    diag = manifest_bytes(kind="diagnosis", files={"ev.png": {"id": oid_of(_GONE), "size": len(_GONE)},
-                                                   "calibration.csv": {"id": oid_of(table), "size": len(table)}})
-    header = {"format": 1, "morfic_version": "0.1.0", "objects": 2, "refs": ["diagnoses/calibration"],
-              "omitted_files": {oid_of(_GONE): "ev.png"}}
-    path = write_bundle(tmp_path / "d.tar", blobs=[table], manifests=[diag], header=header,
-                        refs={"diagnoses/calibration": history_bytes([oid_of(diag)])})
+    diag = manifest_bytes(
+        kind="diagnosis",
+        files={
+            "ev.png": {"id": oid_of(_GONE), "size": len(_GONE)},
+            "calibration.csv": {"id": oid_of(table), "size": len(table)},
+        },
+    )
+    header = {
+        "format": 1,
+        "morfic_version": "0.1.0",
+        "objects": 2,
+        "refs": ["diagnoses/calibration"],
+        "omitted_files": {oid_of(_GONE): "ev.png"},
+    }
+    path = write_bundle(
+        tmp_path / "d.tar",
+        blobs=[table],
+        manifests=[diag],
+        header=header,
+        refs={"diagnoses/calibration": history_bytes([oid_of(diag)])},
+    )
     store = Store(tmp_path / "s")
     assert store.import_tar(path).omitted_files == [oid_of(_GONE)]
     check = store.verify()
@@ -352,8 +495,9 @@ def test_a_results_figures_may_be_left_out_and_verify_counts_them(tmp_path):
 
 def test_cli_results_only_round_trip(run_cli, src, tmp_path):
     b = src.ids["b"]
-    code, out, err = run_cli("store", "export", "runs/b", "--results-only", "--out", str(tmp_path / "bundles"),
-                             "--store", str(src.root))
+    code, out, err = run_cli(
+        "store", "export", "runs/b", "--results-only", "--out", str(tmp_path / "bundles"), "--store", str(src.root)
+    )
     assert code == 0, err
     assert out == f"{tmp_path / 'bundles' / 'b.tar'}\n"
     left = "2 trainer state(s) and 12 weight, rollout-log, curve and figure file(s) left out"
@@ -364,14 +508,17 @@ def test_cli_results_only_round_trip(run_cli, src, tmp_path):
     code, _, err = run_cli("store", "verify", "--store", dst)
     assert code == 0 and "12 weight, rollout-log, curve and figure file(s) left out by a results-only import" in err
     code, out, _ = run_cli("store", "show", "runs/b", "--store", dst, "-f", "json")
-    assert code == 0 and json.loads(out)["omitted_files"] == dict(zip(
-        ("model.pt", "curve.png"), _files(src, b["ckpt"], "model.pt", "curve.png"), strict=True))
-    code, _, err = run_cli("store", "get", "runs/b", "--file", "model.pt", "--out", str(tmp_path / "got"),
-                           "--store", dst)
+    assert code == 0 and json.loads(out)["omitted_files"] == dict(
+        zip(("model.pt", "curve.png"), _files(src, b["ckpt"], "model.pt", "curve.png"), strict=True)
+    )
+    code, _, err = run_cli(
+        "store", "get", "runs/b", "--file", "model.pt", "--out", str(tmp_path / "got"), "--store", dst
+    )
     assert code == 1 and err.startswith("Error: file 'model.pt'") and "results-only bundle left it out" in err
     src.set_ref("rollouts/b", b["rollout"])  # neither a run nor a result
-    code, out, err = run_cli("store", "export", "rollouts/b", "--results-only", "--out", str(tmp_path / "x"),
-                             "--store", str(src.root))
+    code, out, err = run_cli(
+        "store", "export", "rollouts/b", "--results-only", "--out", str(tmp_path / "x"), "--store", str(src.root)
+    )
     assert code == 1 and out == ""
     assert err.startswith("Error: --results-only exports runs or results, and 'rollouts/b' is neither")
     assert not (tmp_path / "x").exists()

@@ -211,8 +211,11 @@ def test_export_path_is_dir_slash_name_and_refuses_to_overwrite(tmp_path):
 
     assert export_path(tmp_path / "new", ["runs/a"]) == tmp_path / "new" / "a.tar"
     assert not (tmp_path / "new").exists()  # nothing created before the export
-    assert export_path(tmp_path, ["runs/a"], "film") == export_path(tmp_path, ["runs/a"], "film.tar") \
+    assert (
+        export_path(tmp_path, ["runs/a"], "film")
+        == export_path(tmp_path, ["runs/a"], "film.tar")
         == tmp_path / "film.tar"
+    )
     (tmp_path / "a.tar").write_bytes(b"x")
     with pytest.raises(StoreError, match="exists; pass --force"):
         export_path(tmp_path, ["runs/a"])

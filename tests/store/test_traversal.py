@@ -12,11 +12,34 @@ from morfic_cli.report.build import write_out
 from morfic_cli.store import Store
 from morfic_cli.store.manifest import check_file_name, safe_join
 
-BAD = ["../../x", "/tmp/abs", "a/../../x", "..", ".", "", "a//b", "a\\b", "a\x00b", "c:x", "a" * 256,
-       "a/b/c/d/e", "x\n",
-       # not plain (issue 53): hidden parts, code Python runs from a folder on its path, odd characters
-       ".config/morfic/trusted-variants", "a/.hidden/b", ".trust-key", "sitecustomize.py", "x.PTH", "m.cpython-312.so",
-       "x y.csv", "-rf", "+x", "caf\u00e9.csv", "a\u202eb", "a\x9bb"]
+BAD = [
+    "../../x",
+    "/tmp/abs",
+    "a/../../x",
+    "..",
+    ".",
+    "",
+    "a//b",
+    "a\\b",
+    "a\x00b",
+    "c:x",
+    "a" * 256,
+    "a/b/c/d/e",
+    "x\n",
+    # not plain (issue 53): hidden parts, code Python runs from a folder on its path, odd characters
+    ".config/morfic/trusted-variants",
+    "a/.hidden/b",
+    ".trust-key",
+    "sitecustomize.py",
+    "x.PTH",
+    "m.cpython-312.so",
+    "x y.csv",
+    "-rf",
+    "+x",
+    "caf\u00e9.csv",
+    "a\u202eb",
+    "a\x9bb",
+]
 
 
 @pytest.mark.parametrize("name", BAD)

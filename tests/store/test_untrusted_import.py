@@ -32,8 +32,12 @@ def _one_file(size=len(DATA), **fields) -> dict:
 
 
 def _bundle(tmp_path, manifest: bytes, *, blobs=(DATA,), times=None):
-    return write_bundle(tmp_path / "b.tar", blobs=list(blobs), manifests=[manifest],
-                        refs={"runs/x": history_bytes([oid_of(manifest)], times)})
+    return write_bundle(
+        tmp_path / "b.tar",
+        blobs=list(blobs),
+        manifests=[manifest],
+        refs={"runs/x": history_bytes([oid_of(manifest)], times)},
+    )
 
 
 def _nan_meta() -> bytes:
@@ -62,10 +66,13 @@ HOSTILE = {
     "missing file object": lambda t: _bundle(t, manifest_bytes(**_one_file()), blobs=()),
     "ref at a blob": lambda t: write_bundle(t / "b.tar", blobs=[DATA], refs={"runs/x": history_bytes([oid_of(DATA)])}),
     "object bytes do not hash to the name": lambda t: write_bundle(
-        t / "b.tar", extra={f"objects/{'ab' * 1}/{'cd' * 31}": b"not that"},
-        header={"format": 1, "morfic_version": "0.1.0", "objects": 1, "refs": []}),
+        t / "b.tar",
+        extra={f"objects/{'ab' * 1}/{'cd' * 31}": b"not that"},
+        header={"format": 1, "morfic_version": "0.1.0", "objects": 1, "refs": []},
+    ),
     "header lies about refs": lambda t: write_bundle(
-        t / "b.tar", header={"format": 1, "morfic_version": "0.1.0", "objects": 0, "refs": ["runs/ghost"]}),
+        t / "b.tar", header={"format": 1, "morfic_version": "0.1.0", "objects": 0, "refs": ["runs/ghost"]}
+    ),
     "header is not JSON": lambda t: write_bundle(t / "b.tar", extra={"morfic-export.json": b"{nope"}),
     "symlink member": lambda t: _with_symlink(t / "b.tar"),
 }
@@ -129,8 +136,12 @@ def test_truncated_tar_is_an_error_not_a_traceback(local, tmp_path):
 def test_one_bad_ref_imports_no_ref_at_all(local, tmp_path):
     good = manifest_bytes(**_one_file())
     bad = manifest_bytes(kind="nosuch")
-    path = write_bundle(tmp_path / "b.tar", blobs=[DATA], manifests=[good, bad],
-                        refs={"runs/a": history_bytes([oid_of(good)]), "runs/z": history_bytes([oid_of(bad)])})
+    path = write_bundle(
+        tmp_path / "b.tar",
+        blobs=[DATA],
+        manifests=[good, bad],
+        refs={"runs/a": history_bytes([oid_of(good)]), "runs/z": history_bytes([oid_of(bad)])},
+    )
     with pytest.raises(StoreError, match="unknown kind"):
         local.import_tar(path)
     assert local.list_refs() == ["runs/keep"]
@@ -139,8 +150,12 @@ def test_one_bad_ref_imports_no_ref_at_all(local, tmp_path):
 def test_a_diverged_ref_imports_nothing(local, tmp_path):
     other = manifest_bytes(**_one_file())
     local_copy = Store(tmp_path / "src")
-    path = write_bundle(tmp_path / "b.tar", blobs=[DATA], manifests=[other],
-                        refs={"runs/keep": history_bytes([oid_of(other)]), "runs/new": history_bytes([oid_of(other)])})
+    path = write_bundle(
+        tmp_path / "b.tar",
+        blobs=[DATA],
+        manifests=[other],
+        refs={"runs/keep": history_bytes([oid_of(other)]), "runs/new": history_bytes([oid_of(other)])},
+    )
     before = listing(local.root)
     with pytest.raises(StoreError, match="diverged"):
         local.import_tar(path)

@@ -17,10 +17,14 @@ STATE = "trainer_state"
 
 def _checkpoint(store: Store, weights: bytes, tensors: bytes, curve: bytes) -> tuple[str, str]:
     """A training checkpoint as the runner writes one: weights + curve, input trainer_state -> (ckpt, state)."""
-    state = store.put_manifest("checkpoint", config={"role": "trainer-state"},
-                               files={"trainer.json": b'{"iteration": 1}', "trainer-tensors.pt": tensors})
-    ckpt = store.put_manifest("checkpoint", config={"variant": "film"}, inputs={STATE: state},
-                              files={"model.pt": weights, "curve.csv": curve})
+    state = store.put_manifest(
+        "checkpoint",
+        config={"role": "trainer-state"},
+        files={"trainer.json": b'{"iteration": 1}', "trainer-tensors.pt": tensors},
+    )
+    ckpt = store.put_manifest(
+        "checkpoint", config={"variant": "film"}, inputs={STATE: state}, files={"model.pt": weights, "curve.csv": curve}
+    )
     return ckpt, state
 
 
@@ -68,8 +72,13 @@ def test_weights_only_export_leaves_out_the_trainer_state_and_lists_it(src, ids,
     header, objects, markers = _members(tmp_path / "shallow.tar")
     weights = [ids["ckpt2"], _blob(src, ids["ckpt2"], "model.pt"), _blob(src, ids["ckpt2"], "curve.csv")]
     assert objects == sorted(weights) and markers == [ids["ckpt2"]]
-    assert header == {"format": 1, "morfic_version": header["morfic_version"], "objects": 3, "refs": ["runs/a"],
-                      "omitted": {ids["state2"]: STATE}}
+    assert header == {
+        "format": 1,
+        "morfic_version": header["morfic_version"],
+        "objects": 3,
+        "refs": ["runs/a"],
+        "omitted": {ids["state2"]: STATE},
+    }
     # the full export: the same plus the trainer state manifest and its two files; no "omitted" in its header
     full_header, full_objects, full_markers = _members(tmp_path / "full.tar")
     state_files = [_blob(src, ids["state2"], "trainer.json"), _blob(src, ids["state2"], "trainer-tensors.pt")]
@@ -205,26 +214,34 @@ def _ckpt_bundle(path, role: str, omitted: object, *, hold_state: bool = False):
     """
     state = manifest_bytes(kind="checkpoint", config={"role": "trainer-state"})
     state_id = oid_of(state) if hold_state else _STATE_ID
-    ckpt = manifest_bytes(kind="checkpoint", inputs={role: state_id},
-                          files={"model.pt": {"id": oid_of(_W), "size": len(_W)}})
+    ckpt = manifest_bytes(
+        kind="checkpoint", inputs={role: state_id}, files={"model.pt": {"id": oid_of(_W), "size": len(_W)}}
+    )
     manifests = [ckpt, state] if hold_state else [ckpt]
     header = {"format": 1, "morfic_version": "0.1.0", "objects": 1 + len(manifests), "refs": ["runs/evil"]}
     if isinstance(omitted, dict):
         header["omitted"] = {state_id if k is None else k: v for k, v in omitted.items()}
     elif omitted is not None:
         header["omitted"] = omitted
-    return write_bundle(path, blobs=[_W], manifests=manifests, refs={"runs/evil": history_bytes([oid_of(ckpt)])},
-                        header=header), oid_of(ckpt)
+    return write_bundle(
+        path, blobs=[_W], manifests=manifests, refs={"runs/evil": history_bytes([oid_of(ckpt)])}, header=header
+    ), oid_of(ckpt)
 
 
 REFUSED = {
-    "omitted-as-a-checkpoint": (dict(role="checkpoint", omitted={None: "checkpoint"}),
-                                "may only leave out trainer_state inputs"),
-    "declared-trainer-state-used-as-checkpoint": (dict(role="checkpoint", omitted={None: STATE}),
-                                                  "names the left-out input"),
+    "omitted-as-a-checkpoint": (
+        dict(role="checkpoint", omitted={None: "checkpoint"}),
+        "may only leave out trainer_state inputs",
+    ),
+    "declared-trainer-state-used-as-checkpoint": (
+        dict(role="checkpoint", omitted={None: STATE}),
+        "names the left-out input",
+    ),
     "undeclared-gap": (dict(role=STATE, omitted=None), "the export is incomplete"),
-    "declared-but-named-by-nothing": (dict(role=STATE, omitted={None: STATE, "cd" * 32: STATE}),
-                                      "no manifest in it names that input"),
+    "declared-but-named-by-nothing": (
+        dict(role=STATE, omitted={None: STATE, "cd" * 32: STATE}),
+        "no manifest in it names that input",
+    ),
     "declared-yet-held": (dict(role=STATE, omitted={None: STATE}, hold_state=True), "yet it holds it"),
     "omitted-not-a-map": (dict(role=STATE, omitted=[_STATE_ID]), "invalid morfic-export.json"),
 }
@@ -253,8 +270,9 @@ def test_a_well_formed_weights_only_bundle_imports(tmp_path):
 
 def test_cli_weights_only_round_trip(run_cli, src, ids, tmp_path):
     out = tmp_path / "s.tar"
-    code, _, err = run_cli("store", "export", "runs/a", "--latest", "--without-trainer-state", "--out", str(out),
-                           "--store", str(src.root))
+    code, _, err = run_cli(
+        "store", "export", "runs/a", "--latest", "--without-trainer-state", "--out", str(out), "--store", str(src.root)
+    )
     assert code == 0, err
     assert "3 objects" in err and "1 trainer state(s) left out" in err
     if out.is_dir():  # `--out` as the folder the tar goes into (issue 18b): DIR/a.tar
