@@ -1,11 +1,12 @@
 """Throughput benchmarks: the env against the raw-physics floor on the same models, in one run.
 
-Robustness on a shared machine (docs/benchmarks.md, "How bench measures"): the env (or a training iteration) and its
-physics floor are timed in alternation, repetition by repetition, so a burst of load from another process hits both
-sides of a ratio rather than one; results are medians over the repetitions with their spread (min, max), and the
-1-minute load average before and after is part of every result. A ratio above :data:`MAX_CREDIBLE_RATIO` (the env
-faster than its own physics, which it cannot be) is not reported: ``ratio`` is None, ``noisy`` is True and the CLI
-says to rerun on a quieter machine. :func:`compare_train` times two commits side by side, in alternating subprocesses.
+Robustness on a shared machine (docs/benchmarks.md, "How `morfic bench` measures"): the env (or a training
+iteration) and its physics floor are timed in alternation, repetition by repetition, so a burst of load from another
+process hits both sides of a ratio rather than one; results are medians over the repetitions with their spread
+(min, max), and the 1-minute load average before and after is part of every result. A ratio above
+:data:`MAX_CREDIBLE_RATIO` (the env faster than its own physics, which it cannot be) is not reported: ``ratio`` is
+None, ``noisy`` is True and the CLI says to rerun on a quieter machine. :func:`compare_train` times two commits side
+by side, in alternating subprocesses.
 """
 
 from __future__ import annotations

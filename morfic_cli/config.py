@@ -15,6 +15,10 @@ from __future__ import annotations
 import dataclasses
 import os
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 
 def _default_threads() -> int:
@@ -37,9 +41,9 @@ class SimCfg:
     simulates on it."""
 
 
-def to_dict(cfg: object) -> dict:
+def to_dict(cfg: DataclassInstance) -> dict:
     """A config as a plain, JSON-serialisable dict (nested dataclasses included)."""
-    return dataclasses.asdict(cfg)  # type: ignore[arg-type]
+    return dataclasses.asdict(cfg)
 
 
 @dataclass(frozen=True)

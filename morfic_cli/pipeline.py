@@ -16,6 +16,7 @@ The pipeline reports progress through a :class:`Progress` (the CLI draws it with
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from collections.abc import Callable
@@ -106,7 +107,7 @@ SHIPPED_TRAIN_PRESET = "cpu"
 #: 2.0 m/s) and its episode and diagnostic lengths, with 16 envs instead of 64 (at 16 envs a policy step costs
 #: little more than its fixed Python overhead, so fewer steps, not fewer envs, would be the real saving), the seven
 #: robots' 16 envs stepped as one batch of 112 (``batch_robots``: one policy call and one env step per step for all
-#: robots, about half the CPU time of seven rollouts of 16; docs/benchmarks.md).
+#: robots, about half the CPU time of seven rollouts of 16; docs/benchmarks-history.md).
 SHIPPED_PROTOCOL: dict[str, Any] = {
     "modes": ("descriptor",),
     "command_vx": (2.0,),
@@ -239,6 +240,12 @@ def _shipped_cfg(
     return base if full_protocol else dataclasses.replace(base, **SHIPPED_PROTOCOL)
 
 
+class _Stoppable(Protocol):
+    """A training run as the pipeline stops it (``rl.runner.TrainingRun``)."""
+
+    stop_requested: bool
+
+
 class Progress(Protocol):
     """What the pipeline tells its user: steps starting, advancing and ending."""
 
@@ -337,7 +344,7 @@ class Pipeline:
     ) -> None:
         self.store, self.cfg, self.out = store, cfg, out
         self.progress = progress or _Silent()
-        self._training = None
+        self._training: _Stoppable | None = None
         self._stop = False
         self.report_result: ReportResult | None = None
 
@@ -366,15 +373,15 @@ class Pipeline:
         steps: list[tuple[str, str, Callable[[], StepResult]]] = []
         for v, s, spec in runs:
             if self.cfg.bundles:
-                steps.append(("import", spec, lambda v=v, spec=spec: self.import_run(v, spec)))
+                steps.append(("import", spec, functools.partial(self.import_run, v, spec)))
             else:
-                steps.append(("train", spec, lambda v=v, s=s, spec=spec: self.train(v, s, spec)))
+                steps.append(("train", spec, functools.partial(self.train, v, s, spec)))
         for _, _, spec in runs:
-            steps.append(("eval", spec, lambda spec=spec: self.evaluate(spec)))
+            steps.append(("eval", spec, functools.partial(self.evaluate, spec)))
         for _, _, spec in runs:
-            steps.append(("diagnose", spec, lambda spec=spec: self.diagnose(spec)))
+            steps.append(("diagnose", spec, functools.partial(self.diagnose, spec)))
         for robot in self.cfg.fixed_rollout_robots:
-            steps.append(("fixed-rollout", robot, lambda robot=robot: self.fixed_rollout(robot)))
+            steps.append(("fixed-rollout", robot, functools.partial(self.fixed_rollout, robot)))
         if self.cfg.critic_study is not None or self.shipped_study() is not None:
             steps.append(("critic-study", STUDY_LABEL, self.critic_study))
         steps.append(("compare", "compare-baselines", self.compare))

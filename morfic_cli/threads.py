@@ -5,7 +5,7 @@ region a thread that has finished its share spins (busy-waits, up to ~300,000 it
 sleeps. On an idle machine that saves a wake-up; on a shared one it is ruinous: when another process holds one of the
 cores, the thread the others wait for is descheduled while they spin through their own time slices, and every one
 of the thousands of parallel regions in a PPO update pays for it. Measured on the 2-core development machine under
-a load average of ~10 (docs/benchmarks.md, "Competing load"): the cpu preset's PPO update took 31-36 s with the
+a load average of ~10 (docs/benchmarks-history.md, "Competing load"): the cpu preset's PPO update took 31-36 s with the
 default policy and 5-7 s with ``OMP_WAIT_POLICY=PASSIVE``.
 
 libgomp reads the variable once, when it is loaded (the first ``import torch``), so :func:`configure_openmp` must run

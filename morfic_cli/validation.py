@@ -32,7 +32,7 @@ MAX_ENVS = 65536
 
 #: Memory per training env on the CPU backend (MuJoCo model + data per env, observation histories,
 #: rollout storage): measured 0.69 MB/env (cpu preset, resident memory after one iteration: 193 MB
-#: at 64 envs, 500 MB at 512 envs; docs/benchmarks.md), rounded up.
+#: at 64 envs, 500 MB at 512 envs; docs/benchmarks-history.md, "Memory per env"), rounded up.
 TRAIN_BYTES_PER_ENV = 720 * 1024
 
 #: Memory per env of the env alone (``bench env``, evaluation): measured 0.36 MB/env (the same runs

@@ -4,7 +4,7 @@ Trains ITER (default 2) cpu-preset iterations of concat, seed 1, from the same s
 its matrix products computed in float32, float32, and bf16 with the native kernels (slow on a CPU without bf16
 kernels: ~1 minute per iteration on an AVX2-only 2-core EPYC). Prints each run's curve rows and how far the weights'
 change from the start differs from the native run's; writes the rows as JSON to OUT (default bf16_matmul_check.json).
-docs/benchmarks.md, "The fix: bf16 products computed in float32", quotes its output.
+docs/benchmarks-history.md, "The fix: bf16 products computed in float32", quotes its output.
 
 Usage: python scripts/bf16_matmul_check.py [ITER] [OUT]
 """

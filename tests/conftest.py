@@ -1,12 +1,33 @@
-"""Shared fixtures: every test gets its own store directory and never touches ./artifacts."""
+"""Shared fixtures (every test gets its own store directory and never touches ./artifacts) and the settings of the
+pytest-xdist workers that run the suite (pyproject.toml's addopts)."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
 import pytest
 from gl_probe import PROBE, probe_env
+
+#: Most workers pyproject.toml's `-n auto` starts: the suite is sized for 2 cores. PYTEST_XDIST_AUTO_NUM_WORKERS
+#: (xdist's own variable) or an explicit `-n N` chooses another count; `-n 0` runs serially.
+MAX_AUTO_WORKERS = 2
+
+WORKER = os.environ.get("PYTEST_XDIST_WORKER")  # "gw0", "gw1", ... in a pytest-xdist worker, else None
+if WORKER and "OMP_NUM_THREADS" not in os.environ:
+    # One OpenMP (torch) thread per worker, set before torch is imported: 2 workers x 2 threads would contend for
+    # 2 cores. Subprocesses inherit it. A test that wants more threads sets them itself.
+    os.environ["OMP_NUM_THREADS"] = "1"
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_auto_num_workers(config):
+    """`-n auto`: one worker per core, at most ``MAX_AUTO_WORKERS`` (None: xdist reads its variable)."""
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return max(1, min(MAX_AUTO_WORKERS, cores))
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -33,9 +54,17 @@ def _isolated_store(tmp_path, monkeypatch):
 @pytest.fixture(scope="session")
 def smoke_runs(tmp_path_factory):
     """The session's smoke-trained stores: ``smoke_runs.store(root, *calls)`` copies one to ``root``, trained once
-    per session for each distinct list of ``train_smoke_runs`` calls (tests/smoke_runs.py)."""
-    from smoke_runs import SmokeRuns
+    per session for each distinct list of ``train_smoke_runs`` calls (tests/smoke_runs.py).
 
+    Under pytest-xdist the workers share the templates: they live beside the workers' own temporary folders (the
+    session's folder, ``popen-gw0``'s parent), and the first worker that asks for one trains it under a lock.
+    """
+    from smoke_runs import SmokeRuns, fcntl
+
+    if WORKER and fcntl is not None:
+        root = tmp_path_factory.getbasetemp().parent / "smoke-templates"
+        root.mkdir(exist_ok=True)
+        return SmokeRuns(root)
     return SmokeRuns(tmp_path_factory.mktemp("smoke-templates"))
 
 

@@ -2,7 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import json
+import shutil
+from collections.abc import Iterator
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # Windows
+    fcntl = None
 
 from morfic_cli.store import Store
 
@@ -38,6 +48,10 @@ class SmokeRuns:
     ``root`` that no test sees; every request (the first included) gets its own ``shutil.copytree`` of it, so a
     test or module that writes into its store never reaches another's. Training is the slow part (about 8-20 s a
     run on 2 cores); a copy of a 20 MB store takes a fraction of a second.
+
+    ``root`` may be shared by the session's pytest-xdist workers (tests/conftest.py): a template's folder is named
+    by its calls and trained under a file lock, so the first worker to ask trains it and the others wait for it and
+    copy it. A worker that failed half-way leaves no ``fingerprint.json``: the next one trains it anew.
     """
 
     def __init__(self, root: Path) -> None:
@@ -51,11 +65,16 @@ class SmokeRuns:
             calls = ((("film",), 0, DEFAULT_NAME),)
         key = tuple((tuple(v), s, n) for v, s, n in calls)
         if key not in self.templates:
-            path = self.root / f"t{len(self.templates)}" / "store"
-            for variants, seed, name in key:
-                train_smoke_runs(path, variants, seed, name)
-            self.templates[key] = path
-            self.fingerprints[path] = _fingerprint(path)
+            folder = self.root / hashlib.sha256(repr(key).encode()).hexdigest()[:16]
+            with _locked(folder.with_suffix(".lock")):
+                done = folder / "fingerprint.json"
+                if not done.exists():
+                    shutil.rmtree(folder, ignore_errors=True)  # what a failed worker left
+                    for variants, seed, name in key:
+                        train_smoke_runs(folder / "store", variants, seed, name)
+                    done.write_text(json.dumps(_fingerprint(folder / "store")))
+            self.templates[key] = folder / "store"
+            self.fingerprints[folder / "store"] = [tuple(f) for f in json.loads(done.read_text())]
         path = self.templates[key]
         assert _fingerprint(path) == self.fingerprints[path], f"a test wrote into the smoke template {path}"
         return path
@@ -63,10 +82,24 @@ class SmokeRuns:
     def store(self, root: Path, *calls: SmokeCall) -> Store:
         """A fresh copy at ``root`` of the store ``train_smoke_runs`` makes with ``calls`` (default: film seed 0,
         ``runs/film-s0``)."""
-        import shutil
-
         shutil.copytree(self.template(*calls), root)
         return Store(root)
+
+
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on the file ``path`` (created if missing) across processes; a no-op without fcntl
+    (Windows), where tests/conftest.py gives each worker its own root."""
+    if fcntl is None:
+        yield
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 def _fingerprint(root: Path) -> list[tuple[str, int, int]]:
@@ -83,8 +116,6 @@ LEGACY_BUNDLE = Path(__file__).resolve().parents[1] / "artifacts" / "bundles" / 
 
 def copy_store(src: Path, tmp_path: Path, monkeypatch) -> Store:
     """A test's own copy of a module's smoke store at ``tmp_path/store``, made the default store (MORFIC_STORE)."""
-    import shutil
-
     root = tmp_path / "store"
     shutil.copytree(src, root)
     monkeypatch.setenv("MORFIC_STORE", str(root))

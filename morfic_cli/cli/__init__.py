@@ -21,7 +21,7 @@ from rich.markup import escape
 try:  # typer >= 0.2x vendors its own copy of click
     from typer._click import exceptions as _click_exc
 except ImportError:  # pragma: no cover - older typer depends on click
-    from click import exceptions as _click_exc
+    from click import exceptions as _click_exc  # type: ignore[no-redef, import-not-found, unused-ignore]
 
 from morfic_cli import __version__
 from morfic_cli.cli import (

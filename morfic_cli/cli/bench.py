@@ -88,7 +88,7 @@ def bench(
     Example: morfic bench train --preset cpu --iterations 2 --set ppo.use_mixed_precision=false
     """
     check_args(store=store, env_counts=envs if what is _options.Benchmark.env else None, steps=steps, seed=seed)
-    backend = backend.value
+    backend_name = backend.value
     if overrides and (what is not _options.Benchmark.train or compare is not None):
         raise MorficError("--set overrides the training config of `morfic bench train` (without --compare); drop it.")
     if what is _options.Benchmark.train:
@@ -96,10 +96,21 @@ def bench(
 
         trust_variants([variant])  # --variant names it on this command line: the user's consent to import it
         if compare is not None:
-            _compare_train(compare, preset.value, variant, iterations, rounds, seed, fmt, quiet, device.value, backend)
+            _compare_train(
+                compare, preset.value, variant, iterations, rounds, seed, fmt, quiet, device.value, backend_name
+            )
             return
         _bench_train(
-            preset.value, variant, iterations, seed, fmt, quiet, store, device.value, backend, list(overrides or [])
+            preset.value,
+            variant,
+            iterations,
+            seed,
+            fmt,
+            quiet,
+            store,
+            device.value,
+            backend_name,
+            list(overrides or []),
         )
         return
     if compare is not None:
@@ -112,7 +123,7 @@ def bench(
         raise MorficError(f"--envs must be comma-separated integers, got '{envs}'.") from exc
     if not counts or min(counts) < 1:
         raise MorficError(f"--envs must be positive integers, got '{envs}'.")
-    if backend == "cpu" and device != Device.cpu:
+    if backend_name == "cpu" and device != Device.cpu:
         raise MorficError("the cpu backend simulates on the CPU; use --backend warp with --device cuda.")
     if device == Device.cuda:
         from morfic_cli.sim.warp import warp_device
@@ -125,8 +136,10 @@ def bench(
     rows = []
     for n in counts:
         if not quiet:
-            info(f"bench env: {n} envs x {steps} steps on {backend} ({device.value}) ...")
-        rows.append(bench_env(n, steps, backend=backend, seed=seed, device=device.value, repeats=repeats).as_dict())
+            info(f"bench env: {n} envs x {steps} steps on {backend_name} ({device.value}) ...")
+        rows.append(
+            bench_env(n, steps, backend=backend_name, seed=seed, device=device.value, repeats=repeats).as_dict()
+        )
     artifact = write_bench_table(store, "env", rows)
     if fmt == OutputFormat.json and len(rows) == 1:
         emit_object(rows[0], fmt)
@@ -161,7 +174,7 @@ def _warn_noisy(rows: list[dict], what: str) -> None:
     from morfic_cli.benchmarks import MAX_CREDIBLE_RATIO
 
     for row in rows:
-        lo, hi = row.get("ratio_spread") or row.get("fraction_spread")
+        lo, hi = row.get("ratio_spread") or row["fraction_spread"]
         sys.stderr.write(
             f"Warning: bench {what} at {row['num_envs']} envs measured the env faster than its own physics floor "
             f"(ratio {lo:.2f}-{hi:.2f} over the repetitions, above {MAX_CREDIBLE_RATIO}), so no ratio is reported: "

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Annotated
 
@@ -131,7 +132,9 @@ def diagnose(
     if not command_vx == command_vx:  # NaN
         raise MorficError("--command-vx must be a number in m/s, e.g. 2.0.")
     st = Store(store)
-    settings = dict(mode=mode.value, command_vx=command_vx, num_envs=envs, steps=steps, seed=seed, trunc_eps=trunc_eps)
+    settings = functools.partial(
+        DiagnoseCfg, mode=mode.value, command_vx=command_vx, num_envs=envs, steps=steps, seed=seed, trunc_eps=trunc_eps
+    )
     if fixed_rollout is None:
         if actor is not None or critics is not None:
             raise MorficError(
@@ -148,7 +151,7 @@ def diagnose(
         names = parse_robot_list(robots)
         if not names:
             raise MorficError("--robots is empty; give 'all' or names such as go1,a1 (see `morfic robots ls`).")
-        cfg = DiagnoseCfg(robots=tuple(names), **settings)
+        cfg = settings(robots=tuple(names))
         _calibration(st, list(runs), cfg, out, fmt, quiet)
     else:
         if runs:
@@ -165,7 +168,7 @@ def diagnose(
             raise MorficError(
                 "--critics is empty; give runs such as runs/film-cpu-s0,runs/ppo-cpu-s0, or leave it out."
             )
-        cfg = DiagnoseCfg(robots=(robot,), **settings)
+        cfg = settings(robots=(robot,))
         _fixed(st, robot, actor, critic_specs, cfg, out, fmt, quiet)
 
 

@@ -176,7 +176,7 @@ def _check(st: Store, source: str, samples: int, quiet: bool, fmt: OutputFormat)
 
     result = check_export(st, source, samples=samples)
     meta = result.metadata
-    if not quiet and result.verification is not None:
+    if not quiet:
         info(f"check: {result.verification.summary()}")
     emit_object(
         {
@@ -185,7 +185,7 @@ def _check(st: Store, source: str, samples: int, quiet: bool, fmt: OutputFormat)
             "checkpoint": meta.get("checkpoint"),
             "format": meta.get("format"),
             "robot": meta.get("baked_robot"),
-            "verification": result.verification.to_dict() if result.verification is not None else None,
+            "verification": result.verification.to_dict(),
             "problems": result.problems,
         },
         fmt,

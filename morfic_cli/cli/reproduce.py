@@ -6,7 +6,7 @@ import signal
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -22,6 +22,12 @@ from morfic_cli.cli._options import (
 )
 from morfic_cli.cli._render import emit_object, info
 from morfic_cli.rl.variants import REPRODUCE_VARIANTS, VARIANTS
+
+if TYPE_CHECKING:  # rich is imported when a view opens (start-up time)
+    from rich.console import Console
+    from rich.live import Live
+    from rich.progress import Progress, TaskID
+    from rich.table import Table
 from morfic_cli.validation import check_args
 
 
@@ -342,10 +348,10 @@ class _View:
 
     def __init__(self, quiet: bool) -> None:
         self.quiet = quiet
-        self.bar = None
-        self.overall = None
-        self.current = None
-        self.console = None
+        self.bar: Progress | None = None
+        self.overall: TaskID | None = None
+        self.current: TaskID | None = None
+        self.console: Console | None = None
         self.done = 0
         self.total: int | None = None
         self.live = False
@@ -372,7 +378,7 @@ class _View:
         return self
 
     def step_start(self, index: int, total: int, label: str, units: int, unit: str) -> None:
-        if self.bar is None:
+        if self.bar is None or self.overall is None:
             return
         self.bar.update(self.overall, total=total, completed=self.done)
         if self.current is not None:
@@ -382,7 +388,7 @@ class _View:
     def step_advance(self, completed: int | None = None, advance: int = 0, detail: str = "") -> None:
         if self.bar is None or self.current is None:
             return
-        kwargs = {"detail": detail} if detail else {}
+        kwargs: dict[str, Any] = {"detail": detail} if detail else {}  # rich.Progress.update's task fields
         if completed is not None:
             self.bar.update(self.current, completed=completed, **kwargs)
         else:
@@ -393,13 +399,13 @@ class _View:
         if self.quiet:
             return
         line = _step_line(result)
-        if self.bar is not None:
+        if self.bar is not None and self.overall is not None:
             if self.current is not None:
                 self.bar.remove_task(self.current)
                 self.current = None
             self.bar.update(self.overall, completed=self.done)
             self.bar.console.print(line)
-        else:
+        elif self.console is not None:
             self.console.print(line, highlight=False)
 
     def __exit__(self, *exc) -> None:
@@ -421,7 +427,7 @@ class _RayView(_View):
 
     def __init__(self, quiet: bool) -> None:
         super().__init__(quiet)
-        self.live_view = None
+        self.live_view: Live | None = None
         self.run = None
 
     def __enter__(self) -> _RayView:
@@ -441,7 +447,7 @@ class _RayView(_View):
         if self.live_view is not None:
             self.live_view.update(self._table(run))
 
-    def _table(self, run):
+    def _table(self, run: Any) -> Table:
         from rich.table import Table
 
         counts: dict[str, int] = {}

@@ -201,6 +201,16 @@ def run_label(trained: TrainedModels, spec: str) -> str:
     return f"{name}@{spec.split('@', 1)[1]}" if "@" in spec else name
 
 
+def _times(on_step: Callable[[int], None], n: int) -> Callable[[int], None]:
+    """``on_step`` called ``n`` times per step: a batch of n robots' progress, one step each."""
+
+    def each(t: int) -> None:
+        for _ in range(n):
+            on_step(t)
+
+    return each
+
+
 def diagnose_runs(
     store: Store,
     specs: Sequence[str],
@@ -245,7 +255,7 @@ def diagnose_runs(
                 if joint is None:
                     if on_rollout_start is not None:
                         on_rollout_start(label, "+".join(cfg.batch))
-                    each = None if on_step is None else (lambda t: [on_step(t) for _ in cfg.batch])
+                    each = None if on_step is None else _times(on_step, len(cfg.batch))
                     joint = collect_batch(store, model, cfg, on_step=each)
                 samples = joint.pop(robot)
             else:
@@ -286,4 +296,4 @@ def diagnose_runs(
         meta={"runs": labels},
         files={"calibration.csv": rows_to_csv(rows, CALIBRATION_COLUMNS), "ev.png": png, "ev.pdf": pdf},
     )
-    return DiagnosisResult(rows, pub.id, CALIBRATION_REF, pub.version)
+    return DiagnosisResult(rows, pub.id, *pub.advanced())

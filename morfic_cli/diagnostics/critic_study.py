@@ -796,4 +796,4 @@ def run_study(
             "seconds": {k: round(v, 1) for k, v in seconds.items()},
         },
     )
-    return StudyResult(rows, fit_rows, pub.id, pub.version, seconds)
+    return StudyResult(rows, fit_rows, pub.id, pub.advanced()[1], seconds)

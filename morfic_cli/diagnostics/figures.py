@@ -169,8 +169,8 @@ def critic_study_plot(summary: Sequence[dict[str, Any]]):
                 color = f"C{k}"
                 face = color if mult.get(variant) else "white"
                 ax.errorbar(xs, ys, yerr=[lo, hi], fmt="none", ecolor=color, elinewidth=1.0, capsize=2)
-                for x, y, c in zip(xs, ys, clipped, strict=True):
-                    ax.plot([x], [y], marker="v" if c else "o", ms=5, mfc=face, mec=color, ls="none")
+                for px, py, below in zip(xs, ys, clipped, strict=True):
+                    ax.plot([px], [py], marker="v" if below else "o", ms=5, mfc=face, mec=color, ls="none")
             if metric == "ev":
                 ax.axhline(0.0, color="black", lw=0.6)
                 ax.set_ylim(-1.08, 1.05)

@@ -310,4 +310,4 @@ def fixed_rollout(
         files={"fixed_rollout.csv": rows_to_csv(rows, FIXED_ROLLOUT_COLUMNS)},
         meta={"actor": actor_label, "critics": [r["critic"] for r in rows[1:]]},
     )
-    return DiagnosisResult(rows, pub.id, ref_name, pub.version)
+    return DiagnosisResult(rows, pub.id, *pub.advanced())

@@ -163,7 +163,8 @@ def encode_obs(obs: dict[str, np.ndarray]) -> bytes:
         else:
             arrays[name] = np.ascontiguousarray(np.swapaxes(a, 0, 1))
     buf = io.BytesIO()
-    np.savez_compressed(buf, __aliases__=np.array(json.dumps(aliases)), **arrays)
+    # numpy's stub lets **kwds fill the keyword allow_pickle, so it refuses a dict of arrays here
+    np.savez_compressed(buf, __aliases__=np.array(json.dumps(aliases)), **arrays)  # type: ignore[arg-type]
     return buf.getvalue()
 
 
@@ -250,8 +251,9 @@ def collect_samples(
 
 def _reused(cfg: DiagnoseCfg, on_step: Callable[[int], None] | None) -> None:
     """Report a reused rollout's progress as complete at once (``cfg.steps`` calls)."""
-    for t in range(cfg.steps if on_step is not None else 0):
-        on_step(t)
+    if on_step is not None:
+        for t in range(cfg.steps):
+            on_step(t)
 
 
 def _diagnostic_rollouts(
@@ -301,11 +303,11 @@ def collect_batch(
     found = {robot: find_rollout(store, trained.checkpoint_id, c) for robot, c in configs.items()}
     if all(found.values()):
         _reused(cfg, on_step)
-        return {robot: load_samples(store, rid) for robot, rid in found.items()}
+        return {robot: load_samples(store, rid) for robot, rid in found.items() if rid}
     rollouts = _diagnostic_rollouts(trained, cfg, tuple(cfg.batch), on_step)
     return {
-        robot: load_samples(store, found[robot])
-        if found[robot]
+        robot: load_samples(store, rid)
+        if (rid := found[robot])
         else _store_samples(store, trained, rollouts.pop(robot), configs[robot], cfg)
         for robot in cfg.batch
     }

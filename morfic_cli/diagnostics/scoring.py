@@ -8,12 +8,16 @@ exactly the inputs it was trained on; the actor reads ``history`` (and ``morphol
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 from tensordict import TensorDict
 
 from morfic_cli.diagnostics.metrics import policy_gradient
+
+if TYPE_CHECKING:
+    from rsl_rl.models import MLPModel
 
 
 def batch_obs(obs: dict[str, np.ndarray], mask: np.ndarray | None = None) -> TensorDict:
@@ -47,7 +51,7 @@ def critic_values(critic: torch.nn.Module, obs: dict[str, np.ndarray], batch_siz
 
 
 def actor_gradients(
-    actor: torch.nn.Module,
+    actor: MLPModel,
     obs: dict[str, np.ndarray],
     actions: np.ndarray,
     mask: np.ndarray,

@@ -234,9 +234,9 @@ def claim_a(rows: Sequence[dict[str, Any]], command: float) -> dict[str, Any]:
     variants = list(dict.fromkeys(r["variant"] for r in rows))
     mult = {r["variant"]: group_of(r["multiplicative"]) for r in rows}  # None (a user's critic): in neither group
     sides = [[v for v in variants if mult[v] is g] for g in (True, False)]
-    per_robot = []
+    per_robot: list[dict[str, Any]] = []
     for robot in OOD_ROBOTS:
-        where = {"command_vx": command, "robot": robot}
+        where: dict[str, Any] = {"command_vx": command, "robot": robot}
         if not any(r["robot"] == robot and r["command_vx"] == command for r in rows):
             continue
         effect = contrast_effect(rows, "ev", *sides, **where)
@@ -253,10 +253,10 @@ def claim_a(rows: Sequence[dict[str, Any]], command: float) -> dict[str, Any]:
 def claim_c(rows: Sequence[dict[str, Any]], command: float) -> dict[str, Any]:
     """Claim (c) at ``command``: per robot film's Flip and CosGrad against every other critic's."""
     others = [v for v in dict.fromkeys(r["variant"] for r in rows) if v != FILM]
-    per_robot = []
+    per_robot: list[dict[str, Any]] = []
     for robot in FIXED_ROBOTS:
         film = {m: _values(rows, m, command_vx=command, robot=robot, variant=FILM) for m in ("flip", "cos_grad")}
-        pairs = []
+        pairs: list[dict[str, Any]] = []
         for other in others:
             flip = contrast_effect(rows, "flip", [other], [FILM], command_vx=command, robot=robot)
             cos = contrast_effect(rows, "cos_grad", [FILM], [other], command_vx=command, robot=robot)

@@ -20,7 +20,7 @@ class CommandRanges:
         yaw_rate: Yaw-rate range (rad/s).
     """
 
-    vx: tuple[float, float]
+    vx: tuple[float, float] | torch.Tensor
     vy: tuple[float, float]
     yaw_rate: tuple[float, float]
 
@@ -84,9 +84,9 @@ def widen_vx(ranges: CommandRanges, mean_tracking: float | torch.Tensor, cfg: Co
             ]
         )
         new = torch.where(torch.as_tensor(mean_tracking, device=vx.device) >= cfg.curriculum_threshold, wider, vx)
-        changed = (new != vx).any()
+        widened = (new != vx).any()
         vx.copy_(new)
-        return changed
+        return widened
     if mean_tracking < cfg.curriculum_threshold:
         return False
     lo = max(cfg.vx_limit[0], ranges.vx[0] - cfg.curriculum_step)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 from rsl_rl.env import VecEnv
@@ -85,7 +85,7 @@ class LocomotionEnv(VecEnv):
         self,
         cfg: EnvCfg,
         *,
-        mode: Mode = "train",
+        mode: str = "train",  # one of MODES (Mode), checked: modes come from the command line
         robot: str | Sequence[str] = TEMPLATE,
         seed: int = 0,
     ) -> None:
@@ -113,7 +113,7 @@ class LocomotionEnv(VecEnv):
             )
         self.cfg = cfg
         self.mode = mode
-        self.target: RobotSpec = load_robot(robot if per_env is None else per_env[0])
+        self.target: RobotSpec = load_robot(robot if isinstance(robot, str) else robot[0])
         self.spec: RobotSpec = self.target if mode == "full" else load_robot(TEMPLATE)
         self.num_envs = cfg.num_envs
         self.num_actions = NUM_JOINTS
@@ -132,7 +132,7 @@ class LocomotionEnv(VecEnv):
         if mode in TEMPLATE_MODES and per_env is None:
             desc = torch.as_tensor(as_descriptor(self.target.descriptor), dtype=torch.float64)
             self.backend.set_morphology(self._all_ids, desc.expand(self.num_envs, -1).clone())
-        elif mode in TEMPLATE_MODES:
+        elif mode in TEMPLATE_MODES and per_env is not None:
             specs = {name: load_robot(name) for name in dict.fromkeys(per_env)}
             desc = torch.stack(
                 [torch.as_tensor(as_descriptor(specs[name].descriptor), dtype=torch.float64) for name in per_env]
@@ -152,7 +152,7 @@ class LocomotionEnv(VecEnv):
     # ------------------------------------------------------------------ buffers
     def _alloc_buffers(self) -> None:
         n, h, dev = self.num_envs, O.history_frames(self.cfg.obs), self.device
-        f32 = {"dtype": torch.float32, "device": dev}
+        f32: dict[str, Any] = {"dtype": torch.float32, "device": dev}
         self._all_ids = torch.arange(n, device=dev)
         self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=dev)
         self.common_step_counter = 0
@@ -235,7 +235,7 @@ class LocomotionEnv(VecEnv):
         self._pool_foot_pos_b = torch.as_tensor(pool.nominal_foot_pos_b, dtype=torch.float32, device=dev)
         self.geometry_ids = torch.zeros(self.num_envs, dtype=torch.long, device=dev)
         """Each env's robot in :attr:`geometry_pool`. Shape: (N,)."""
-        f64 = {"dtype": torch.float64, "device": dev}
+        f64: dict[str, Any] = {"dtype": torch.float64, "device": dev}
         self._pool_kp = torch.tensor([r.kp for r in pool.robots], **f64)
         self._pool_kd = torch.tensor([r.kd for r in pool.robots], **f64)
         self._pool_geometry = torch.stack([torch.as_tensor(geometry_vector(r), **f64) for r in pool.robots])
@@ -328,7 +328,7 @@ class LocomotionEnv(VecEnv):
         self.joint_vel_prev = frame.joint_vel.float().clone()
         self.foot_vel_prev = frame.foot_vel_w.float().clone()
         log["/env/nonfinite_resets"] = self._nonfinite.double()
-        log["/curriculum/vx_max"] = self.command_ranges.vx[1].clone()
+        log["/curriculum/vx_max"] = torch.as_tensor(self.command_ranges.vx[1]).clone()  # the env's vx: a tensor
         extras = {"time_outs": time_outs, "log": log}
         return self._obs, reward, dones.to(torch.long), extras
 

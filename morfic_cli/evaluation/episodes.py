@@ -32,7 +32,7 @@ def first_episode_lengths(done: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         bool. Shapes: (N,), (N,).
     """
     done = np.asarray(done, dtype=bool)
-    ended = done.any(axis=0)
+    ended = np.asarray(done.any(axis=0))
     first = np.where(ended, done.argmax(axis=0) + 1, done.shape[0])
     return first.astype(np.int64), ended
 

@@ -201,8 +201,11 @@ def rollout_figure(
 
 def _number(row: dict[str, Any], key: str) -> float:
     """``row[key]`` as a float (NaN when empty or missing): eval rows come from CSV text or pandas."""
+    value = row.get(key)
+    if value is None:
+        return float("nan")
     try:
-        return float(row.get(key))
+        return float(value)
     except (TypeError, ValueError):
         return float("nan")
 

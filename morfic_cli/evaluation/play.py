@@ -116,6 +116,7 @@ def play(
     from morfic_cli.evaluation.rollout import rollout_env_cfg, step_record
     from morfic_cli.recording.rollout_log import ROLLOUT_FIELDS, RolloutLogWriter
     from morfic_cli.recording.scene import RolloutScene
+    from morfic_cli.sim.cpu import CpuBackend
 
     if cfg.viewer and not has_display():
         raise MorficError(
@@ -136,7 +137,9 @@ def play(
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, on_sigint) if in_main else None
     try:
-        models, info = env.backend.models[: cfg.num_envs], env.backend.info
+        backend = env.backend
+        assert isinstance(backend, CpuBackend)  # evaluation always simulates on the CPU backend (eval_env_cfg)
+        models, info = backend.models[: cfg.num_envs], backend.info
         scene = RolloutScene(models, range(len(models)), info.qpos_adr)
         nominal = env.params.nominal_height.float()
         obs = env.get_observations()

@@ -103,7 +103,9 @@ def write_rollout_log(path: Path, rollout: Rollout, metadata: dict[str, Any], sc
     from morfic_cli.recording.scene import RolloutScene
 
     n = min(scene_envs, len(rollout.models))
-    scene = RolloutScene(rollout.models[:n], range(n), rollout.qpos_adr) if n > 0 else None
+    scene = (
+        RolloutScene(rollout.models[:n], range(n), rollout.qpos_adr) if n > 0 and rollout.qpos_adr is not None else None
+    )
     a = rollout.arrays
     fields = (
         "base_pos",
@@ -126,6 +128,16 @@ def write_rollout_log(path: Path, rollout: Rollout, metadata: dict[str, Any], sc
     ) as log:
         for t in range(num_steps):
             log.write_step(t, (t + 1) * rollout.dt, {k: a[k][t] for k in fields})
+
+
+def _times(on_step: Callable[[int], None], n: int) -> Callable[[int], None]:
+    """``on_step`` called ``n`` times per step: a batch of n robots' progress, one step each."""
+
+    def each(t: int) -> None:
+        for _ in range(n):
+            on_step(t)
+
+    return each
 
 
 def evaluate(
@@ -181,7 +193,7 @@ def evaluate(
         if (mode, vx) not in joint:
             if on_rollout_start is not None:
                 on_rollout_start("+".join(cfg.robots), mode, vx)
-            each = None if on_step is None else (lambda t: [on_step(t) for _ in cfg.robots])
+            each = None if on_step is None else _times(on_step, len(cfg.robots))
             joint[(mode, vx)] = run_rollouts(
                 trained.actor,
                 trained.critic,
@@ -253,7 +265,7 @@ def evaluate(
             files={"eval.csv": rows_to_csv(rows, eval_columns())},
             meta={"run": run_name, "iteration": trained.meta.get("iteration")},
         )
-    return EvalResult(rows, pub.id, pub.ref, pub.version, rollouts)
+    return EvalResult(rows, pub.id, *pub.advanced(), rollouts)
 
 
 def parse_commands(text: str) -> tuple[float, ...]:

@@ -12,12 +12,16 @@ import copy
 import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from morfic_cli.config import EnvCfg, eval_env_cfg
 from morfic_cli.evaluation.metrics import TransferMetrics, env_outcomes, transfer_metrics
+
+if TYPE_CHECKING:
+    from rsl_rl.models import MLPModel
 
 #: Arrays a rollout records per step for all envs, with their per-env shapes (K = reward terms).
 RECORDED: dict[str, tuple[int, ...]] = {
@@ -172,8 +176,8 @@ def rollout_env_cfg(train_env: EnvCfg, num_envs: int, steps: int, command_vx: fl
 
 
 def run_rollout(
-    actor: torch.nn.Module,
-    critic: torch.nn.Module,
+    actor: MLPModel,
+    critic: MLPModel,
     train_env: EnvCfg,
     *,
     robot: str,
@@ -225,8 +229,8 @@ def run_rollout(
 
 
 def run_rollouts(
-    actor: torch.nn.Module,
-    critic: torch.nn.Module,
+    actor: MLPModel,
+    critic: MLPModel,
     train_env: EnvCfg,
     *,
     robots: Sequence[str],
@@ -248,7 +252,8 @@ def run_rollouts(
     differs from a rollout of the robot alone is the env's random draws (reset poses, gait phases, sampled actions
     come from one generator over the joint batch) and so the sampled start states, not their distribution. One
     robot is exactly :func:`run_rollout`. At 16 envs a policy step costs little more than its fixed Python and
-    model-call overhead, so seven robots in one batch cost about 3x one robot instead of 7x (docs/benchmarks.md).
+    model-call overhead, so seven robots in one batch cost about 3x one robot instead of 7x
+    (docs/benchmarks-history.md, "The shipped preset's quick protocol").
 
     Args:
         actor: Trained actor, as in :func:`run_rollout`.
@@ -319,9 +324,9 @@ def run_rollouts(
         env.close()
     arrays, kept_obs = rec, obs_rec
     out = {}
+    whole = len(robots) == 1  # else each robot's envs as views, no copies
     for k, robot in enumerate(robots):
         envs = slice(k * num_envs, (k + 1) * num_envs)
-        pick = (lambda a: a) if len(robots) == 1 else (lambda a, envs=envs: a[:, envs])  # views, no copies
         out[robot] = Rollout(
             robot,
             mode,
@@ -330,10 +335,10 @@ def run_rollouts(
             dt,
             term_names or [],
             descriptors[envs.start],
-            {key: pick(a) for key, a in arrays.items()},
+            {key: a if whole else a[:, envs] for key, a in arrays.items()},
             models[k],
             qpos_adr,
-            {g: pick(a) for g, a in kept_obs.items()},
+            {g: a if whole else a[:, envs] for g, a in kept_obs.items()},
         )
     return out
 

@@ -103,13 +103,13 @@ class CheckResult:
 
     source: str
     metadata: dict[str, Any]
-    verification: Verification | None
+    verification: Verification
     problems: list[str]
 
     @property
     def ok(self) -> bool:
         """No problems and a passed verification."""
-        return not self.problems and self.verification is not None and self.verification.ok
+        return not self.problems and self.verification.ok
 
 
 def export_ref(run: str, robot: str | None, fmt: str) -> str:

@@ -15,14 +15,17 @@ No dropout (eval copies) and no sampling: the output is what ``morfic eval`` app
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import torch
 import torch.nn as nn
 
-from morfic_cli.rl.models import MorficActor
+if TYPE_CHECKING:
+    from rsl_rl.models import MLPModel  # morfic's actors and the external baselines' (rl/models.py, rl/external.py)
 
 
-def _core(actor: MorficActor) -> nn.Module:
+def _core(actor: MLPModel) -> nn.Module:
     core = actor.as_onnx()
     core.eval()
     return core
@@ -31,7 +34,7 @@ def _core(actor: MorficActor) -> nn.Module:
 class DescriptorInputPolicy(nn.Module):
     """``(history, morphology) -> actions``. Shapes: (N, H, 48), (N, 11) -> (N, 12)."""
 
-    def __init__(self, actor: MorficActor) -> None:
+    def __init__(self, actor: MLPModel) -> None:
         super().__init__()
         self.core = _core(actor)
 
@@ -49,7 +52,10 @@ class FixedDescriptorPolicy(nn.Module):
             no morphology encoder (variant ``ppo``).
     """
 
-    def __init__(self, actor: MorficActor, morphology: np.ndarray | None) -> None:
+    if TYPE_CHECKING:  # for mypy only: TorchScript cannot read this module's string annotations
+        morphology: torch.Tensor  # buffer, (1, 11) or (1, 0)
+
+    def __init__(self, actor: MLPModel, morphology: np.ndarray | None) -> None:
         super().__init__()
         self.core = _core(actor)
         self.uses_morphology = actor.morphology_encoder is not None
@@ -74,6 +80,11 @@ class JointTargetPolicy(nn.Module):
         action_scale: Target = q0 + action_scale * a.
         action_clip: Actions are clipped to [-action_clip, action_clip] first.
     """
+
+    if TYPE_CHECKING:  # for mypy only: TorchScript cannot read this module's string annotations
+        default_joint_pos: torch.Tensor  # buffers, (1, 12) rad
+        joint_min: torch.Tensor
+        joint_max: torch.Tensor
 
     def __init__(
         self,

@@ -99,6 +99,8 @@ def to_onnx(
             dynamic_shapes=dynamic,
             optimize=True,
         )
+        if program is None:  # only the legacy (dynamo=False) exporter returns nothing
+            raise RuntimeError("torch.onnx.export(dynamo=True) returned no ONNX program")
         with tempfile.TemporaryDirectory(prefix="morfic-onnx-") as tmp:
             path = Path(tmp) / "policy.onnx"
             program.save(str(path), external_data=False)

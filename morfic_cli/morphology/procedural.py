@@ -37,6 +37,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
@@ -129,6 +130,10 @@ class GeometrySample:
         }
 
 
+@overload
+def _u(rng: np.random.Generator, bounds: tuple[float, float]) -> float: ...
+@overload
+def _u(rng: np.random.Generator, bounds: tuple[float, float], size: int) -> np.ndarray: ...
 def _u(rng: np.random.Generator, bounds: tuple[float, float], size: int | None = None) -> np.ndarray | float:
     lo, hi = bounds
     value = rng.uniform(lo, hi, size)

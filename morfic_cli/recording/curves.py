@@ -95,7 +95,9 @@ def curve_png(rows: Sequence[dict], title: str = "") -> bytes:
     main_rows = max(1, math.ceil(len(panels) / 3))
     fig = plt.figure(figsize=(14, 3.2 * main_rows + 1.9 * term_rows + (0.5 if title else 0)), constrained_layout=True)
     top, bottom = (
-        fig.subfigures(2, 1, height_ratios=[3.2 * main_rows, max(1.9 * term_rows, 0.01)]) if terms else (fig, None)
+        fig.subfigures(2, 1, squeeze=False, height_ratios=[3.2 * main_rows, max(1.9 * term_rows, 0.01)]).ravel()
+        if terms
+        else (fig, None)
     )
     axes = top.subplots(main_rows, 3, squeeze=False).ravel()
     for ax, (keys, label) in zip(axes, panels, strict=False):

@@ -98,14 +98,17 @@ class LiveView:
             )
 
         self._steps = channel(ROLLOUT_TOPIC, ROLLOUT_SCHEMA_NAME, self._codec.schema_data)
-        self._scene = self._tf = self._tf_static = None
+        # the scene's channels (scene, moving frames, static frames), with a scene only
+        self._scene_channels: tuple[foxglove.Channel, foxglove.Channel, foxglove.Channel] | None = None
         if scene is not None:
-            self._scene = channel(
-                SCENE_TOPIC, "foxglove.SceneUpdate", build_file_descriptor_set(SceneUpdate).SerializeToString()
-            )
             tf_schema = build_file_descriptor_set(FrameTransforms).SerializeToString()
-            self._tf = channel(TF_TOPIC, "foxglove.FrameTransforms", tf_schema)
-            self._tf_static = channel(TF_STATIC_TOPIC, "foxglove.FrameTransforms", tf_schema)
+            self._scene_channels = (
+                channel(
+                    SCENE_TOPIC, "foxglove.SceneUpdate", build_file_descriptor_set(SceneUpdate).SerializeToString()
+                ),
+                channel(TF_TOPIC, "foxglove.FrameTransforms", tf_schema),
+                channel(TF_STATIC_TOPIC, "foxglove.FrameTransforms", tf_schema),
+            )
         self._last_scene = -np.inf
 
     @property
@@ -130,21 +133,21 @@ class LiveView:
         """
         now = time.time_ns()
         arrays = check_step_data(data, self.num_envs, len(self.term_names))
-        if self.scene is not None:
+        if self.scene is not None and self._scene_channels is not None:
+            scene_ch, tf_ch, tf_static_ch = self._scene_channels
             if self._listener.wanted.is_set() or time.monotonic() - self._last_scene >= SCENE_REPEAT_S:
                 self._listener.wanted.clear()
                 self._last_scene = time.monotonic()
-                self._scene.log(self.scene.scene_update(now).SerializeToString(), log_time=now)
-                self._tf_static.log(self.scene.static_transforms(now).SerializeToString(), log_time=now)
+                scene_ch.log(self.scene.scene_update(now).SerializeToString(), log_time=now)
+                tf_static_ch.log(self.scene.static_transforms(now).SerializeToString(), log_time=now)
             qpos = self.scene.qpos(arrays["base_pos"], arrays["base_quat"], arrays["joint_pos"])
-            self._tf.log(self.scene.step_transforms(qpos, now).SerializeToString(), log_time=now)
+            tf_ch.log(self.scene.step_transforms(qpos, now).SerializeToString(), log_time=now)
         self._steps.log(self._codec.encode(step, time_s, arrays), log_time=now)
 
     def close(self) -> None:
         """Close the channels, the relay and the server."""
-        for ch in (self._steps, self._scene, self._tf, self._tf_static):
-            if ch is not None:
-                ch.close()
+        for ch in (self._steps, *(self._scene_channels or ())):
+            ch.close()
         try:
             self.relay.close()
         finally:

@@ -340,7 +340,7 @@ class RolloutLogWriter:
         log_time = round(time_s * 1e9)
         payload = self._codec.encode(step, time_s, arrays)
         self._writer.add_message(self._channel, log_time, payload, log_time, sequence=self._count)
-        if self.scene is not None:
+        if self.scene is not None and self._tf is not None:
             qpos = self.scene.qpos(arrays["base_pos"], arrays["base_quat"], arrays["joint_pos"])
             tf = self.scene.step_transforms(qpos, log_time).SerializeToString()
             self._writer.add_message(self._tf, log_time, tf, log_time, sequence=self._count + 1)

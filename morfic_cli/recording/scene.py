@@ -91,7 +91,9 @@ class RolloutScene:
             Shape: (12,).
     """
 
-    def __init__(self, models: Sequence[mujoco.MjModel], env_ids: Sequence[int], qpos_adr: Sequence[int]) -> None:
+    def __init__(
+        self, models: Sequence[mujoco.MjModel], env_ids: Sequence[int], qpos_adr: Sequence[int] | np.ndarray
+    ) -> None:
         if len(models) != len(env_ids) or not models:
             raise ValueError(f"need one model per scene env, got {len(models)} models for env ids {list(env_ids)}")
         self.models = list(models)
@@ -171,8 +173,8 @@ class RolloutScene:
                     timestamp=stamp,
                     parent_frame_id=parent,
                     child_frame_id=child,
-                    translation={"x": t[0], "y": t[1], "z": t[2]},
-                    rotation={"w": q[0], "x": q[1], "y": q[2], "z": q[3]},
+                    translation=Vector3(x=t[0], y=t[1], z=t[2]),
+                    rotation=Quaternion(w=q[0], x=q[1], y=q[2], z=q[3]),
                 )
                 for (parent, child), t, q in zip(env_names, ts, qs, strict=True)
             ]

@@ -423,7 +423,7 @@ def find_ffmpeg() -> str | None:
     None when the ``morfic[video]`` extra (imageio-ffmpeg) is not installed or finds no ffmpeg: videos are GIFs.
     """
     try:
-        import imageio_ffmpeg  # type: ignore[import-not-found]
+        import imageio_ffmpeg
 
         return imageio_ffmpeg.get_ffmpeg_exe()
     except Exception:  # not installed, or installed without a binary and none on PATH
@@ -436,7 +436,7 @@ def _encode_mp4(frames: np.ndarray, fps: float) -> bytes:
     yuv420p needs an even width and height: an odd edge is padded by repeating the last row / column (no
     resampling).
     """
-    import imageio_ffmpeg  # type: ignore[import-not-found]
+    import imageio_ffmpeg
 
     n, h, w, _ = frames.shape
     frames = np.pad(frames, ((0, 0), (0, h % 2), (0, w % 2), (0, 0)), mode="edge")

@@ -30,7 +30,7 @@ import ipaddress
 import json
 import logging
 import threading
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 
 SDK_SUBPROTOCOL = "foxglove.sdk.v1"
 """The subprotocol ``foxglove-sdk``'s server accepts."""
@@ -413,6 +413,7 @@ class SubprotocolRelay:
     async def _serve(self, host: str, port: int):
         from websockets.asyncio.server import ServerConnection, serve
         from websockets.protocol import State
+        from websockets.typing import Subprotocol
 
         relay = self
 
@@ -453,8 +454,8 @@ class SubprotocolRelay:
                     if self.protocol.state is not State.OPEN:
                         relay._busy -= 1
 
-        def select(connection, offered: list[str]) -> str | None:
-            return next((p for p in SUBPROTOCOLS if p in offered), None)
+        def select(connection, offered: Sequence[Subprotocol]) -> Subprotocol | None:
+            return next((Subprotocol(p) for p in SUBPROTOCOLS if p in offered), None)
 
         def check(connection, request):
             if "websocket" not in request.headers.get("Upgrade", "").lower():
@@ -475,7 +476,7 @@ class SubprotocolRelay:
             self._relay,
             host,
             port,
-            subprotocols=list(SUBPROTOCOLS),
+            subprotocols=[Subprotocol(p) for p in SUBPROTOCOLS],
             select_subprotocol=select,
             process_request=check,
             compression=None,
@@ -500,13 +501,14 @@ class SubprotocolRelay:
         from websockets.asyncio.client import connect
         from websockets.exceptions import ConnectionClosed
         from websockets.protocol import State
+        from websockets.typing import Subprotocol
 
         state = _Client(_peer(client), Outbox(self.backlog_bytes))
         self.clients.add(state)
         try:
             upstream = await connect(
                 self.upstream,
-                subprotocols=[SDK_SUBPROTOCOL],
+                subprotocols=[Subprotocol(SDK_SUBPROTOCOL)],
                 compression=None,
                 max_size=None,
                 ping_interval=None,
@@ -545,7 +547,7 @@ class SubprotocolRelay:
                 await _close_upstream(upstream)
         finally:
             self.clients.discard(state)
-        bad = next((t.exception() for t in done if isinstance(t.exception(), _BadClient)), None)
+        bad = next((e for e in (t.exception() for t in done) if isinstance(e, _BadClient)), None)
         if bad is not None:
             self.report(client, f"{bad.reason} -> close {bad.code}")
             await self._close_client(client, bad.code, one_line(bad.reason, 120))

@@ -490,12 +490,12 @@ def render(
             md.append((s.heading, body))
         if figures:
             fixed = [n for n in figures if not n.startswith(SPEED_PREFIX)]
-            body = [f"![{FIGURES[n]}](figures/{n}.png)\n\n*{FIGURES[n]}*\n" for n in fixed]
+            shown = [f"![{FIGURES[n]}](figures/{n}.png)\n\n*{FIGURES[n]}*\n" for n in fixed]
             for run, names in _speed_groups([n for n in figures if n.startswith(SPEED_PREFIX)], run_names).items():
-                body.append(
+                shown.append(
                     " ".join(f"![{n}](figures/{n}.png)" for n in names) + f"\n\n*{SPEED_CAPTION.format(run=run)}*\n"
                 )
-            md.append(("Figures", "\n".join(body)))
+            md.append(("Figures", "\n".join(shown)))
         table = ["| kind | ref | id | role |", "|---|---|---|---|"]
         table += [f"| {p['kind']} | {p['ref'] or '-'} | `{p['id']}` | {p['role']} |" for p in prov_rows]
         md.append(("Provenance", "Every artifact this report was built from:\n\n" + "\n".join(table)))
@@ -644,7 +644,7 @@ def build_report(
         )
     else:
         pub = store.publish("report", ref, config=config, inputs=inputs, reuse=True)
-    existing, version, reused = pub.id, pub.version, pub.reused
+    existing, version, reused = pub.id, pub.advanced()[1], pub.reused
     manifest = store.read_manifest(existing)
     result = ReportResult(
         existing,

@@ -451,7 +451,9 @@ def claim_c(fixed: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) 
         for r in at_command(fixed, command_vx)
         if r.get("variant") in STOCK and r.get("actor_variant") == FIXED_ROLLOUT_ACTOR
     ]
-    comps, beside, notes = [], [], {}
+    comps: list[Comparison] = []
+    beside: list[Comparison] = []
+    notes: dict[str, str] = {}
     for robot in FIXED_ROBOTS:
         flip, cos = per_seed(rows, "flip", robot), per_seed(rows, "cos_grad", robot)
         for v in (v for v in STOCK if v != "film"):
@@ -503,8 +505,8 @@ def claim_c(fixed: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) 
 
 def paper_spread(robot: str) -> float | None:
     """The max - min of the paper's v_x over its multiplicative variants at 2.0 m/s on ``robot`` (None: none)."""
-    vals = [paper.transfer_values(v, robot, PAPER_COMMAND)["vx"] for v in MULTIPLICATIVE]
-    vals = [x for x in vals if x is not None]
+    printed = [paper.transfer_values(v, robot, PAPER_COMMAND)["vx"] for v in MULTIPLICATIVE]
+    vals = [x for x in printed if x is not None]
     return max(vals) - min(vals) if len(vals) >= 2 else None
 
 
@@ -588,7 +590,7 @@ def claim_e(evals: Sequence[dict[str, Any]], command_vx: float = PAPER_COMMAND) 
         "descriptor mode)."
     )
     rows = with_speed_kept(at_command(evals, command_vx, "descriptor"))
-    dist = {}
+    dist: dict[str, float] = {}
     for r in rows:
         if r.get("d") not in (None, ""):
             dist.setdefault(r["robot"], float(r["d"]))

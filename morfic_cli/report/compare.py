@@ -446,9 +446,9 @@ def add_paper_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             src = paper.transfer_source(row["variant"], row["command_vx"]) if row["mode"] == "descriptor" else None
             values = paper.transfer_values(row["variant"], row["robot"], row["command_vx"]) if src else {}
             extra = {f"paper_{k}": values.get(k) for k in ("vx", "vx_std", "survival")}
-            found = src is not None and row["robot"] in src.rows
-            extra["paper_quantity"] = paper.speed_quantity(src) if found else None
-            extra["paper_table"] = src.label if found else None
+            found = src if src is not None and row["robot"] in src.rows else None
+            extra["paper_quantity"] = paper.speed_quantity(found) if found is not None else None
+            extra["paper_table"] = found.label if found is not None else None
         elif table == "calibration":
             source, values = external_critic_values(row["variant"], row["robot"])
             values = values if is_paper_command(row_command(row)) else dict.fromkeys(values)

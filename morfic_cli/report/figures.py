@@ -100,13 +100,10 @@ def distance_plot(transfer: Sequence[dict[str, Any]], *, command_vx: float = 2.0
     if with_paper:
         d_of = {r["robot"]: float(r["d"]) for r in sel}
         for j, variant in enumerate(("ppo", "film")):
-            pts = [
-                (d_of[robot], paper.transfer_values(variant, robot, command_vx)["vx"])
-                for robot in d_of
-                if paper.transfer_values(variant, robot, command_vx)["vx"] is not None
-            ]
-            if pts:
-                xs, ys = zip(*pts, strict=True)
+            printed = {robot: paper.transfer_values(variant, robot, command_vx)["vx"] for robot in d_of}
+            marks = [(d_of[robot], vx) for robot, vx in printed.items() if vx is not None]
+            if marks:
+                xs, ys = zip(*marks, strict=True)
                 ax.scatter(
                     xs,
                     ys,

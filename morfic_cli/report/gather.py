@@ -297,19 +297,19 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
         for item in store.ls(kind):  # oldest first: newer rows overwrite older ones
             manifest = store.read_manifest(item["id"])
             if kind == "eval" and "eval.csv" in manifest.files:
-                run = by_ckpt.get(manifest.inputs.get("checkpoint", ""))
-                if run is None:
+                owner = by_ckpt.get(manifest.inputs.get("checkpoint", ""))
+                if owner is None:
                     continue
                 for row in read_csv_rows(store.read_file(manifest.id, "eval.csv")):
-                    key = (run.checkpoint, row["robot"], row["mode"], float(row["command_vx"]))
-                    _keep(evals, key, {**row, **_run_keys(run), "artifact": manifest.id})
+                    key = (owner.checkpoint, row["robot"], row["mode"], float(row["command_vx"]))
+                    _keep(evals, key, {**row, **_run_keys(owner), "artifact": manifest.id})
             elif kind == "diagnosis" and "calibration.csv" in manifest.files:
                 for row in read_csv_rows(store.read_file(manifest.id, "calibration.csv")):
-                    run = by_ckpt.get(str(row.get("checkpoint")))
-                    if run is None:
+                    owner = by_ckpt.get(str(row.get("checkpoint")))
+                    if owner is None:
                         continue
-                    key = (run.checkpoint, row["robot"], row["mode"], row_command(row))
-                    _keep(calib, key, {**row, **_run_keys(run), "artifact": manifest.id})
+                    key = (owner.checkpoint, row["robot"], row["mode"], row_command(row))
+                    _keep(calib, key, {**row, **_run_keys(owner), "artifact": manifest.id})
             elif kind == "diagnosis" and "critic_study.csv" in manifest.files:
                 actors = [v for k, v in manifest.inputs.items() if k == "actor" or k.startswith("actor/")]
                 if any(a in by_ckpt for a in actors):  # oldest first: the newest study wins
@@ -331,16 +331,16 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                     critic = str(row.get("checkpoint")) if row.get("checkpoint") else "mc"
                     if critic != "mc" and critic not in by_ckpt:
                         continue
-                    key = (row["robot"], actor, critic, row["mode"], row_command(row))
+                    fixed_key = (row["robot"], actor, critic, row["mode"], row_command(row))
                     extra = _run_keys(by_ckpt[critic]) if critic != "mc" else {"run": "MC", "variant": "mc"}
-                    _keep(fixed, key, {**row, **extra, "actor_checkpoint": actor, "artifact": manifest.id})
+                    _keep(fixed, fixed_key, {**row, **extra, "actor_checkpoint": actor, "artifact": manifest.id})
 
-    for rows, kind, role in (
+    for kept, kind, role in (
         (evals, "eval", "eval"),
         (calib, "diagnosis", "calibration"),
         (fixed, "diagnosis", "fixed-rollout"),
     ):
-        for row in rows.values():
+        for row in kept.values():
             use(row["artifact"], kind, f"{role}/{row['artifact'][:12]}")
     if data.study:
         use(data.study[0]["artifact"], "diagnosis", f"critic-study/{data.study[0]['artifact'][:12]}")

@@ -43,7 +43,7 @@ def _welch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
 
 def _verdicts(est: np.ndarray, p: np.ndarray, higher: np.ndarray | bool = True) -> np.ndarray:
     """Holm over the last axis, then each draw's verdict. Shapes: (D, m) -> (D,)."""
-    return stats.decide(stats.outcome(est, stats.holm(p), higher))
+    return np.asarray(stats.decide(stats.outcome(est, stats.holm(p), higher)), dtype=object)
 
 
 def claim_a(x: np.ndarray) -> np.ndarray:

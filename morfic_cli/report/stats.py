@@ -25,6 +25,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 from scipy import stats as sst
@@ -107,7 +108,7 @@ def p_text(p: float) -> str:
     return f"{p:.2g}"
 
 
-def _clean(values: Sequence[float]) -> np.ndarray:
+def _clean(values: Sequence[float] | np.ndarray) -> np.ndarray:
     """The finite values as a float64 array."""
     a = np.asarray([float(v) for v in values], dtype=np.float64)
     return a[np.isfinite(a)]
@@ -151,7 +152,10 @@ def contrast(
 
 
 def group_effect(
-    side_a: Sequence[Sequence[float]], side_b: Sequence[Sequence[float]], *, alpha: float = ALPHA
+    side_a: Sequence[Sequence[float] | np.ndarray],
+    side_b: Sequence[Sequence[float] | np.ndarray],
+    *,
+    alpha: float = ALPHA,
 ) -> Effect:
     """Effect = mean over a's variants of their seed means - the same for b, with its t-contrast test.
 
@@ -246,9 +250,9 @@ def equivalence_p(effect: Effect, tol: float) -> tuple[float, int]:
     if not effect.has_test:
         return math.nan, NONE
     with np.errstate(divide="ignore", invalid="ignore"):
-        t_lo = np.float64(effect.estimate + tol) / effect.se  # against Δ <= -tol
-        t_hi = np.float64(effect.estimate - tol) / effect.se  # against Δ >= tol
-    t_lo, t_hi = (0.0 if np.isnan(t) else float(t) for t in (t_lo, t_hi))
+        z_lo = np.float64(effect.estimate + tol) / effect.se  # against Δ <= -tol
+        z_hi = np.float64(effect.estimate - tol) / effect.se  # against Δ >= tol
+    t_lo, t_hi = (0.0 if np.isnan(t) else float(t) for t in (z_lo, z_hi))
     p_eq = min(1.0, 2 * max(sst.t.sf(t_lo, effect.df), sst.t.cdf(t_hi, effect.df)))
     p_out = min(1.0, 2 * min(sst.t.sf(t_hi, effect.df), sst.t.cdf(t_lo, effect.df)))
     return (float(p_eq), FOR) if p_eq <= p_out else (float(p_out), AGAINST)
@@ -273,6 +277,12 @@ def holm(p: Sequence[float] | np.ndarray) -> np.ndarray:
     return np.where(np.isnan(p), np.nan, out)
 
 
+@overload
+def outcome(estimate: float, p: float, higher: bool = True, alpha: float = ALPHA) -> int: ...
+@overload
+def outcome(
+    estimate: np.ndarray, p: float | np.ndarray, higher: bool | np.ndarray = True, alpha: float = ALPHA
+) -> np.ndarray: ...
 def outcome(
     estimate: float | np.ndarray, p: float | np.ndarray, higher: bool | np.ndarray = True, alpha: float = ALPHA
 ) -> int | np.ndarray:
@@ -283,6 +293,10 @@ def outcome(
     return int(out) if out.ndim == 0 else out
 
 
+@overload
+def decide(outcomes: Sequence[int]) -> str: ...
+@overload
+def decide(outcomes: np.ndarray) -> str | np.ndarray: ...
 def decide(outcomes: Sequence[int] | np.ndarray) -> str | np.ndarray:
     """A claim's verdict from its m primary comparisons' outcomes (after Holm), over the last axis.
 
@@ -352,7 +366,7 @@ def mean_interval(values: Sequence[float], *, alpha: float = ALPHA) -> tuple[flo
     return mean, mean - half, mean + half
 
 
-def spearman(xs: Sequence[float], ys: Sequence[float]) -> float:
+def spearman(xs: Sequence[float] | np.ndarray, ys: Sequence[float] | np.ndarray) -> float:
     """Spearman's rank correlation (average ranks for ties); NaN for fewer than 3 pairs or a constant side."""
     x, y = np.asarray(xs, dtype=np.float64), np.asarray(ys, dtype=np.float64)
     if x.size < 3 or x.size != y.size:

@@ -49,7 +49,7 @@ class PPOCfg:
     """Adaptation optimiser learning rate; None = ``learning_rate``."""
     use_mixed_precision: bool = False
     """Forward passes of rollout and update under bf16 autocast, output layers float32 (rsl-rl's flag; the ``cpu``
-    preset turns it on: 2.6x faster matrix products on CPUs with AVX512-BF16 or AMX, docs/benchmarks.md)."""
+    preset turns it on: 2.6x faster matrix products on CPUs with AVX512-BF16 or AMX, docs/benchmarks-history.md)."""
 
 
 @dataclass(frozen=True)
@@ -123,7 +123,7 @@ def cpu_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
     up to 120 ms of latency is a third of a 3 Hz gait cycle, a hard start for a small budget (docs/training.md);
     the evaluation protocol has no latency either way. Everything else (morphology support, pushes, friction) is
     the paper's. The networks run in bf16 mixed precision (``ppo.use_mixed_precision``; float32 weights and output
-    layers), which halves the update on CPUs with bf16 instructions (docs/benchmarks.md); on a CPU without them
+    layers), which halves the update on CPUs with bf16 instructions (docs/benchmarks-history.md); on a CPU without them
     ``--set ppo.use_mixed_precision=false`` is faster.
     """
     env = EnvCfg(num_envs=512)
@@ -261,7 +261,7 @@ def _build(cls: type, doc: dict[str, Any], prefix: str) -> Any:
 def _coerce(tp: Any, value: Any, key: str) -> Any:
     """``value`` (parsed JSON) as type ``tp``; raises MorficError naming ``key`` when it does not fit."""
     origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise MorficError(f"config key '{key}' is a section; set one of its fields, e.g. '{key}.<field>=...'.")
         return _build(tp, value, f"{key}.")

@@ -44,6 +44,7 @@ an encoder: the actor's trained by the policy losses only, the critic's by the v
 from __future__ import annotations
 
 import copy
+from typing import TYPE_CHECKING, TypedDict
 
 import torch
 import torch.nn as nn
@@ -95,6 +96,16 @@ def _zero_last_linear(mlp: nn.Module) -> None:
     last = [m for m in mlp.modules() if isinstance(m, nn.Linear)][-1]
     nn.init.zeros_(last.weight)
     nn.init.zeros_(last.bias)
+
+
+class ModulatorCfg(TypedDict):
+    """What sizes a critic's conditioning modules (``MorficCritic.modulator_cfg``)."""
+
+    latent_dim: int
+    generator_hidden_dim: int
+    scale: float
+    rank: int
+    activation: str
 
 
 class FiLM(nn.Module):
@@ -353,7 +364,7 @@ class MorficActor(MLPModel):
     def update_normalization(self, obs: TensorDict) -> None:
         """Update the state normaliser from a batch of observations (no-op without ``obs_normalization``)."""
         if self.obs_normalization:
-            self.obs_normalizer.update(flatten_groups(obs, self.obs_groups))  # type: ignore[operator]
+            self.obs_normalizer.update(flatten_groups(obs, self.obs_groups))
 
     def export_input(self, obs: TensorDict) -> torch.Tensor:
         """The flat input of :meth:`as_jit` / :meth:`as_onnx`: ``[state groups..., m]``. Shape: (N, D_s + 11)."""
@@ -458,7 +469,7 @@ class MorficCritic(MLPModel):
             if self.uses_morphology and not self.shared_morphology_encoder
             else None
         )
-        self.modulator_cfg = {
+        self.modulator_cfg: ModulatorCfg = {
             "latent_dim": morphology_latent_dim,
             "generator_hidden_dim": generator_hidden_dim,
             "scale": conditioning_scale,
@@ -580,7 +591,7 @@ class MorficCritic(MLPModel):
     def update_normalization(self, obs: TensorDict) -> None:
         """Update the state normaliser from a batch of observations (no-op without ``obs_normalization``)."""
         if self.obs_normalization:
-            self.obs_normalizer.update(flatten_groups(obs, self.obs_groups))  # type: ignore[operator]
+            self.obs_normalizer.update(flatten_groups(obs, self.obs_groups))
 
     def as_jit(self) -> nn.Module:
         """Not supported: only the policy is exported."""
@@ -593,6 +604,8 @@ class MorficCritic(MLPModel):
     def _latent(self, obs: TensorDict, z_m: torch.Tensor | None) -> torch.Tensor:
         parts = [self.get_state(obs), self.encode_privileged(obs)]
         if self.concat_dim:
+            if z_m is None:
+                raise ValueError("a concat critic needs z_m (from encode_morphology).")
             parts.append(z_m)
         return torch.cat(parts, dim=-1)
 
@@ -611,10 +624,9 @@ def link_morphology_encoder(actor: nn.Module, critic: nn.Module) -> None:
     Raises:
         ValueError: The critic shares but the actor has no encoder, or the latent sizes differ.
     """
-    if not getattr(critic, "shared_morphology_encoder", False):
+    if not (isinstance(critic, MorficCritic) and critic.shared_morphology_encoder):
         return
-    encoder = getattr(actor, "morphology_encoder", None)
-    if encoder is None:
+    if not isinstance(actor, MorficActor) or actor.morphology_encoder is None:
         raise ValueError("the critic shares the actor's morphology encoder, but the actor has none.")
     if critic.modulator_cfg["latent_dim"] != actor.morphology_latent_dim:
         raise ValueError(
@@ -630,6 +642,8 @@ class ExportedPolicy(nn.Module):
     """
 
     is_recurrent: bool = False
+    if TYPE_CHECKING:  # for mypy only: TorchScript cannot read this module's string annotations
+        input_size: int  # width of the flat input ``obs`` (set by the subclass)
     __jit_unused_properties__ = ["input_names", "output_names"]
 
     @torch.jit.export

@@ -16,8 +16,9 @@ Mixed precision (``use_mixed_precision``, rsl-rl's flag; the ``cpu`` preset turn
 forward passes under bf16 autocast; MorficPPO also runs the rollout's ``act`` and the bootstrap value of
 ``compute_returns`` under it, so the log-probabilities of the ratio pi_theta / pi_old are computed the same way on
 both sides, and keeps the two output layers (the action mean and the value) in float32, so actions, log-probabilities
-and values are not rounded to bf16's 8 bits (docs/benchmarks.md, "Levers"). Weights, gradients and Adam's state stay
-float32. The optimiser is Adam with ``fused=True`` (one kernel over all parameters instead of a Python loop).
+and values are not rounded to bf16's 8 bits (docs/benchmarks-history.md, "The levers, each measured alone").
+Weights, gradients and Adam's state stay float32. The optimiser is Adam with ``fused=True`` (one kernel over all
+parameters instead of a Python loop).
 """
 
 from __future__ import annotations
@@ -110,7 +111,7 @@ def _output_layers(model: nn.Module) -> list[nn.Linear]:
     """
     if getattr(model, "float32_outputs", False):
         return []
-    return [[m for m in model.mlp.modules() if isinstance(m, nn.Linear)][-1]]
+    return [[m for m in model.get_submodule("mlp").modules() if isinstance(m, nn.Linear)][-1]]
 
 
 class MorficPPO(PPO):
@@ -141,6 +142,8 @@ class MorficPPO(PPO):
 
     actor: MorficActor
     critic: MorficCritic
+    optimizer: torch.optim.Optimizer
+    adaptation_optimizer: torch.optim.Optimizer | None
 
     def __init__(
         self,
@@ -283,11 +286,11 @@ class MorficPPO(PPO):
     def _policy_shift(self, batch: RolloutStorage.Batch) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean KL(pi_old || pi_theta) and clip fraction of one mini-batch. Shapes: (), ()."""
         with torch.no_grad():
-            n = batch.old_actions_log_prob.shape[0]  # type: ignore[union-attr]
+            n = batch.old_actions_log_prob.shape[0]
             new_params = tuple(p[:n] for p in self.actor.output_distribution_params)
-            kl = self.actor.get_kl_divergence(batch.old_distribution_params, new_params).mean()  # type: ignore[arg-type]
-            log_prob = self.actor.get_output_log_prob(batch.actions)[:n]  # type: ignore[arg-type]
-            ratio = torch.exp(log_prob - batch.old_actions_log_prob.squeeze(-1))  # type: ignore[union-attr]
+            kl = self.actor.get_kl_divergence(batch.old_distribution_params, new_params).mean()
+            log_prob = self.actor.get_output_log_prob(batch.actions)[:n]
+            ratio = torch.exp(log_prob - batch.old_actions_log_prob.squeeze(-1))
             clip_fraction = ((ratio - 1.0).abs() > self.clip_param).float().mean()
         return kl, clip_fraction
 
@@ -296,7 +299,8 @@ class MorficPPO(PPO):
 
         NaN, and no step, for models without an adaptation module (the external baselines).
         """
-        if not self.adapts:
+        optimizer = self.adaptation_optimizer
+        if not self.adapts or optimizer is None:
             return torch.full((), float("nan"))
         obs = batch.observations
         with torch.autocast(
@@ -309,11 +313,11 @@ class MorficPPO(PPO):
             error = (z_priv_hat.float() - z_priv.float()).pow(2).mean()
         if self.adaptation_loss_coef > 0.0:
             params = list(actor.adaptation.parameters())
-            self.adaptation_optimizer.zero_grad()
+            optimizer.zero_grad()
             (self.adaptation_loss_coef * error).backward()
             if self.is_multi_gpu:
                 reduce_gradients_in_buckets(params, self.gpu_world_size, self.grad_reduce_bucket_mb)
             nn.utils.clip_grad_norm_(params, self.max_grad_norm)
-            self.adaptation_optimizer.step()
-            self.adaptation_optimizer.zero_grad(set_to_none=True)
+            optimizer.step()
+            optimizer.zero_grad(set_to_none=True)
         return error.detach()

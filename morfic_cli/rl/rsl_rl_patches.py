@@ -13,12 +13,13 @@ from __future__ import annotations
 import contextlib
 import functools
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import torch.nn as nn
+if TYPE_CHECKING:
+    from rsl_rl.models import MLPModel
 
 
-def raw_models(alg: Any) -> tuple[nn.Module, nn.Module]:
+def raw_models(alg: Any) -> tuple[MLPModel, MLPModel]:
     """The unwrapped (actor, critic) of an rsl-rl ``PPO``.
 
     Relies on: ``PPO._raw_actor`` / ``PPO._raw_critic`` (the models before ``torch.compile`` / DDP wrapping); the

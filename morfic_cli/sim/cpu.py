@@ -285,7 +285,7 @@ class CpuBackend:
         targets = clamp_to_limits(targets, self._joint_range)
         before = self.state.copy()
         bad = ~np.isfinite(before).all(axis=1) | ~finite_targets
-        for env in np.flatnonzero(bad):  # MuJoCo never sees a non-finite state
+        for env in np.flatnonzero(bad).tolist():  # MuJoCo never sees a non-finite state
             self.state[env] = self._home_state(env)
         ctrl = np.empty((self.num_envs, self._stepper.nu))
         ctrl[:, self.info.actuator_ids] = targets

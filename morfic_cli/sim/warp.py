@@ -123,8 +123,9 @@ def import_warp() -> tuple[Any, Any]:
     try:
         import warp as wp
 
-        wp.config.quiet = True  # no banner
-        if hasattr(wp, "LOG_WARNING"):  # no per-module "load ... (compiled)" lines (warp >= 1.18)
+        if hasattr(wp.config, "quiet"):  # no banner (older warp; newer warp logs it at INFO, below)
+            wp.config.quiet = True
+        if hasattr(wp, "LOG_WARNING"):  # no banner or per-module "load ... (compiled)" lines (warp >= 1.18)
             wp.config.log_level = wp.LOG_WARNING
         import mujoco_warp as mjw
     except ImportError as exc:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import difflib
 import os
 import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -201,7 +201,7 @@ class Store:
         *,
         config: dict[str, Any] | None = None,
         inputs: dict[str, str] | None = None,
-        files: dict[str, bytes | Path] | None = None,
+        files: Mapping[str, bytes | Path] | None = None,
         meta: dict[str, Any] | None = None,
     ) -> str:
         """Store the files and a manifest describing them; return the manifest id.

@@ -106,12 +106,13 @@ def write_atomic(tmp_dir: Path, dest: Path, chunks: Iterable[bytes], *, mode: in
         OSError: From the filesystem; the temp file is removed first (also on ``KeyboardInterrupt``).
     """
     tmp_dir.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=tmp_dir, prefix="w-", suffix=".tmp")
+    fd, path = tempfile.mkstemp(dir=tmp_dir, prefix="w-", suffix=".tmp")
+    tmp: str | None = path
     try:
         digest = _write_fd(fd, chunks)
-        os.chmod(tmp, mode)
+        os.chmod(path, mode)
         dest.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(tmp, dest)
+        os.replace(path, dest)
         tmp = None
         fsync_dir(dest.parent)
         return digest
@@ -306,19 +307,20 @@ class ObjectDB:
         """Write ``chunks`` to a temp file, then rename it to the object path of its hash."""
         try:
             self.tmp_dir.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.tmp_dir, prefix="obj-", suffix=".tmp")
+            fd, path = tempfile.mkstemp(dir=self.tmp_dir, prefix="obj-", suffix=".tmp")
         except OSError as exc:
             raise store_os_error(exc, "writing an object", self.root) from exc
+        tmp: str | None = path
         try:
             oid = _write_fd(fd, chunks)
             if expected is not None and oid != expected:
                 raise StoreError(f"object {expected} is corrupt: its bytes hash to {oid}; nothing was stored.")
-            size = os.stat(tmp).st_size
+            size = os.stat(path).st_size
             if not self.intact(oid, size):
-                os.chmod(tmp, 0o444)
+                os.chmod(path, 0o444)
                 dest = self.path(oid)
                 dest.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(tmp, dest)
+                os.replace(path, dest)
                 tmp = None
                 fsync_dir(dest.parent)
             return oid

@@ -36,6 +36,16 @@ class Published:
     version: int | None
     reused: bool = False
 
+    def advanced(self) -> tuple[str, int]:
+        """``(ref, version)`` of a result published under a ref.
+
+        Raises:
+            ValueError: It was published without one (``ref=None``).
+        """
+        if self.ref is None or self.version is None:
+            raise ValueError(f"manifest {self.id} was published without a ref.")
+        return self.ref, self.version
+
 
 def find_manifest(
     store: Store,

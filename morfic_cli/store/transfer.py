@@ -283,10 +283,11 @@ def _write_tar(
 ) -> None:
     """Write the tar to a temp file next to ``out`` and rename it into place."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
+    fd, tmp_name = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
+    tmp: str | None = tmp_name
     os.close(fd)
     try:
-        with tarfile.open(tmp, "w", format=tarfile.PAX_FORMAT) as tar:
+        with tarfile.open(tmp_name, "w", format=tarfile.PAX_FORMAT) as tar:
             header = {"format": EXPORT_FORMAT, "morfic_version": __version__, "objects": len(ids), "refs": names}
             if report.omitted:  # a full export's header (and bytes) stay what they always were
                 header["omitted"] = report.omitted
@@ -305,8 +306,8 @@ def _write_tar(
                     _add_bytes(tar, f"manifests/{oid}", b"", 0o444)
             for name in names:
                 _add_bytes(tar, f"refs/{name}", encode_history(histories[name]))
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; a bundle is a file to share, as `cp` would make it
-        os.replace(tmp, out)
+        os.chmod(tmp_name, 0o666 & ~_umask())  # mkstemp makes 0600; a bundle is a file to share, as `cp` would make it
+        os.replace(tmp_name, out)
         tmp = None
     except OSError as exc:
         raise store_os_error(exc, f"writing the export {out}", store.root) from exc
@@ -409,7 +410,7 @@ class _BoundedReader:
     the limit (the file's size for a plain tar), and a single read is at most what a morfic member needs.
     """
 
-    def __init__(self, stream: IO[bytes], path: Path, size: int, limit: int | None, kind: str) -> None:
+    def __init__(self, stream: io.BufferedIOBase, path: Path, size: int, limit: int | None, kind: str) -> None:
         self._stream, self._path, self._size, self._limit, self._kind = stream, path, size, limit, kind
         self._budget = MAX_READ_PASSES * max(limit or size, 1 << 20)
         self._pos = 0
@@ -473,7 +474,8 @@ class _ForwardTarFile(tarfile.TarFile):
     """A tar read forwards only: a member whose header moves the next one back (a negative size) ends the read."""
 
     def next(self) -> tarfile.TarInfo | None:
-        cached, before = self.firstmember is not None, self.offset  # (the first member is read when opening)
+        # (the first member is read when opening; typeshed lacks the undocumented TarFile.firstmember)
+        cached, before = self.firstmember is not None, self.offset  # type: ignore[attr-defined]
         info = super().next()
         if info is not None and not cached and self.offset <= before:  # tarfile would read them forever
             raise tarfile.ReadError(f"the member header at offset {before} points backwards")
@@ -491,7 +493,7 @@ def _open_tar(path: Path) -> Iterator[tarfile.TarFile]:
         raise StoreError(f"{path} is a folder; give the tar file made by `morfic store export`.") from None
     except OSError as exc:
         raise StoreError(f"{path} is not a readable tar file ({exc}); make one with `morfic store export`.") from exc
-    stream: IO[bytes] = raw
+    stream: io.BufferedIOBase = raw
     try:
         try:
             size = os.fstat(raw.fileno()).st_size
@@ -500,7 +502,9 @@ def _open_tar(path: Path) -> Iterator[tarfile.TarFile]:
             kind, opener = next(((k, o) for m, k, o in _COMPRESSED if magic.startswith(m)), ("plain", None))
             stream = raw if opener is None else opener(raw)
             limit = None if opener is None else max(MIN_EXPANDED_BYTES, MAX_EXPANSION * size)
-            tar = _ForwardTarFile(fileobj=_BoundedReader(stream, path, size, limit, kind), mode="r")
+            reader = _BoundedReader(stream, path, size, limit, kind)
+            # typeshed's tarfile fileobj protocol also asks for write() and close(), which mode "r" never calls
+            tar = _ForwardTarFile(fileobj=reader, mode="r")  # type: ignore[arg-type]
         except (*_READ_ERRORS, OSError) as exc:
             raise StoreError(
                 f"{path} is not a readable tar file ({exc}); make one with `morfic store export`."
@@ -829,15 +833,15 @@ def _check_manifest(
         )
     manifest = parse_manifest(oid, data)
     try:  # a variant names code that commands would import: refuse any string that is not a well-formed name
-        named = stored_variants(manifest.config, manifest.meta)  # stock ones too: the store knows no registry
+        variants = stored_variants(manifest.config, manifest.meta)  # stock ones too: the store knows no registry
     except MorficError as exc:
         raise StoreError(
             f"manifest {oid} in the export names a variant that is not well-formed ({exc}); nothing was "
             "imported. morfic records a stock name, an entry-point name or module.path:Class: the bundle "
             "was not made by morfic, or was edited."
         ) from None
-    if named:
-        plan.variants[oid] = named
+    if variants:
+        plan.variants[oid] = variants
     if manifest.kind == "checkpoint" and "model.pt" in manifest.files:  # a run: commands rebuild models from it
         problem = stored_cfg_problem(manifest.config)
         if problem is not None:

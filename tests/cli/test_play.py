@@ -6,11 +6,13 @@ import asyncio
 import base64
 import json
 import os
+import re
 import signal
-import socket
 import struct
 import subprocess
 import sys
+import threading
+import time
 
 import pytest
 
@@ -28,10 +30,16 @@ def smoke_store(smoke_runs, tmp_path_factory):
     return root
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def _served_port(lines: list[str], proc: subprocess.Popen, timeout_s: float) -> int:
+    """The port `morfic play --port 0` listens on, from the ``ws://127.0.0.1:PORT`` it prints (a thread appends
+    its stderr to ``lines``); no port picked beforehand, which another test or worker could take in between."""
+    deadline = time.monotonic() + timeout_s  # the server starts after the policy's first step
+    while time.monotonic() < deadline and proc.poll() is None:
+        found = next((m for line in list(lines) if (m := re.search(r"ws://127\.0\.0\.1:(\d+)", line))), None)
+        if found:
+            return int(found.group(1))
+        time.sleep(0.1)
+    raise AssertionError(f"morfic play never listened: {''.join(lines)[-2000:]}")
 
 
 def _decoder(channel: dict):
@@ -91,7 +99,7 @@ async def _watch(port: int, want: dict[str, int], timeout_s: float) -> tuple[str
 def test_play_serves_the_scene_and_numbers_over_foxglove_websocket(smoke_store, tmp_path):
     from morfic_cli.recording.rollout_log import read_rollout
 
-    port, record = _free_port(), tmp_path / "session.mcap"
+    record = tmp_path / "session.mcap"
     env = {**os.environ, "MORFIC_STORE": str(smoke_store), "OMP_NUM_THREADS": "1"}
     proc = subprocess.Popen(
         [
@@ -105,26 +113,32 @@ def test_play_serves_the_scene_and_numbers_over_foxglove_websocket(smoke_store, 
             "--envs",
             "2",
             "--port",
-            str(port),
+            "0",
             "--record",
             str(record),
         ],
         env=env,
-        stdout=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
     )
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stderr), daemon=True)
+    reader.start()
     try:
+        port = _served_port(lines, proc, 240)
         subprotocol, channels, got = asyncio.run(
             _watch(port, {"/rollout/step": 3, "/tf": 3, "/tf_static": 1, "/scene": 1}, 240)
         )
     finally:
         proc.send_signal(signal.SIGINT)  # Ctrl-C
         try:
-            _, err = proc.communicate(timeout=60)
+            proc.wait(timeout=60)
         except subprocess.TimeoutExpired:
             proc.kill()
             raise
+        reader.join(timeout=60)
+    err = "".join(lines)
     assert proc.returncode == 0, err
     assert subprotocol in SUBPROTOCOLS
     assert {(c["topic"], c["schemaName"], c["encoding"], c["schemaEncoding"]) for c in channels} == {
