@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 if TYPE_CHECKING:
     from rich.console import Console
+    from rich.progress import Progress, TaskID
 
 LOG_FRACTION = 0.05
 """A log gets a StepBar line each 5 % of a phase's work ..."""
@@ -74,8 +75,8 @@ class StepBar:
 
     def __init__(self, label: str, total: int, quiet: bool, console: Console | None = None) -> None:
         self.label, self.total, self.quiet, self.console = label, total, quiet, console
-        self.bar = None
-        self.task = None
+        self.bar: Progress | None = None
+        self.task: TaskID = cast("TaskID", 0)  # the current phase's task of ``bar``, set with it
         self.lines: _Lines | None = None
 
     def __enter__(self) -> StepBar:
@@ -127,7 +128,7 @@ class StepBar:
         if self.bar is not None:
             self.bar.advance(self.task)
 
-    def __exit__(self, exc_type: object, *exc: object) -> None:
+    def __exit__(self, exc_type: Any, *exc: Any) -> None:
         if self.lines is not None and exc_type is None:  # an error or Ctrl-C says what happened itself
             self.lines.end(complete=False)
         if self.bar is not None:

@@ -9,7 +9,7 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -33,6 +33,9 @@ from morfic_cli.errors import MorficError
 from morfic_cli.rl.variants import help_text, trust_variants
 from morfic_cli.runs import run_name
 from morfic_cli.validation import check_args
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 
 def train(
@@ -225,7 +228,7 @@ class _progress:
 
     def __init__(self, run, quiet: bool) -> None:
         self.run, self.quiet = run, quiet
-        self.bar = None
+        self.bar: Progress | None = None
 
     def __enter__(self) -> _progress:
         if self.quiet:
@@ -263,13 +266,14 @@ class _progress:
             console=console,
             transient=False,
         )
-        self.bar.__enter__()
-        task = self.bar.add_task(
+        bar = self.bar
+        bar.__enter__()
+        task = bar.add_task(
             "train", total=self.run.cfg.max_iterations, completed=self.run.iteration, sps="-", reward="-", ev="-"
         )
 
         def update(row: dict) -> None:
-            self.bar.update(
+            bar.update(
                 task,
                 completed=int(row["iteration"]),
                 sps=f"{row.get('steps_per_s', 0):,.0f}",

@@ -119,7 +119,8 @@ class BodyEncoder(nn.Module):
         inference kernel does not).
         """
         x = self.tokens(root, joints)
-        bias = torch.zeros(self.mask.shape, dtype=x.dtype, device=x.device).masked_fill(self.mask, float("-inf"))
+        mask = self.get_buffer("mask")  # (13, 13) bool, True where attention is not allowed
+        bias = torch.zeros(mask.shape, dtype=x.dtype, device=x.device).masked_fill(mask, float("-inf"))
         for layer in self.encoder.layers:
             x = encoder_layer(layer, x, bias)
         return x

@@ -71,7 +71,7 @@ class CurveLogger(Logger):
 
     def init_logging_writer(self) -> None:
         """No rsl-rl writer, no git snapshot (the store keeps the run); the live writer, if one is configured."""
-        self.writer = _NullWriter()  # type: ignore[assignment]
+        self.writer = _NullWriter()
         if self.live_cfg is not None and self.live is None and not self.disable_logs:
             from morfic_cli.rl.live_log import open_writer
 

@@ -131,7 +131,7 @@ class TrainingRun:
         if remaining <= 0:
             return self.checkpoints[-1] if self.checkpoints else None
         self.runner.current_learning_iteration = self.iteration
-        logger: CurveLogger = self.runner.logger  # type: ignore[assignment]
+        logger: CurveLogger = self.runner.logger
         logger.start_clock(self.clock_from)
         self.clock_from = None
         try:
@@ -149,7 +149,7 @@ class TrainingRun:
 
         Counted from :attr:`clock_from` (or the start of rsl-rl's ``learn``) to now, or to the end of :meth:`train`.
         """
-        return self.runner.logger.clock()  # type: ignore[attr-defined]
+        return self.runner.logger.clock()
 
     def _on_iteration(self, row: dict[str, float]) -> None:
         self.iteration = int(row["iteration"])
@@ -179,7 +179,7 @@ class TrainingRun:
         curves = {"curve.csv": curve_csv(self.rows)}
         if finished or interrupted:
             curves["curve.png"] = curve_png(self.rows)
-        logger: CurveLogger = self.runner.logger  # type: ignore[assignment]
+        logger: CurveLogger = self.runner.logger
         wall = logger.clock()  # after the drawing: the stored time misses only the write below
         saved = alg.save()
         saved.pop("actor_state_dict"), saved.pop("critic_state_dict")
@@ -245,7 +245,7 @@ class TrainingRun:
         alg.load(loaded, None, True)
         alg.learning_rate = trainer["learning_rate"]
         self.env.load_state_dict(trainer["env"])
-        self.runner.logger.load_state_dict(trainer["logger"])  # type: ignore[attr-defined]
+        self.runner.logger.load_state_dict(trainer["logger"])
         torch.set_rng_state(trainer["torch_rng"])
         self.iteration = int(trainer["iteration"])
         self.rows = rows

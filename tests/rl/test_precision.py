@@ -124,6 +124,52 @@ def test_a_whole_einsum_with_mixed_operands_is_autocasts_bf16_product():
     assert emulated.tolist() == torch.tensor(hand).to(BF16).tolist()
 
 
+def test_a_whole_einsum_of_float32_operands_is_autocasts_bf16_product():
+    # autocast casts no CPU einsum, only the bmm inside; under inference_mode the whole einsum reached the mode with
+    # float32 operands and ran in float32 (bot's per-node embeddings). 1 + 3/512 is not a bf16 number: autocast
+    # rounds it to 1 + 4/512, so the native product is 1/128 where float32 gives 3/512.
+    a, b = torch.tensor([[1.0 + 3 / 512, -1.0]]), torch.tensor([[1.0], [1.0]])
+    with torch.inference_mode(), torch.autocast("cpu", dtype=BF16):
+        native = torch.einsum("ij,jk->ik", a, b)
+        with Bf16MatmulInFloat32():
+            emulated = torch.einsum("ij,jk->ik", a, b)
+            with torch.autocast("cpu", enabled=False):  # float32_linear's heads: left in float32
+                outside = torch.einsum("ij,jk->ik", a, b)
+    assert emulated.dtype == native.dtype == BF16
+    assert emulated.item() == native.item() == 1 / 128
+    assert outside.dtype == torch.float32 and outside.item() == 3 / 512
+    a.requires_grad_(True)  # the update: autocast casts the bmm, the mode computes it
+    with torch.autocast("cpu", dtype=BF16), Bf16MatmulInFloat32():
+        updated = torch.einsum("ij,jk->ik", a, b)
+    updated.float().sum().backward()
+    assert updated.dtype == BF16 and updated.item() == 1 / 128 and a.grad.tolist() == [[1.0, 1.0]]
+
+
+def test_bots_rollout_under_the_mode_is_the_native_one_up_to_the_order_of_sums():
+    from tensordict import TensorDict
+
+    from morfic_cli.rl.bot import BotActor, BotCritic
+
+    torch.manual_seed(0)
+    n, sizes = 16, {"d_model": 64, "nhead": 2, "num_layers": 8, "dim_feedforward": 128}  # BoT-Hard, the variant's
+    obs = TensorDict(
+        {"history": torch.randn(n, 48), "critic": torch.randn(n, 48), "privileged": torch.randn(n, 18)}, batch_size=[n]
+    )
+    actor = BotActor(obs, {"actor": ["history"]}, "actor", 12, **sizes)
+    critic = BotCritic(obs, {"critic": ["critic", "privileged"]}, "critic", 1, **sizes)
+    for model in (actor, critic):
+        with torch.inference_mode():
+            full = model.compute(obs)
+            with torch.autocast("cpu", dtype=BF16):
+                native = model.compute(obs)
+                with Bf16MatmulInFloat32():
+                    emulated = model.compute(obs)
+        assert emulated.dtype == native.dtype == torch.float32  # float32 heads
+        # before einsum was cast, the joint tokens stayed float32: as far from native as native from float32
+        assert _rel([emulated], [native])[0] < 0.25 * _rel([native], [full])[0]
+        assert float((emulated - native).abs().max()) <= 2**-7 * float(native.abs().max())
+
+
 def test_urmas_attention_pool_runs_in_the_rollout_on_a_cpu_without_kernels():
     from morfic_cli.rl.urma import AttentionPool
 
