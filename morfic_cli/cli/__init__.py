@@ -40,6 +40,7 @@ from morfic_cli.cli import (
     train,
     trust,
 )
+from morfic_cli.cli._exit import freeze_at_exit
 from morfic_cli.errors import MorficError, printable
 from morfic_cli.threads import configure_openmp
 
@@ -150,6 +151,7 @@ def _fail(message: str, code: int = 1) -> None:
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point: run the app with central error handling."""
     configure_openmp()  # before any command imports torch (morfic_cli/threads.py)
+    freeze_at_exit()  # the exit after a torch-heavy command skips its garbage collection (cli/_exit.py)
     debug = os.environ.get("MORFIC_DEBUG", "") not in ("", "0")
     from morfic_cli.rl.variants import consent_scope
 

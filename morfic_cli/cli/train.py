@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import atexit
-import gc
 import os
 import signal
 import sys
@@ -102,7 +100,6 @@ def train(
     Your own critic: morfic train --variant my_lab.critics:GatedCritic (docs/extending.md)
     """
     started = process_start()  # the training clock counts from here: imports and the env's construction too
-    freeze_at_exit()  # and the exit after the last checkpoint is quick
     check_args(store=store, name=name, seed=seed, specs=[resume] if resume is not None else None, trust=trust_variant)
     named = [variant] if variant is not None and resume is None else []
     trust_variants(named)  # --variant names it on this command line: the user's consent to import it
@@ -199,18 +196,6 @@ def process_start() -> float:
     except (OSError, ValueError, IndexError, AttributeError):  # not Linux
         return time.perf_counter()
     return time.perf_counter() - max(age, 0.0)
-
-
-def freeze_at_exit() -> None:
-    """Skip the garbage collection of the interpreter's exit: ``gc.freeze()`` registered with ``atexit``.
-
-    At exit Python collects garbage over every object torch, scipy and matplotlib made, several passes while it
-    tears the modules down: 1.5-3 s after the result is printed on a busy 2-core machine, after the training clock
-    stopped. Frozen objects are left to the OS, which frees the process's memory anyway. Only at exit: a process
-    that goes on (tests calling the command) collects garbage as usual.
-    """
-    atexit.unregister(gc.freeze)  # once, however often the command runs in one process
-    atexit.register(gc.freeze)
 
 
 def _num(value: float | None, digits: int = 2) -> str:

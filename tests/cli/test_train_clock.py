@@ -33,7 +33,7 @@ loud = Loud()
 loud.me = loud
 del loud
 if sys.argv[1] == "freeze":
-    from morfic_cli.cli.train import freeze_at_exit
+    from morfic_cli.cli._exit import freeze_at_exit
 
     freeze_at_exit()
     freeze_at_exit()  # once is enough; twice changes nothing
@@ -41,7 +41,7 @@ if sys.argv[1] == "freeze":
 
 
 def test_the_exit_after_training_skips_the_garbage_collection():
-    """Python collects the cycle as it exits; after freeze_at_exit (as `morfic train` calls it) it leaves it."""
+    """Python collects the cycle as it exits; after freeze_at_exit (as `morfic`'s main calls it) it leaves it."""
     out = {
         how: subprocess.run(
             [sys.executable, "-c", EXIT, how], capture_output=True, text=True, timeout=300, check=True
