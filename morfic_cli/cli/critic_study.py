@@ -57,7 +57,7 @@ def critic_study(
         typer.Option(
             "--seeds", min=1, help="Fits per variant and actor (fit seeds 0..N-1), averaged within the actor."
         ),
-    ] = 2,
+    ] = 1,
     command_vx: Annotated[
         str, typer.Option("--command-vx", help="Forward command(s) in m/s; one fit set over all of them.")
     ] = "1.0,2.0",

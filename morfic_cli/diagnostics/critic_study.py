@@ -130,9 +130,9 @@ class StudyCfg:
     """The frozen actors' checkpoints (the unit of replication), each with its own rollouts and fits."""
     variants: tuple[str, ...] = STUDY_VARIANTS
     """Critics to fit: stock names or a user's ``module:Class``."""
-    seeds: int = 2
+    seeds: int = 1
     """Fits per variant and actor (fit seeds 0 .. seeds-1: initial weights and mini-batch order), averaged within
-    the actor."""
+    the actor. One by default: the unit is the actor, and more fits only average the fit's own noise."""
     commands: tuple[float, ...] = (1.0, 2.0)
     """Forward commands (m/s); a fit is made and scored per command."""
     robots: tuple[str, ...] = ("go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c")

@@ -59,6 +59,8 @@ def _unit_words(rows: Sequence[dict[str, Any]]) -> str:
     if study_unit(rows) == ACTOR:
         actors = len({r.get("actor") for r in rows})
         seeds = len({r["fit_seed"] for r in rows})
+        if seeds == 1:
+            return f"{actors} actors (one fit a critic and actor)"
         return f"{actors} actors (each actor's converged fits, {seeds} fit seeds, averaged first)"
     return "the fit seeds of one actor (a one-actor study: it speaks of that actor only)"
 

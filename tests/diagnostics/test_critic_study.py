@@ -424,6 +424,16 @@ def test_claims_over_actors_are_paired_by_actor():
     assert ss.contrast_effect(rows, "flip", ["ppo"], ["film"], robot="aliengo").n_a == 2
 
 
+def test_the_unit_is_named_with_its_fit_seeds():
+    from morfic_cli.report.study import _unit_words
+
+    row = {"command_vx": 1.0, "robot": "go2", "variant": "film", "converged": "True", "ev": 0.1}
+    one = [{**row, "actor": a, "fit_seed": 0} for a in ("a0", "a1", "a2")]
+    two = one + [{**r, "fit_seed": 1} for r in one]
+    assert _unit_words(one) == "3 actors (one fit a critic and actor)"
+    assert _unit_words(two) == "3 actors (each actor's converged fits, 2 fit seeds, averaged first)"
+
+
 def test_a_one_actor_study_of_layout_1_is_read_over_fit_seeds_and_a_newer_layout_refused():
     rows = [
         {
