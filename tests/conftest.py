@@ -85,6 +85,21 @@ def run_cli(capsys):
     return _run
 
 
+@pytest.fixture
+def wide_tables(monkeypatch):
+    """The CLI's tables printed 250 columns wide, whenever its console was made.
+
+    rich reads COLUMNS as a console is made, and ``_render.out_console`` is made when the CLI is first imported:
+    by another test of the same process (an xdist worker runs many files), not always by this one.
+    """
+    from rich.console import Console
+
+    from morfic_cli.cli import _render
+
+    monkeypatch.setenv("COLUMNS", "250")
+    monkeypatch.setattr(_render, "out_console", Console(emoji=False, width=250))
+
+
 @pytest.fixture(scope="session")
 def gl_backend():
     """The backend that renders here (probed in a subprocess: a GL failure can abort the process), else skip."""

@@ -199,10 +199,9 @@ def test_seeds_aggregate_as_declared(with_yaw):
     ]
 
 
-def test_a_registered_metric_reaches_eval_csv_the_table_and_compare_baselines(run_cli, tmp_path, monkeypatch, with_yaw):
+def test_a_registered_metric_reaches_eval_csv_the_table_and_compare_baselines(run_cli, tmp_path, with_yaw, wide_tables):
     from morfic_cli.recording.rollout_log import read_rollout
 
-    monkeypatch.setenv("COLUMNS", "250")  # wide enough for every column
     assert run_cli("store", "import", str(LEGACY_BUNDLE))[0] == 0  # runs/film-cpu
     out = tmp_path / "out"
     code, stdout, err = run_cli(

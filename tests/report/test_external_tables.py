@@ -252,8 +252,7 @@ def test_the_ev_figure_of_the_external_baselines(data):
     assert ev_external_figure([r for r in calibration if r["variant"] == "film"]) == {}  # no baseline: no figure
 
 
-def test_compare_baselines_prints_both_groups_and_the_line(store, run_cli, monkeypatch):
-    monkeypatch.setenv("COLUMNS", "250")
+def test_compare_baselines_prints_both_groups_and_the_line(store, run_cli, wide_tables):
     code, out, err = run_cli("compare-baselines", "--store", str(store.root), "-f", "json")
     assert code == 0, err
     rows = [r for r in json.loads(out) if r["table"] == "external"]
