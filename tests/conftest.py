@@ -14,6 +14,9 @@ from gl_probe import PROBE, probe_env
 #: (xdist's own variable) or an explicit `-n N` chooses another count; `-n 0` runs serially.
 MAX_AUTO_WORKERS = 2
 
+# Reports write report.tex without compiling report.pdf (5-10 s each on 2 cores): the one LaTeX test compiles.
+os.environ.setdefault("MORFIC_NO_PDF", "1")
+
 WORKER = os.environ.get("PYTEST_XDIST_WORKER")  # "gw0", "gw1", ... in a pytest-xdist worker, else None
 if WORKER and "OMP_NUM_THREADS" not in os.environ:
     # One OpenMP (torch) thread per worker, set before torch is imported: 2 workers x 2 threads would contend for

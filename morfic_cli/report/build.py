@@ -621,9 +621,11 @@ def build_report(
         stage("writing the report")
         files = render(cfg, data, sections, prov, figures)
         if cfg.latex:
-            from morfic_cli.report.latex import compile_pdf, pdflatex
+            from morfic_cli.report.latex import NO_PDF_ENV, compile_pdf, pdf_skipped, pdflatex
 
-            if pdflatex() is not None:
+            if pdf_skipped():
+                pdf_error = f"{NO_PDF_ENV} is set; report.tex is written, report.pdf is not"
+            elif pdflatex() is not None:
                 stage("compiling the PDF")
                 try:
                     files["report.pdf"] = compile_pdf(

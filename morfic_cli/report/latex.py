@@ -13,6 +13,7 @@ The provenance list is pandas' ``Styler.to_latex`` (:func:`longtable_latex`). Th
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import tempfile
@@ -219,9 +220,19 @@ def longtable_latex(header: Sequence[str], rows: Sequence[Sequence[str]], spec: 
     return "{\\scriptsize\n" + body.rstrip("\n") + "}"
 
 
+NO_PDF_ENV = "MORFIC_NO_PDF"
+"""Set (to anything but ``0``) to write ``report.tex`` without compiling ``report.pdf``, pdflatex or not (the tests
+set it: each report compile costs 5-10 s on 2 cores; the one LaTeX test unsets it)."""
+
+
 def pdflatex() -> str | None:
     """Path of ``pdflatex``, or None when it is not installed."""
     return shutil.which("pdflatex")
+
+
+def pdf_skipped() -> bool:
+    """Whether :data:`NO_PDF_ENV` asks for no PDF."""
+    return os.environ.get(NO_PDF_ENV, "") not in ("", "0")
 
 
 def compile_pdf(tex: str, files: Mapping[str, bytes] | None = None, *, timeout_s: float = 120.0) -> bytes:

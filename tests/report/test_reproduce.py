@@ -309,9 +309,10 @@ def _check_latex_structure(tex: str) -> None:
             assert "$" not in line or line.count("$") % 2 == 0, line
 
 
-def test_smoke_report_tex_compiles_with_pdflatex(run_cli, store, tmp_path):
-    from morfic_cli.report.latex import compile_pdf, pdflatex
+def test_smoke_report_tex_compiles_with_pdflatex(run_cli, store, tmp_path, monkeypatch):
+    from morfic_cli.report.latex import NO_PDF_ENV, compile_pdf, pdflatex
 
+    monkeypatch.delenv(NO_PDF_ENV, raising=False)  # the one test that compiles (tests/conftest.py sets it)
     if pdflatex() is None:
         pytest.skip("pdflatex is not installed (apt-get install texlive-latex-base texlive-latex-recommended)")
     code, out, err = run_cli(
