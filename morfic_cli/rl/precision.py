@@ -56,9 +56,8 @@ _MATMULS = frozenset(
 """The products autocast runs in bf16 on the CPU, as they reach a dispatch mode: ``linear``, ``matmul`` and
 ``einsum`` whole under ``torch.inference_mode`` (the rollout), decomposed into ``mm`` / ``addmm`` / ``bmm`` /
 ``baddbmm`` where autograd records them (the update, forward and backward). A whole ``einsum`` arrives before
-autocast has cast its operands (it casts the ``bmm`` inside), so it may mix bf16 and float32 operands (urma's
-attention pool: float32 weights, bf16 values); one of float32 operands only is cast by :class:`_EinsumAsAutocast`
-first."""
+autocast would cast its operands (it casts the ``bmm`` inside): :class:`_EinsumAsAutocast` rounds its float32
+operands to bf16 first (urma's attention pool mixes float32 weights and bf16 values; bot's embeddings are float32)."""
 
 _EINSUMS = frozenset({torch.functional.einsum, torch._C._VariableFunctions.einsum})  # type: ignore[attr-defined]
 """``torch.einsum`` as a function mode sees it (the Python wrapper, or the binding called directly)."""
@@ -113,7 +112,7 @@ class Bf16MatmulInFloat32(TorchDispatchMode):
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):  # noqa: ANN001, D105
         kwargs = kwargs or {}
         if func in _MATMULS and any(t.dtype == torch.bfloat16 for t in _tensors(args)):
-            return func(*pytree.tree_map(_as_bf16_in_float32, args), **kwargs).to(torch.bfloat16)
+            return func(*pytree.tree_map(_bf16_as_float32, args), **kwargs).to(torch.bfloat16)
         return func(*args, **kwargs)
 
 
@@ -144,11 +143,12 @@ def _tensors(args: tuple) -> list[torch.Tensor]:
     return [a for a in pytree.tree_leaves(args) if isinstance(a, torch.Tensor)]
 
 
-def _as_bf16_in_float32(a: object) -> object:
-    """A floating operand as autocast passes it to a bf16 product (rounded to bf16), held in float32."""
-    if isinstance(a, torch.Tensor) and a.dtype in (torch.bfloat16, torch.float32):
-        return a.to(torch.bfloat16).float()
-    return a
+def _bf16_as_float32(a: object) -> object:
+    """A bf16 tensor widened to float32 (exactly); anything else as it is.
+
+    A whole ``einsum``'s float32 operands were rounded to bf16 before it reached the mode (:class:`_EinsumAsAutocast`).
+    """
+    return a.float() if isinstance(a, torch.Tensor) and a.dtype == torch.bfloat16 else a
 
 
 @contextlib.contextmanager
