@@ -62,9 +62,9 @@ def smoke_runs(tmp_path_factory):
     Under pytest-xdist the workers share the templates: they live beside the workers' own temporary folders (the
     session's folder, ``popen-gw0``'s parent), and the first worker that asks for one trains it under a lock.
     """
-    from smoke_runs import SmokeRuns, fcntl
+    from smoke_runs import SmokeRuns
 
-    if WORKER and fcntl is not None:
+    if WORKER:
         root = tmp_path_factory.getbasetemp().parent / "smoke-templates"
         root.mkdir(exist_ok=True)
         return SmokeRuns(root)

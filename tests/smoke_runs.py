@@ -2,17 +2,12 @@
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import shutil
-from collections.abc import Iterator
 from pathlib import Path
 
-try:
-    import fcntl
-except ImportError:  # Windows
-    fcntl = None
+from filelock import FileLock
 
 from morfic_cli.store import Store
 
@@ -66,7 +61,8 @@ class SmokeRuns:
         key = tuple((tuple(v), s, n) for v, s, n in calls)
         if key not in self.templates:
             folder = self.root / hashlib.sha256(repr(key).encode()).hexdigest()[:16]
-            with _locked(folder.with_suffix(".lock")):
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            with FileLock(folder.with_suffix(".lock")):  # across the xdist workers
                 done = folder / "fingerprint.json"
                 if not done.exists():
                     shutil.rmtree(folder, ignore_errors=True)  # what a failed worker left
@@ -84,22 +80,6 @@ class SmokeRuns:
         ``runs/film-s0``)."""
         shutil.copytree(self.template(*calls), root)
         return Store(root)
-
-
-@contextlib.contextmanager
-def _locked(path: Path) -> Iterator[None]:
-    """Hold an exclusive lock on the file ``path`` (created if missing) across processes; a no-op without fcntl
-    (Windows), where tests/conftest.py gives each worker its own root."""
-    if fcntl is None:
-        yield
-        return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 def _fingerprint(root: Path) -> list[tuple[str, int, int]]:
