@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
-from morfic_cli.diagnostics.metrics import cos_grad, critic_advantage, critic_metrics, mc_advantage
+from morfic_cli.diagnostics.metrics import CriticMetrics, cos_grad, critic_advantage, critic_metrics, mc_advantage
 from morfic_cli.diagnostics.returns import mc_returns, min_horizon
 from morfic_cli.diagnostics.samples import (
     DiagnoseCfg,
@@ -167,27 +167,37 @@ def score_critics(
         [a_mc, *(critic_advantage(G, v) for v in values)],
         clip_param=clip_param,
     )
-    rows = []
-    for v, g_phi in zip(values, grads[1:], strict=True):
-        m = critic_metrics(G, v, cfg.sigma_eps)
-        rows.append(
-            {
-                "ev": m.ev,
-                "nvb": m.nvb,
-                "abs_nvb": abs(m.nvb),
-                "nve": m.nve,
-                "asa": m.asa,
-                "flip": m.flip,
-                "cos_grad": cos_grad(g_phi, grads[0]),
-                "cell": paper_cell(m.nvb, m.nve, m.asa),
-                "n_samples": m.n,
-                "coverage": float(ref.mask.mean()),
-                "g_mean": m.g_mean,
-                "g_std": m.g_std,
-                "v_mean": m.v_mean,
-            }
-        )
-    return rows
+    coverage = float(ref.mask.mean())
+    return [
+        {**metric_row(critic_metrics(G, v, cfg.sigma_eps), cos_grad(g_phi, grads[0])), "coverage": coverage}
+        for v, g_phi in zip(values, grads[1:], strict=True)
+    ]
+
+
+def metric_row(m: CriticMetrics, cos: float) -> dict[str, Any]:
+    """One critic's scores as a table row, the columns calibration.csv and critic_study.csv share.
+
+    Args:
+        m: Its metrics on one sample set.
+        cos: Its CosGrad on that set.
+
+    Returns:
+        ``ev, nvb, abs_nvb, nve, asa, flip, cos_grad, cell, n_samples, g_mean, g_std, v_mean``.
+    """
+    return {
+        "ev": m.ev,
+        "nvb": m.nvb,
+        "abs_nvb": abs(m.nvb),
+        "nve": m.nve,
+        "asa": m.asa,
+        "flip": m.flip,
+        "cos_grad": cos,
+        "cell": paper_cell(m.nvb, m.nve, m.asa),
+        "n_samples": m.n,
+        "g_mean": m.g_mean,
+        "g_std": m.g_std,
+        "v_mean": m.v_mean,
+    }
 
 
 def paper_cell(nvb: float, nve: float, asa: float) -> str:

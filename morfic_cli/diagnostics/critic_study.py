@@ -46,7 +46,7 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
-from morfic_cli.diagnostics.calibration import check_horizon, paper_cell, reference, run_label
+from morfic_cli.diagnostics.calibration import check_horizon, metric_row, reference, run_label
 from morfic_cli.diagnostics.metrics import cos_grad, critic_advantage, critic_metrics, mc_advantage
 from morfic_cli.diagnostics.samples import DiagnoseCfg, Samples, collect_samples
 from morfic_cli.diagnostics.scoring import actor_gradients, critic_values
@@ -540,26 +540,10 @@ def score_fits(
         [mc_advantage(G_cos), *(critic_advantage(G_cos, v[keep]) for v in values)],
         clip_param=clip_param,
     )
-    rows = []
-    for v, g_phi in zip(values, grads[1:], strict=True):
-        m = critic_metrics(G, v, cfg.sigma_eps)
-        rows.append(
-            {
-                "ev": m.ev,
-                "nvb": m.nvb,
-                "abs_nvb": abs(m.nvb),
-                "nve": m.nve,
-                "asa": m.asa,
-                "flip": m.flip,
-                "cos_grad": cos_grad(g_phi, grads[0]),
-                "cell": paper_cell(m.nvb, m.nve, m.asa),
-                "n_samples": m.n,
-                "g_mean": m.g_mean,
-                "g_std": m.g_std,
-                "v_mean": m.v_mean,
-            }
-        )
-    return rows
+    return [
+        metric_row(critic_metrics(G, v, cfg.sigma_eps), cos_grad(g_phi, grads[0]))
+        for v, g_phi in zip(values, grads[1:], strict=True)
+    ]
 
 
 def study_config(cfg: StudyCfg) -> dict[str, Any]:

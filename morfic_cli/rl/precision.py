@@ -168,5 +168,6 @@ def float32_note(mode: str | None) -> str | None:
     return (
         "note: this CPU has no bf16 matrix kernels (AVX2 only), so the run's bf16 matrix products are computed in "
         "float32 from the same bf16 operands and rounded to bf16: the native kernels' values up to the order of "
-        "float32 sums, at 1.2x float32's time instead of 7.5x (morfic_cli/rl/precision.py)."
+        "float32 sums, at 1.2-1.5x float32's time (film's cpu preset 1.2x, bot's rollout 1.5x) instead of 7.5x "
+        "(morfic_cli/rl/precision.py)."
     )

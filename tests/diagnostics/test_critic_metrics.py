@@ -154,3 +154,24 @@ def test_cos_grad_is_one_when_the_critic_gives_the_mc_advantage(seed):
     # CosGrad ignores the advantages' scale, not their sign
     assert cos_grad(policy_gradient(lp, 3 * a_mc, params), policy_gradient(lp, a_mc, params)) == pytest.approx(1.0)
     assert cos_grad(policy_gradient(lp, -a_mc, params), policy_gradient(lp, a_mc, params)) == pytest.approx(-1.0)
+
+
+def test_metric_row_is_the_row_calibration_and_the_critic_study_share():
+    from morfic_cli.diagnostics.calibration import metric_row
+    from morfic_cli.diagnostics.metrics import CriticMetrics
+
+    m = CriticMetrics(ev=0.5, nvb=-0.25, nve=1.0, asa=0.75, flip=0.25, n=8, g_mean=1.5, g_std=2.0, v_mean=2.0)
+    assert metric_row(m, 0.9) == {
+        "ev": 0.5,
+        "nvb": -0.25,
+        "abs_nvb": 0.25,  # the tables print |NVB|
+        "nve": 1.0,
+        "asa": 0.75,
+        "flip": 0.25,
+        "cos_grad": 0.9,
+        "cell": "0.250/1.000/0.750",
+        "n_samples": 8,
+        "g_mean": 1.5,
+        "g_std": 2.0,
+        "v_mean": 2.0,
+    }
