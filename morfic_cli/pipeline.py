@@ -28,7 +28,7 @@ from morfic_cli.errors import MorficError
 from morfic_cli.report.build import ReportCfg, ReportResult, build_report
 from morfic_cli.report.claims import PAPER_COMMAND
 from morfic_cli.report.paper import ROBOTS
-from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, REPRODUCE_VARIANTS, VARIANTS, resolve_variant
+from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR, REPRODUCE_VARIANTS, VARIANTS, eval_modes, resolve_variant
 from morfic_cli.runs import RUNS_PREFIX, run_name, run_of
 from morfic_cli.store import Store
 from morfic_cli.store.publish import find_manifest
@@ -47,7 +47,8 @@ class ReproduceCfg:
         train_overrides: ``--set key=value`` items applied to every training config.
         robots: Evaluation and diagnosis targets.
         command_vx: Evaluation commands (m/s).
-        modes: Evaluation modes.
+        modes: Evaluation modes of every run; None: each run's variant's
+            (:func:`~morfic_cli.rl.variants.eval_modes`: descriptor and full, issue 58's ``actuation-matched`` too).
         eval_envs: Envs per evaluation rollout.
         eval_steps: Policy steps per evaluation rollout.
         diagnose_envs: Envs per diagnostic rollout.
@@ -77,7 +78,7 @@ class ReproduceCfg:
     train_overrides: tuple[str, ...] = ()
     robots: tuple[str, ...] = ROBOTS
     command_vx: tuple[float, ...] = (2.0, 2.5)
-    modes: tuple[str, ...] = ("descriptor", "full")
+    modes: tuple[str, ...] | None = None
     eval_envs: int = 64
     eval_steps: int = 500
     diagnose_envs: int = 64
@@ -540,14 +541,27 @@ class Pipeline:
         it = manifest.meta.get("iteration")
         return StepResult("import", spec, status, manifest.id, spec, detail=f"{detail}, iteration {it}")
 
-    def eval_cfg(self):
-        """The evaluation config of every run."""
+    def variant_of(self, spec: str) -> str:
+        """The variant of run ``spec``: this pipeline's (:meth:`run_specs`), else the one the store's run records.
+
+        Raises:
+            MorficError: ``spec`` is neither this pipeline's run nor in the store.
+        """
+        for variant, _, s in self.run_specs():
+            if s == spec:
+                return variant
+        if not self.store.has_ref(spec):
+            raise MorficError(f"{spec} is not a run of this reproduce and not in {self.store.root}.")
+        return str(self.store.read_manifest(spec).config["variant"])
+
+    def eval_cfg(self, spec: str):
+        """The evaluation config of run ``spec``: the protocol's modes, or (``modes`` None) its variant's."""
         from morfic_cli.evaluation.protocol import EvalCfg
 
         c = self.cfg
         return EvalCfg(
             robots=c.robots,
-            modes=c.modes,
+            modes=c.modes if c.modes is not None else eval_modes(self.variant_of(spec)),
             command_vx=c.command_vx,
             num_envs=c.eval_envs,
             steps=c.eval_steps,
@@ -564,7 +578,7 @@ class Pipeline:
             return None
         from morfic_cli.evaluation.protocol import eval_config
 
-        config = _json(eval_config(spec, cfg or self.eval_cfg()))
+        config = _json(eval_config(spec, cfg or self.eval_cfg(spec)))
         found = find_manifest(
             self.store, "eval", config, inputs_subset={"checkpoint": self.store.resolve(spec)}, files=("eval.csv",)
         )
@@ -577,7 +591,7 @@ class Pipeline:
         """
         from morfic_cli.evaluation.protocol import evaluate
 
-        cfg = cfg or self.eval_cfg()
+        cfg = cfg or self.eval_cfg(spec)
         found = self.stored_eval(spec, cfg)
         if found is not None:
             return found
@@ -654,15 +668,44 @@ class Pipeline:
 
         Every critic is scored on that one actor's rollouts (paper Table "causal advantage"), also when
         ``actor_variant`` is not among the variants reproduced (then its run must be in the store already:
-        :meth:`fixed_rollout_unavailable`); never another variant's actor in its place.
+        :meth:`fixed_rollout_unavailable`); never another variant's actor in its place. The critics are every run's
+        but those :meth:`fixed_rollout_left_out` names.
         """
         runs = self.run_specs()
         actor = RUNS_PREFIX + run_name(self.cfg.actor_variant, 0, self.cfg.preset)
-        return actor, [spec for _, _, spec in runs]
+        left_out = self.fixed_rollout_left_out()
+        return actor, [spec for _, _, spec in runs if spec not in left_out]
+
+    def fixed_rollout_left_out(self) -> dict[str, str]:
+        """The runs whose critic the fixed-rollout analysis leaves out, each with why.
+
+        A critic trained with other returns or inputs than the frozen actor's run cannot be scored on its rollouts
+        (:func:`~morfic_cli.diagnostics.fixed_rollout.incompatible`, on the runs' training configs): issue 58's
+        runs with the extended descriptor (``env.obs.extended_morphology``). None of the paper's variants is.
+        """
+        from morfic_cli.diagnostics.fixed_rollout import incompatible
+
+        actor = self.train_cfg(self.cfg.actor_variant, 0)
+        left_out: dict[str, str] = {}
+        for variant, seed, spec in self.run_specs():
+            differ = incompatible(actor, self.train_cfg(variant, seed))
+            if differ:
+                left_out[spec] = (
+                    f"{spec}'s critic is left out of the fixed-rollout analysis: trained with other "
+                    f"{', '.join(differ)} than the frozen actor's run, its values read other inputs or predict "
+                    "other returns than that actor's rollouts record"
+                )
+        return left_out
 
     def fixed_rollout_unavailable(self) -> str | None:
-        """Why the fixed-rollout analysis cannot run (its actor neither reproduced here nor in the store), or None."""
-        actor, _ = self.fixed_rollout_models()
+        """Why the fixed-rollout analysis cannot run, or None.
+
+        Its actor is neither reproduced here nor in the store, or every run's critic is left out
+        (:meth:`fixed_rollout_left_out`).
+        """
+        actor, critics = self.fixed_rollout_models()
+        if not critics:
+            return "every critic is left out: " + "; ".join(self.fixed_rollout_left_out().values())
         if any(spec == actor for _, _, spec in self.run_specs()) or self.store.has_ref(actor):
             return None
         return (
@@ -705,7 +748,9 @@ class Pipeline:
         self._start("fixed-rollout", robot, cfg.steps, "steps")
         models = load_models(self.store, actor, critics, cfg)
         res = fixed_rollout(self.store, robot, models, cfg, on_step=lambda _t: self.progress.step_advance(advance=1))
-        return StepResult("fixed-rollout", robot, "done", res.id, f"{res.ref}@{res.version}")
+        left_out = self.fixed_rollout_left_out()
+        detail = f"left out (other inputs or returns): {', '.join(left_out)}" if left_out else ""
+        return StepResult("fixed-rollout", robot, "done", res.id, f"{res.ref}@{res.version}", detail=detail)
 
     def study_actors(self) -> list[str]:
         """The critic study's frozen actors, those this pipeline trains or the store holds.

@@ -4,8 +4,8 @@ Writes, for run RUN (its results as `morfic reproduce --preset cpu` stored them,
 so a table is never another run's):
 
 - ``<out>/RUN-eval.csv`` and ``<out>/RUN-calibration.csv``: the eval's and the diagnosis's files, verbatim;
-- ``<out>/RUN-eval-1.0.csv``: the eval at 1.0 m/s, the trained regime (:func:`trained_regime_cfg`: descriptor mode,
-  64 envs x 500 steps, as ``morfic eval runs/RUN --command-vx 1.0``), verbatim;
+- ``<out>/RUN-eval-1.0.csv``: the eval at 1.0 m/s, the trained regime (:func:`trained_regime_cfg`: 64 envs x 500
+  steps, as :func:`trained_regime_command`), verbatim;
 - ``<out>/RUN-calibration-1.0.csv``: the critic's diagnosis at 1.0 m/s (:func:`trained_regime_diagnosis`: the
   paper's protocol at that command), verbatim, when the store holds it or the run's weights to make it (a run
   imported from a results-only bundle has none: the file is left out, with a note);
@@ -14,13 +14,19 @@ so a table is never another run's):
   the content id of the samples it was scored on (``samples``). The first samples are the reference
   (``<out>/fixed-rollout-<robot>.json``); a store that lacks them (a results-only bundle leaves rollout logs out, and
   another CPU does not reproduce them bit for bit) scores on a new rollout, whose rows go in beside the reference
-  rows (:func:`merge_fixed_rows`);
+  rows (:func:`merge_fixed_rows`). A critic that reads other inputs than the frozen actor's run (issue 58's extended
+  descriptor) is left out, with a note (``Pipeline.fixed_rollout_left_out``), at both commands;
 - ``<out>/fixed-rollout-1.0-<robot>.csv``: the same at 1.0 m/s (:func:`fixed_rollout_path`: the frozen film actor's
   rollout at the trained regime's command), when the store holds that analysis or both runs' weights to make it (a
   run imported from a results-only bundle has none: left out, with a note);
 - ``<out>/RUN-curve.csv``: the training curve's main columns (:data:`CURVE_COLUMNS`);
 - ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, 1.0 m/s eval (``eval-1.0``), diagnosis, 1.0 m/s
   diagnosis (``diagnosis-1.0``) and fixed-rollout analyses (``fixed_rollout``, at 1.0 m/s ``fixed_rollout-1.0``).
+
+Each eval holds the modes of RUN's variant (:func:`morfic_cli.rl.variants.eval_modes`; its ``mode`` column tells
+them apart): the paper's variants descriptor and full mode, at 1.0 m/s descriptor mode alone; the external baselines
+both modes at 1.0 m/s too; issue 58's variants (table ``actuation``) descriptor, full and actuation-matched mode at
+every command.
 
 With ``--run-missing`` the run is first evaluated (at 2.0/2.5 and at 1.0 m/s), diagnosed (at 2.0 and 1.0 m/s) and
 its critic scored in the fixed-rollout analysis (at 2.0 and, with both runs' weights at hand, 1.0 m/s), each step
@@ -155,24 +161,41 @@ def one_run_pipeline(store, variant: str, seed: int, spec: str):
     return OneRun(store, reproduce_cfg("cpu", variants=(variant,), seeds=seed + 1))
 
 
-def trained_regime_cfg():
-    """The 1.0 m/s evaluation (``morfic eval RUN --command-vx 1.0``: descriptor mode, the paper's 64 envs x 500 steps).
+def trained_regime_cfg(variant: str):
+    """The 1.0 m/s evaluation of a run of ``variant`` (``morfic eval RUN --command-vx 1.0 [--mode ...]``).
 
-    Every robot in the CLI's order (``--robots all``), not batched: the config (and so the content address) the
-    seed-0 runs' ``eval-1.0`` ids were made with.
+    The paper's 64 envs x 500 steps, every robot in the CLI's order (``--robots all``), not batched, in the variant's
+    modes at 1.0 m/s (:func:`~morfic_cli.rl.variants.eval_modes`): for the paper's variants descriptor mode alone,
+    the config (and so the content address) the seed-0 runs' ``eval-1.0`` ids were made with.
     """
     from morfic_cli.evaluation.protocol import EvalCfg
     from morfic_cli.morphology.distance import parse_robot_list
+    from morfic_cli.rl.variants import eval_modes
 
-    return EvalCfg(robots=tuple(parse_robot_list("all")), modes=("descriptor",), command_vx=(TRAINED_COMMAND,))
+    return EvalCfg(
+        robots=tuple(parse_robot_list("all")),
+        modes=eval_modes(variant, trained_regime=True),
+        command_vx=(TRAINED_COMMAND,),
+    )
+
+
+def trained_regime_command(spec: str, modes: tuple[str, ...]) -> str | None:
+    """The ``morfic eval`` command that makes :func:`trained_regime_cfg`'s eval of ``spec`` in ``modes``.
+
+    None for modes that no one ``--mode`` choice runs (all three: only ``--run-missing`` makes that eval).
+    """
+    flag = {("descriptor",): "", ("descriptor", "full"): " --mode both"}.get(modes)
+    if flag is None and len(modes) == 1:
+        flag = f" --mode {modes[0]}"
+    return None if flag is None else f"morfic eval {spec} --command-vx 1.0{flag}"
 
 
 def trained_regime_eval(pipe, spec: str, run_missing: bool) -> str | None:
-    """The id of the stored 1.0 m/s eval of ``spec``'s checkpoint (:func:`trained_regime_cfg`).
+    """The id of the stored 1.0 m/s eval of ``spec``'s checkpoint (:func:`trained_regime_cfg` of its variant).
 
     Run first when ``run_missing`` and the store lacks it; None when it lacks it otherwise.
     """
-    cfg = trained_regime_cfg()
+    cfg = trained_regime_cfg(pipe.variant_of(spec))
     step = pipe.stored_eval(spec, cfg)
     if step is None and run_missing:
         start = time.monotonic()
@@ -273,6 +296,7 @@ def write_fixed_rollout(
 
 def main(argv: list[str] | None = None) -> int:
     """Write the tables; 1 with ``Error:`` when the store has no paper-protocol result of the run."""
+    from morfic_cli.rl.variants import eval_modes
     from morfic_cli.store import Store
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -363,9 +387,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{path} (artifact {step.id[:12]})")
         slow = trained_regime_eval(pipe, spec, args.run_missing)
         if slow is None:
+            command = trained_regime_command(spec, eval_modes(variant, trained_regime=True))
             print(
-                f"Error: no 1.0 m/s eval of {spec} in {store.root}; rerun with --run-missing (or `morfic eval "
-                f"{spec} --command-vx 1.0`) first.",
+                f"Error: no 1.0 m/s eval of {spec} in {store.root}; rerun with --run-missing"
+                + (f" (or `{command}`)" if command else "")
+                + " first.",
                 file=sys.stderr,
             )
             return 1
@@ -374,6 +400,11 @@ def main(argv: list[str] | None = None) -> int:
         ids["eval-1.0"] = slow
         print(f"{path} (artifact {slow[:12]})")
         write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, args.run_missing)
+    refused = pipe.fixed_rollout_left_out().get(spec)
+    if refused is not None:
+        print(f"{'Error' if only_fixed else 'note'}: {refused}", file=sys.stderr)
+        ids_path.write_text(json.dumps(ids, indent=1) + "\n")
+        return 1 if only_fixed else 0
     rescore: dict[float, dict[str, str]] = {}  # command -> robot -> the samples RUN's critic was scored on
     if not args.fixed_1_0_only:
         used = write_fixed_rollout(

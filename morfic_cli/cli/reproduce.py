@@ -153,13 +153,13 @@ def reproduce(
 ) -> None:
     """Train all variants, evaluate, diagnose, compare and report: the paper's pipeline in one command.
 
-    For each variant and seed: train (ref runs/<variant>-<preset>-s<seed>), evaluate on every robot at 2.0 and
-    2.5 m/s in both modes, diagnose the critic; then the fixed-rollout analysis on aliengo and mini_cheetah (the
-    film actor frozen, every critic scored), the comparison tables and the report (LaTeX + PDF where pdflatex is
-    installed, Markdown, figures, the paper's tables beside ours). Idempotent: a step whose inputs and config
-    already have a result in the store is skipped, so a second run does nothing and a run after Ctrl-C (training
-    checkpoints first) continues where it stopped. The smoke preset takes minutes on 2 cores and only exercises
-    the pipeline; cpu is sized for a 2-core machine (hours per variant), paper for a GPU.
+    For each variant and seed: train (ref runs/<variant>-<preset>-s<seed>), evaluate on every robot at 2.0 and 2.5 m/s
+    in both modes (issue 58's variants in actuation-matched mode too), diagnose the critic; then the fixed-rollout
+    analysis on aliengo and mini_cheetah (the film actor frozen, every critic scored), the comparison tables and the
+    report (LaTeX + PDF where pdflatex is installed, Markdown, figures, the paper's tables beside ours). Idempotent: a
+    step whose inputs and config already have a result in the store is skipped, so a second run does nothing and a run
+    after Ctrl-C (training checkpoints first) continues where it stopped. The smoke preset takes minutes on 2 cores and
+    only exercises the pipeline; cpu is sized for a 2-core machine (hours per variant), paper for a GPU.
 
     --preset shipped trains nothing: it imports the seed-0 cpu runs shipped under artifacts/bundles/ and runs
     the paper's main zero-shot table (descriptor mode, 2.0 m/s) and the diagnostics with 16 envs per rollout

@@ -29,6 +29,7 @@ from morfic_cli.rl.variants import FIXED_ROLLOUT_ACTOR
 from morfic_cli.store import Store
 
 if TYPE_CHECKING:
+    from morfic_cli.rl.config import TrainCfg
     from morfic_cli.rl.load import TrainedModels
 
 FIXED_ROLLOUT_PREFIX = "diagnoses/fixed-rollout/"
@@ -149,25 +150,31 @@ def default_critics(store: Store, on_skip: Callable[[str, str], None] | None = N
     return [runs[v] for v in VARIANTS if v in runs] + [r for v, r in sorted(runs.items()) if v not in VARIANTS]
 
 
-def check_compatible(actor: TrainedModels, critic: TrainedModels, label: str) -> None:
-    """Refuse a critic that was trained on other returns or other inputs than the actor's run.
+def incompatible(actor: TrainCfg, critic: TrainCfg) -> list[str]:
+    """The settings in which ``critic``'s training config differs from ``actor``'s (empty: it can be scored).
 
-    Compared: the discount, the reward config, the (noise-free) observation config, and the control step. Whether
-    the env also gives URMA's token groups (``env.obs.body_tokens``) does not count: :func:`load_models` has the
-    actor's rollout record them when a critic reads them.
+    A critic that differs predicts other returns or reads other inputs than the actor's rollouts record. Compared: the
+    discount, the reward config, the (noise-free) observation config, and the control step. Whether the env also gives
+    URMA's token groups (``env.obs.body_tokens``) does not count: :func:`load_models` has the actor's rollout record
+    them when a critic reads them.
+    """
+    pairs = {
+        "ppo.gamma": (actor.ppo.gamma, critic.ppo.gamma),
+        "env.rewards": (actor.env.rewards, critic.env.rewards),
+        "env.obs": tuple(dataclasses.replace(eval_env_cfg(x.env).obs, body_tokens=False) for x in (actor, critic)),
+        "env.decimation": (actor.env.decimation, critic.env.decimation),
+        "env.sim.physics_dt": (actor.env.sim.physics_dt, critic.env.sim.physics_dt),
+    }
+    return [k for k, (x, y) in pairs.items() if x != y]
+
+
+def check_compatible(actor: TrainedModels, critic: TrainedModels, label: str) -> None:
+    """Refuse a critic that was trained on other returns or other inputs than the actor's run (:func:`incompatible`).
 
     Raises:
         MorficError: They differ; the message names what.
     """
-    a, c = actor.cfg, critic.cfg
-    pairs = {
-        "ppo.gamma": (a.ppo.gamma, c.ppo.gamma),
-        "env.rewards": (a.env.rewards, c.env.rewards),
-        "env.obs": tuple(dataclasses.replace(eval_env_cfg(x.env).obs, body_tokens=False) for x in (a, c)),
-        "env.decimation": (a.env.decimation, c.env.decimation),
-        "env.sim.physics_dt": (a.env.sim.physics_dt, c.env.sim.physics_dt),
-    }
-    differ = [k for k, (x, y) in pairs.items() if x != y]
+    differ = incompatible(actor.cfg, critic.cfg)
     if differ:
         raise MorficError(
             f"critic {label} was trained with other {', '.join(differ)} than the actor's run, so its "

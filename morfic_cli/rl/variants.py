@@ -81,7 +81,8 @@ class Variant:
         label: Its name in the paper's tables and our figures (``MorFiC-F``).
         tables: The paper's transfer tables it is a column of: ``main`` (zero-shot transfer), ``ablation``,
             ``external`` (the external baselines, Table "External baselines vs. MorFiC"); ``actuation`` (issue 58's
-            variants) is none of the paper's.
+            variants and film-act's ablations) is none of the paper's; each table's evaluation modes:
+            :data:`TABLE_MODES`.
         actor_class: rsl-rl ``class_name`` of the actor.
         critic_class: rsl-rl ``class_name`` of the critic.
         actor_morphology: Whether the actor sees z_m (False only for ``ppo``).
@@ -238,6 +239,29 @@ ACTUATION_ENV: dict[str, Any] = {
 support's joint limits, total masses x 0.8-4 (log-uniform, under the morphology curriculum) with Kp, Kd and torque
 limits following the mass and jittered to cover robots/*.toml's own gains, and z_m of the extended descriptor."""
 
+ACTUATION_ABLATIONS: dict[str, tuple[str, dict[str, Any]]] = {
+    "film-act-wide": ("MorFiC-F(act)-wide", {"rand.actuation.curriculum": False}),
+    "film-act-11d": ("MorFiC-F(act)-11D", {"obs.extended_morphology": False}),
+    "film-act-template": ("MorFiC-F(act)-template", {"rand.geometry.enabled": False}),
+    "film-act-light": ("MorFiC-F(act)-light", {"rand.actuation.mass_scale": [0.8, 1.0]}),
+}
+"""Issue 58's ablations of ``film-act``: name -> (label, the one :data:`ACTUATION_ENV` entry switched off), in the
+order of docs/training.md's table: the fixed wide support (no morphology curriculum), the paper's 11-D z_m (no
+actuation in it), the Go2 template's geometry (no procedural geometry; ``limits_from_support`` stays on and acts on
+nothing: without geometry train mode draws every descriptor entry, the joint limits too, from the paper's support)
+and no heavier masses (s_m in [0.8, 1.0]: gains and torque limits still follow the mass and keep their jitter)."""
+
+
+def _film_act(name: str, label: str, off: Mapping[str, Any]) -> Variant:
+    """A variant of film's networks on :data:`ACTUATION_ENV`, ``off``'s entries replaced (film-act, its ablations)."""
+    return Variant(
+        name,
+        label,
+        ("actuation",),
+        critic_defaults={"conditioning": "film", "conditioning_scale": 0.1, "hidden_dims": list(PAPER_TRUNK)},
+        env_overrides=copy.deepcopy({**ACTUATION_ENV, **off}),
+    )
+
 
 STOCK: dict[str, Variant] = {
     v.name: v
@@ -279,13 +303,7 @@ STOCK: dict[str, Variant] = {
             env_overrides={"rand.geometry.enabled": True},
         ),
         # issue 58: film and ppo on generated, heavier bodies whose gains follow their mass (ACTUATION_ENV)
-        Variant(
-            "film-act",
-            "MorFiC-F(act)",
-            ("actuation",),
-            critic_defaults={"conditioning": "film", "conditioning_scale": 0.1, "hidden_dims": list(PAPER_TRUNK)},
-            env_overrides=dict(ACTUATION_ENV),
-        ),
+        _film_act("film-act", "MorFiC-F(act)", {}),
         Variant(
             "ppo-act",
             "PPO(act)",
@@ -293,13 +311,15 @@ STOCK: dict[str, Variant] = {
             actor_morphology=False,
             critic_morphology=False,
             critic_defaults={"conditioning": "none", "conditioning_scale": 1.0, "hidden_dims": list(PAPER_TRUNK)},
-            env_overrides=dict(ACTUATION_ENV),
+            env_overrides=copy.deepcopy(ACTUATION_ENV),
         ),
+        *(_film_act(name, label, off) for name, (label, off) in ACTUATION_ABLATIONS.items()),
     )
 }
 """The paper's variants, in the order of its tables (sizes: paper Tables "architecture", "conditioning variants"), then
 the external baselines re-implemented in morfic's pipeline (table ``external``: paper Table "External baselines vs.
-MorFiC"), then the actuation variants of issue 58 (table ``actuation``, in none of the paper's)."""
+MorFiC"), then the actuation variants of issue 58 and film-act's ablations (table ``actuation``, in none of the
+paper's)."""
 
 VARIANTS: tuple[str, ...] = tuple(STOCK)
 """The stock ``--variant`` names, in the paper's order."""
@@ -311,6 +331,32 @@ REPRODUCE_VARIANTS: tuple[str, ...] = tuple(v.name for v in STOCK.values() if "a
 def table_variants(table: str) -> tuple[str, ...]:
     """The stock variants that are columns of the paper's transfer table ``table`` (``main``, ``ablation``)."""
     return tuple(v.name for v in STOCK.values() if table in v.tables)
+
+
+EVAL_MODES: tuple[str, ...] = ("descriptor", "full", "actuation-matched")
+"""The evaluation modes (``morfic eval --mode``, docs/eval.md), in the order of the tables."""
+
+TABLE_MODES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "main": (("descriptor", "full"), ("descriptor",)),
+    "ablation": (("descriptor", "full"), ("descriptor",)),
+    "external": (("descriptor", "full"), ("descriptor", "full")),
+    "actuation": (EVAL_MODES, EVAL_MODES),
+}
+"""The modes each table's runs are evaluated in: (at the paper's commands, 2.0 and 2.5 m/s; at the trained regime's
+1.0 m/s). The paper's tables: both modes, and descriptor mode at 1.0 m/s (the configs, and so the content addresses,
+of the shipped runs' evals); the external baselines: full mode at 1.0 m/s too (issue 57); issue 58's: all three."""
+
+
+def eval_modes(variant: str, *, trained_regime: bool = False) -> tuple[str, ...]:
+    """The modes a run of ``variant`` is evaluated in, at the paper's commands or (``trained_regime``) at 1.0 m/s.
+
+    The union of its tables' :data:`TABLE_MODES`, in :data:`EVAL_MODES` order; a user variant (in no table) is
+    evaluated as the paper's. The one place both ``reproduce`` (:meth:`morfic_cli.pipeline.Pipeline.eval_cfg`) and
+    scripts/experiment_tables.py (the 1.0 m/s eval) read. Imports nothing of a user variant.
+    """
+    tables = STOCK[variant].tables if variant in STOCK else ()
+    wanted = {m for t in tables or ("main",) for m in TABLE_MODES[t][trained_regime]}
+    return tuple(m for m in EVAL_MODES if m in wanted)
 
 
 def variant_order(name: str) -> int:

@@ -197,6 +197,32 @@ def test_a_run_of_the_same_name_with_another_config_is_refused(tmp_path):
         Pipeline(store, ReproduceCfg(variants=("film",))).run()
 
 
+def test_the_fixed_rollout_leaves_out_the_critics_that_read_other_inputs(tmp_path):
+    """The frozen film actor's rollouts record the 11-D z_m: a critic of the extended descriptor cannot be scored."""
+    from morfic_cli.rl.variants import REPRODUCE_VARIANTS
+
+    store = Store(tmp_path / "store")
+    pipe = Pipeline(store, reproduce_cfg("cpu", variants=("film", "film-act", "film-act-11d", "ppo-act", "urma")))
+    actor, critics = pipe.fixed_rollout_models()
+    assert actor == "runs/film-cpu-s0"
+    assert critics == ["runs/film-cpu-s0", "runs/film-act-11d-cpu-s0", "runs/urma-cpu-s0"]
+    assert pipe.fixed_rollout_left_out()["runs/film-act-cpu-s0"] == (
+        "runs/film-act-cpu-s0's critic is left out of the fixed-rollout analysis: trained with other env.obs than "
+        "the frozen actor's run, its values read other inputs or predict other returns than that actor's rollouts "
+        "record"
+    )
+    assert list(pipe.fixed_rollout_left_out()) == ["runs/film-act-cpu-s0", "runs/ppo-act-cpu-s0"]
+    paper = Pipeline(store, reproduce_cfg("cpu"))  # every variant reproduce trains is scored, as before
+    assert paper.fixed_rollout_models()[1] == [f"runs/{v}-cpu-s0" for v in REPRODUCE_VARIANTS]
+    alone = Pipeline(store, reproduce_cfg("cpu", variants=("film", "ppo-act")))
+    assert alone.fixed_rollout_models()[1] == ["runs/film-cpu-s0"]
+    nothing = Pipeline(store, reproduce_cfg("cpu", variants=("ppo-act",)))
+    assert nothing.fixed_rollout_models()[1] == []
+    assert nothing.fixed_rollout_unavailable() == (
+        "every critic is left out: " + nothing.fixed_rollout_left_out()["runs/ppo-act-cpu-s0"]
+    )
+
+
 def test_compare_baselines_with_paper_csv_has_the_papers_aliengo_film_value(run_cli, store):
     code, out, err = run_cli("compare-baselines", "--with-paper", "--format", "csv")
     assert code == 0, err
@@ -364,19 +390,16 @@ def _tiny(cfg):
     )
 
 
-def test_shipped_cfg_is_the_cpu_runs_with_the_quick_protocol(bundles):
+def test_shipped_cfg_is_the_cpu_runs_with_the_quick_protocol(bundles, tmp_path):
     cfg = reproduce_cfg("shipped", bundles=bundles)
     assert shipped_variants(bundles) == ("film",) and cfg.variants == ("film",)
     assert (cfg.preset, cfg.seeds, cfg.report_name) == ("cpu", 1, "shipped")
     assert (cfg.modes, cfg.command_vx, cfg.eval_envs, cfg.eval_steps) == (("descriptor",), (2.0,), 16, 500)
     assert SHIPPED_PROTOCOL["diagnose_steps"] == cfg.diagnose_steps == 800
     full = reproduce_cfg("shipped", bundles=bundles, full_protocol=True)
-    assert (full.modes, full.command_vx, full.eval_envs, full.diagnose_envs) == (
-        ("descriptor", "full"),
-        (2.0, 2.5),
-        64,
-        64,
-    )
+    assert (full.modes, full.command_vx, full.eval_envs, full.diagnose_envs) == (None, (2.0, 2.5), 64, 64)
+    # the paper's protocol evaluates each run in its variant's modes (the paper's variants: descriptor and full)
+    assert Pipeline(Store(tmp_path / "store"), full).eval_cfg("runs/film-cpu-s0").modes == ("descriptor", "full")
 
 
 def test_shipped_imports_evaluates_reports_and_a_rerun_does_nothing(bundles, tmp_path):

@@ -14,12 +14,48 @@ def test_the_registry_holds_the_papers_seven_in_table_order():
     assert V.VARIANTS[:7] == ("ppo", "actor-only", "concat", "film", "film-scaled", "hyper", "adaln")
     n_ext = len(V.table_variants("external"))
     assert set(V.VARIANTS[7 : 7 + n_ext]) == set(V.table_variants("external"))  # then the external baselines
-    assert V.VARIANTS[7 + n_ext :] == V.table_variants("actuation") == ("film-act", "ppo-act")  # then issue 58's
+    actuation = ("film-act", "ppo-act", "film-act-wide", "film-act-11d", "film-act-template", "film-act-light")
+    assert V.VARIANTS[7 + n_ext :] == V.table_variants("actuation") == actuation  # then issue 58's, the ablations last
+    assert not set(V.table_variants("actuation")) & set(V.REPRODUCE_VARIANTS)  # trained by name only
     assert V.table_variants("main") == paper.ZERO_SHOT_TRANSFER.columns
     assert V.table_variants("ablation") == paper.CRITIC_CONDITIONING_ABLATION.columns
     assert [V.variant_order(v) for v in V.VARIANTS] == list(range(len(V.VARIANTS)))
     assert V.variant_order("my_lab:Critic") == len(V.VARIANTS)
     assert paper.METHOD_LABELS["film-scaled"] == V.STOCK["film-scaled"].label == "MorFiC-F(Scaled)"
+
+
+@pytest.mark.parametrize(
+    ("name", "label", "key", "film_act", "value"),
+    [
+        ("film-act-wide", "MorFiC-F(act)-wide", "env.rand.actuation.curriculum", True, False),
+        ("film-act-11d", "MorFiC-F(act)-11D", "env.obs.extended_morphology", True, False),
+        ("film-act-template", "MorFiC-F(act)-template", "env.rand.geometry.enabled", True, False),
+        ("film-act-light", "MorFiC-F(act)-light", "env.rand.actuation.mass_scale", [0.8, 4.0], [0.8, 1.0]),
+    ],
+)
+def test_each_ablation_is_film_act_with_one_env_key_switched_off(name, label, key, film_act, value):
+    """The smoke trainings of every variant leave the ablations out: film-act's networks and env code, this one key."""
+    from morfic_cli.rl.config import preset_cfg, train_cfg_to_dict
+    from morfic_cli.validation import flatten
+
+    base = flatten(train_cfg_to_dict(preset_cfg("cpu", "film-act", 0)))
+    ablation = flatten(train_cfg_to_dict(preset_cfg("cpu", name, 0)))
+    differ = {k: (base[k], ablation[k]) for k in base if base[k] != ablation[k]}
+    assert differ == {"variant": ("film-act", name), key: (film_act, value)}
+    assert V.STOCK[name].label == label and V.STOCK[name].tables == ("actuation",)
+    assert V.model_cfgs(name) == V.model_cfgs("film-act")
+    assert V.eval_modes(name) == V.eval_modes(name, trained_regime=True) == ("descriptor", "full", "actuation-matched")
+    assert V.STOCK["film-act"].env_overrides == V.ACTUATION_ENV  # the ablations did not change film-act's env
+
+
+def test_a_run_is_evaluated_in_its_tables_modes():
+    both = ("descriptor", "full")
+    assert [V.eval_modes(v) for v in ("ppo", "film", "film-scaled", "genloco", "my_lab:Critic")] == [both] * 5
+    assert [V.eval_modes(v, trained_regime=True) for v in ("ppo", "film", "adaln", "my_lab:Critic")] == [
+        ("descriptor",)
+    ] * 4  # the seed-0 runs' eval-1.0 configs
+    assert [V.eval_modes(v, trained_regime=True) for v in ("bot", "urma", "genloco")] == [both] * 3  # issue 57
+    assert V.eval_modes("ppo-act", trained_regime=True) == ("descriptor", "full", "actuation-matched")
 
 
 def test_run_names_follow_one_rule():

@@ -1,0 +1,97 @@
+"""scripts/experiment_tables.py's evaluations: each run in its variant's modes (morfic_cli.rl.variants.eval_modes),
+the paper's runs with the configs, and so the content addresses, of their shipped evals."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from morfic_cli.evaluation.protocol import eval_config
+from morfic_cli.pipeline import Pipeline, _json, reproduce_cfg
+from morfic_cli.store import Store
+
+ROOT = Path(__file__).resolve().parents[2]
+_spec = importlib.util.spec_from_file_location("experiment_tables", ROOT / "scripts" / "experiment_tables.py")
+et = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(et)
+
+D, F, A = "descriptor", "full", "actuation-matched"
+
+
+def _plan(store: Store, variant: str) -> list[tuple[str, float]]:
+    """(mode, command) of every rollout the queue's evaluation of ``variant``'s seed-0 run makes, in order."""
+    spec = f"runs/{variant}-cpu-s0"
+    pipe = et.one_run_pipeline(store, variant, 0, spec)
+    cfgs = (pipe.eval_cfg(spec), et.trained_regime_cfg(variant))
+    return [(m, v) for cfg in cfgs for m in cfg.modes for v in cfg.command_vx]
+
+
+@pytest.mark.parametrize(
+    ("variant", "plan"),
+    [
+        ("film", [(D, 2.0), (D, 2.5), (F, 2.0), (F, 2.5), (D, 1.0)]),  # the paper's: as shipped
+        ("adaln", [(D, 2.0), (D, 2.5), (F, 2.0), (F, 2.5), (D, 1.0)]),
+        ("genloco", [(D, 2.0), (D, 2.5), (F, 2.0), (F, 2.5), (D, 1.0), (F, 1.0)]),  # issue 57: full mode at 1.0
+        (
+            "film-act",
+            [(D, 2.0), (D, 2.5), (F, 2.0), (F, 2.5), (A, 2.0), (A, 2.5), (D, 1.0), (F, 1.0), (A, 1.0)],
+        ),
+        (
+            "film-act-light",
+            [(D, 2.0), (D, 2.5), (F, 2.0), (F, 2.5), (A, 2.0), (A, 2.5), (D, 1.0), (F, 1.0), (A, 1.0)],
+        ),
+    ],
+)
+def test_each_run_is_evaluated_in_its_variants_modes_at_every_command(tmp_path, variant, plan):
+    assert _plan(Store(tmp_path / "store"), variant) == plan
+
+
+def test_the_papers_evals_keep_the_configs_of_the_shipped_runs(tmp_path):
+    # written out by hand: the config of film-cpu-s0's eval ba87775fde1e (docs/results/film-cpu-s0-artifacts.json)
+    # and of the shipped preset's quick eval; the 1.0 m/s one is tests/scripts/test_results_tables.py's
+    store = Store(tmp_path / "store")
+    pipe = et.one_run_pipeline(store, "film", 0, "runs/film-cpu-s0")
+    robots = ["go2", "go1", "a1", "aliengo", "b1", "mini_cheetah", "anymal_c"]
+    paper = {
+        "spec": "runs/film-cpu-s0",
+        "robots": robots,
+        "modes": ["descriptor", "full"],
+        "command_vx": [2.0, 2.5],
+        "num_envs": 64,
+        "steps": 500,
+        "seed": 0,
+        "scene_envs": 4,
+    }
+    assert _json(eval_config("runs/film-cpu-s0", pipe.eval_cfg("runs/film-cpu-s0"))) == paper
+    quick = Pipeline(store, reproduce_cfg("shipped", bundles=ROOT / "artifacts" / "bundles", variants=("film",)))
+    assert _json(eval_config("runs/film-cpu-s0", quick.eval_cfg("runs/film-cpu-s0"))) == {
+        **paper,
+        "modes": ["descriptor"],
+        "command_vx": [2.0],
+        "num_envs": 16,
+        "batch_robots": True,
+    }
+
+
+def test_the_shipped_film_runs_evals_are_found_so_none_is_made_again(tmp_path):
+    """reproduce and the queue skip a step whose config and inputs the store holds (``find_manifest``)."""
+    store = Store(tmp_path / "store")
+    store.import_tar(ROOT / "artifacts" / "bundles" / "results" / "film-cpu-s0.tar")
+    shipped = json.loads((ROOT / "docs" / "results" / "film-cpu-s0-artifacts.json").read_text())
+    pipe = et.one_run_pipeline(store, "film", 0, "runs/film-cpu-s0")
+    found = pipe.stored_eval("runs/film-cpu-s0")
+    assert found is not None and found.id == shipped["eval"]
+    assert et.trained_regime_eval(pipe, "runs/film-cpu-s0", run_missing=False) == shipped["eval-1.0"]
+
+
+def test_the_eval_command_of_the_1_0_eval_where_one_choice_of_mode_makes_it():
+    assert et.trained_regime_command("runs/film-cpu-s0", (D,)) == "morfic eval runs/film-cpu-s0 --command-vx 1.0"
+    assert (
+        et.trained_regime_command("runs/genloco-cpu-s0", (D, F))
+        == "morfic eval runs/genloco-cpu-s0 --command-vx 1.0 --mode both"
+    )
+    assert et.trained_regime_command("runs/x", (A,)) == "morfic eval runs/x --command-vx 1.0 --mode actuation-matched"
+    assert et.trained_regime_command("runs/film-act-cpu-s0", (D, F, A)) is None  # only --run-missing makes it
