@@ -92,8 +92,9 @@ def evaluate(
 
     Per robot and command: v_x ± σ (σ over all alive env-steps, the paper's; the std of the per-env means is
     vx_env_std in JSON), survival S (no termination in --steps), the best 1 s moving average (peak, an extra; the
-    paper's v_x^max is the v_x at 2.5 m/s), tracking ratio and a validity verdict (a survivor that stands still,
-    lies down or drags its feet is not a transfer). Actions are the policy mean; no pushes or
+    paper's v_x^max is the v_x at 2.5 m/s), tracking ratio, a validity verdict (a survivor that stands still,
+    lies down or drags its feet is not a transfer) and what ended the failed episodes (envs per termination term;
+    an env that tripped two counts under both). Actions are the policy mean; no pushes or
     randomisation. Stores the table (ref evals/<run>) and, per robot and command, an MCAP log (numbers and a 3D
     scene for Foxglove, docs/mcap.md) and a figure of speed and survival over time.
 
@@ -165,10 +166,12 @@ def evaluate(
             info(f"video: {path}")
     if out is not None:
         from morfic_cli.evaluation.protocol import eval_columns
+        from morfic_cli.evaluation.terminations import TERMINATION_COLUMNS, TERMINATIONS_CSV, termination_lines
         from morfic_cli.recording.tables import rows_to_csv
 
         out.mkdir(parents=True, exist_ok=True)
         (out / "eval.csv").write_bytes(rows_to_csv(result.rows, eval_columns()))
+        (out / TERMINATIONS_CSV).write_bytes(rows_to_csv(termination_lines(result.rows), TERMINATION_COLUMNS))
         from morfic_cli.evaluation.figures import write_figures
 
         for path in write_figures(st, result.id, out):
@@ -180,10 +183,14 @@ def evaluate(
     if not quiet:
         info(f"stored {result.ref}@{result.version} ({result.id[:12]}) with {len(result.rollouts)} MCAP rollout logs")
     from morfic_cli.evaluation.metric_terms import shown_terms
+    from morfic_cli.evaluation.terminations import failure_text
 
     shown = shown_terms()  # the registered metrics the table shows (docs/eval.md)
+    rows = result.rows  # json: "terminations" {term: envs}; csv: that as one text cell
+    if fmt == OutputFormat.csv:
+        rows = [{**r, "terminations": failure_text(r["terminations"])} for r in rows]
     emit_rows(
-        result.rows,
+        rows,
         fmt,
         columns=[
             Column("robot", "robot"),
@@ -191,9 +198,16 @@ def evaluate(
             Column("command_vx", "cmd", fmt=lambda v: f"{v:.1f}", justify="right"),
             Column("d", "d", fmt=lambda v: "-" if v is None else f"{v:.3f}", justify="right", drop=1),
             *(metric_column(t) for t in shown),
+            Column("terminations", "ended by", fmt=lambda v: failure_text(v) or "-", drop=4),
         ],
         title=f"zero-shot transfer of {run}",
-        caption="; ".join(["cmd: commanded v_x (m/s)", *(t.legend for t in shown if t.legend)]),
+        caption="; ".join(
+            [
+                "cmd: commanded v_x (m/s)",
+                *(t.legend for t in shown if t.legend),
+                "ended by: failed envs per termination term (an env can trip several)",
+            ]
+        ),
     )
 
 

@@ -47,7 +47,7 @@ from morfic_cli.envs.randomization import (
 )
 from morfic_cli.envs.rewards import TRACKING_TERM, compute_rewards
 from morfic_cli.envs.state import EnvState
-from morfic_cli.envs.terminations import compute_terminations
+from morfic_cli.envs.terminations import NONFINITE, compute_terminations
 from morfic_cli.errors import MorficError
 from morfic_cli.morphology.descriptor import DIM as DESCRIPTOR_DIM
 from morfic_cli.morphology.descriptor import LIMIT_PAIRS, TRAIN_MAX, TRAIN_MIN, as_descriptor
@@ -177,6 +177,9 @@ class LocomotionEnv(VecEnv):
         self._tracking_count = 0
         self.last_state: EnvState | None = None
         self.last_reward_terms: dict[str, torch.Tensor] = {}
+        self.last_terminations: dict[str, torch.Tensor] = {}
+        """Pre-reset view of the last step's ends (evaluation logs): each termination term's mask, then
+        ``NONFINITE``, each (N,) bool on the device."""
         hip_xy = torch.as_tensor(self.spec.hip_pos[:, :2] + self.spec.thigh_offset[:, :2], **f32)
         self.nominal_foot_pos_b = hip_xy.expand(n, 4, 2).clone()
         self._obs = TensorDict({}, batch_size=[n], device=dev)
@@ -300,6 +303,8 @@ class LocomotionEnv(VecEnv):
         self._nonfinite += bad.sum()
         reward = torch.where(bad, torch.zeros_like(reward), reward)
         terminated = terminated | bad
+        # references, no host read; bad is copied: the CPU backend's frame shares the flags it clears at reset
+        self.last_terminations = {**term_masks, NONFINITE: bad.clone()}
         reward = torch.nan_to_num(reward, nan=0.0, posinf=0.0, neginf=0.0)
         time_outs = (self.episode_length_buf >= self.max_episode_length) & ~terminated
         dones = terminated | time_outs
@@ -538,7 +543,7 @@ class LocomotionEnv(VecEnv):
         for name, mask in masks.items():
             log[f"/termination/{name}"] = mask[ids].float().mean()
         log["/termination/time_out"] = time_outs[ids].float().mean()
-        log["/termination/nonfinite"] = bad[ids].float().mean()
+        log[f"/termination/{NONFINITE}"] = bad[ids].float().mean()
         # legged_gym's rule: r_lin summed over the episode / the *maximum* episode length, over every finished
         # episode, so a fall counts as poor tracking. (Averaging over time-outs only let the envs with easy commands,
         # the ones that survive, widen the range long before the policy walked.)

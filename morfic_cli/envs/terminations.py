@@ -38,6 +38,10 @@ TERMINATIONS = {
 }
 """Every termination term, by name (each is logged as the fraction of envs it ended)."""
 
+NONFINITE = "nonfinite"
+"""The name of the env's own end of an episode beside :data:`TERMINATIONS`: the physics state became non-finite
+(``SimFrame.bad``)."""
+
 
 def compute_terminations(state: EnvState, cfg: TerminationCfg) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Evaluate every termination term.

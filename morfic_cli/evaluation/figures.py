@@ -1,13 +1,15 @@
 """The figure of one evaluation rollout (``morfic eval``): validity verdict, forward speed, foot slip and survival.
 
 Above the plots, the table's validity verdict (green when ``ok``, red otherwise) and how many envs are valid, with
-the count of each failure (``falls``, ``stands still``, ``lies down``, ``drags feet``). Top: v_x (body frame) of
-the envs still alive (:func:`~morfic_cli.evaluation.metrics.alive_mask`, the metrics' definition) against time:
-their mean, a band from the 10th to the 90th percentile, the command as a dashed line, and a red tick at the time
-of each fall (a termination that is not a time-out). Middle: foot slip, the mean horizontal speed of the feet in
-contact, over the same alive envs (mean and band), with the validity threshold (an env whose mean slip is above it
-drags its feet). Bottom: survival S(t), the fraction of envs alive at t, which ends at the table's S. Legends sit
-right of the axes, off the data. Each figure is ``(png, pdf)`` bytes (the PDF without a creation date).
+the count of each failure (``falls``, ``stands still``, ``lies down``, ``drags feet``) and, under it, the envs each
+termination term ended (:mod:`morfic_cli.evaluation.terminations`; an env that tripped two counts under both). Top:
+v_x (body frame) of the envs still alive (:func:`~morfic_cli.evaluation.metrics.alive_mask`, the metrics'
+definition) against time: their mean, a band from the 10th to the 90th percentile, the command as a dashed line, and
+a red tick at the time of each fall (a termination that is not a time-out). Middle: foot slip, the mean horizontal
+speed of the feet in contact, over the same alive envs (mean and band), with the validity threshold (an env whose
+mean slip is above it drags its feet). Bottom: survival S(t), the fraction of envs alive at t, which ends at the
+table's S. Legends sit right of the axes, off the data. Each figure is ``(png, pdf)`` bytes (the PDF without a
+creation date).
 
 A rollout imported from a results-only bundle has neither its log nor its figure (docs/concepts.md, "Results-only
 bundles"); :func:`table_figure` then draws the same verdict line with the eval table's numbers instead of the time
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import io
 from collections import Counter
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,6 +28,7 @@ import numpy as np
 
 from morfic_cli.evaluation.metrics import FAILURES, ValidityCfg, alive_mask
 from morfic_cli.evaluation.names import FIGURE_PDF, FIGURE_PNG, media_name, rollout_role
+from morfic_cli.evaluation.terminations import failure_text
 
 if TYPE_CHECKING:
     from morfic_cli.store import Store
@@ -72,24 +76,32 @@ def running_mean(x: np.ndarray, alive: np.ndarray) -> np.ndarray:
         return np.where(n > 0, total / np.maximum(n, 1), np.nan)
 
 
-def verdict_line(outcomes: np.ndarray, verdict: str | None = None) -> tuple[str, bool]:
+def verdict_line(
+    outcomes: np.ndarray, verdict: str | None = None, terminations: Mapping[str, int] | None = None
+) -> tuple[str, bool]:
     """The figure's verdict line and whether it reads ``ok``.
 
     Args:
         outcomes: Each env's validity, ``"ok"`` or its failure. Shape: (N,).
         verdict: The table's verdict; None: ``ok`` when at least half the envs are valid, else the most common
             failure (the table's rule).
+        terminations: Envs each termination term ended; when any did, a second line ``ended by ...`` (an env that
+            tripped several terms counts under each).
 
     Returns:
-        E.g. ``("verdict: drags feet \u2013 valid 0/8 (drags feet 8)", False)``.
+        E.g. ``("verdict: drags feet \u2013 valid 0/8 (drags feet 8)", False)``; with ``terminations`` and falls,
+        a second line such as ``ended by illegal_contact 8, base_too_low 2``.
     """
     counts = Counter(str(o) for o in outcomes)
     ok = counts["ok"]
     if verdict is None:
         verdict = "ok" if 2 * ok >= len(outcomes) else max(FAILURES, key=lambda k: counts[k])
     detail = ", ".join(f"{k} {counts[k]}" for k in FAILURES if counts[k])
+    ended = failure_text(terminations)
     return (
-        f"verdict: {verdict} \u2013 valid {ok}/{len(outcomes)}" + (f" ({detail})" if detail else ""),
+        f"verdict: {verdict} \u2013 valid {ok}/{len(outcomes)}"
+        + (f" ({detail})" if detail else "")
+        + (f"\nended by {ended}" if ended else ""),
         verdict == "ok",
     )
 
@@ -104,6 +116,7 @@ def rollout_figure(
     foot_slip: np.ndarray | None = None,
     outcomes: np.ndarray | None = None,
     verdict: str | None = None,
+    terminations: Mapping[str, int] | None = None,
     max_foot_slip: float = ValidityCfg.max_foot_slip,
 ) -> tuple[bytes, bytes]:
     """Speed, foot slip, survival and the validity verdict of one rollout (module docstring).
@@ -118,6 +131,8 @@ def rollout_figure(
         outcomes: Each env's validity, ``"ok"`` or its failure
             (:func:`~morfic_cli.evaluation.metrics.env_outcomes`). Shape: (N,). None: no verdict line.
         verdict: The table's verdict (``ok`` or the most common failure); with ``outcomes``.
+        terminations: Envs each termination term ended (``Rollout.termination_counts``), a second verdict line
+            when any did; with ``outcomes``.
         max_foot_slip: The slip above which a survivor drags its feet (m/s), drawn as a line.
 
     Returns:
@@ -159,7 +174,7 @@ def rollout_figure(
     ax.set_ylabel("v_x (m/s)", fontsize=9)
     ax.set_title(title, fontsize=9)
     if outcomes is not None:
-        text, ok = verdict_line(outcomes, verdict)
+        text, ok = verdict_line(outcomes, verdict, terminations)
         fig.suptitle(text, fontsize=9, fontweight="bold", color="C2" if ok else "C3")
     ax.grid(alpha=0.3)
     ax.tick_params(labelsize=8)

@@ -1,9 +1,10 @@
 """The paper's zero-shot protocol over robots x commands, with MCAP logs and a table in the store.
 
-One evaluation = one ``eval`` manifest (ref ``evals/<run name>``) holding ``eval.csv`` (a row per robot and
-command), with inputs ``checkpoint`` (the evaluated weights) and ``rollout/<robot>/<mode>/vx<cmd>`` (one
-``rollout`` manifest per robot and command, holding that rollout's MCAP log, see docs/mcap.md, and its figure
-``speed.png`` / ``speed.pdf``, forward speed and survival over time, see :mod:`morfic_cli.evaluation.figures`).
+One evaluation = one ``eval`` manifest (ref ``evals/<run name>``) holding ``eval.csv`` (a row per robot and command)
+and ``terminations.csv`` (per row, the envs each termination term ended, :mod:`morfic_cli.evaluation.terminations`),
+with inputs ``checkpoint`` (the evaluated weights) and ``rollout/<robot>/<mode>/vx<cmd>`` (one ``rollout`` manifest
+per robot and command, holding that rollout's MCAP log, see docs/mcap.md, and its figure ``speed.png`` /
+``speed.pdf``, forward speed and survival over time, see :mod:`morfic_cli.evaluation.figures`).
 """
 
 from __future__ import annotations
@@ -85,7 +86,11 @@ class EvalResult:
 
 
 def metrics_row(rollout: Rollout, distance: float | None) -> dict[str, Any]:
-    """One row of the eval table (:func:`eval_columns`): every registered metric of ``rollout``."""
+    """One row of the eval table (:func:`eval_columns`): every registered metric of ``rollout``.
+
+    Plus ``terminations`` (term -> envs whose first episode it ended, :meth:`Rollout.termination_counts`), which
+    ``morfic eval --format json`` prints and ``terminations.csv`` stores; ``eval.csv`` keeps its columns.
+    """
     return {
         "robot": rollout.robot,
         "mode": rollout.mode,
@@ -94,6 +99,7 @@ def metrics_row(rollout: Rollout, distance: float | None) -> dict[str, Any]:
         **metric_values(RolloutData(rollout.arrays, rollout.command_vx, rollout.dt)),
         "num_envs": int(rollout.arrays["done"].shape[1]),
         "steps": int(rollout.arrays["done"].shape[0]),
+        "terminations": rollout.termination_counts(),
     }
 
 
@@ -160,6 +166,7 @@ def evaluate(
         ArtifactNotFoundError / MorficError: ``spec`` is not a training checkpoint.
     """
     from morfic_cli.evaluation.figures import rollout_figure
+    from morfic_cli.evaluation.terminations import TERMINATION_COLUMNS, TERMINATIONS_CSV, termination_lines
     from morfic_cli.morphology.distance import distance_table
     from morfic_cli.morphology.robots import list_robots
     from morfic_cli.recording.tables import rows_to_csv
@@ -239,6 +246,7 @@ def evaluate(
                         foot_slip=rollout.arrays["foot_slip"],
                         outcomes=rollout.outcomes(),
                         verdict=rows[-1]["verdict"],
+                        terminations=rows[-1]["terminations"],
                     )
                     config = {
                         "robot": robot,
@@ -262,7 +270,10 @@ def evaluate(
             EVALS_PREFIX + run_name,
             config=eval_config(spec, cfg),
             inputs=inputs,
-            files={"eval.csv": rows_to_csv(rows, eval_columns())},
+            files={
+                "eval.csv": rows_to_csv(rows, eval_columns()),
+                TERMINATIONS_CSV: rows_to_csv(termination_lines(rows), TERMINATION_COLUMNS),
+            },
             meta={"run": run_name, "iteration": trained.meta.get("iteration")},
         )
     return EvalResult(rows, pub.id, *pub.advanced(), rollouts)

@@ -55,7 +55,8 @@ class Rollout:
         dt: Policy step (s).
         term_names: Names of the reward terms (columns of ``arrays["reward_terms"]``).
         descriptor: The 11-D descriptor in effect (raw units). Shape: (11,).
-        arrays: :data:`RECORDED` plus ``reward_terms``, each (T, N, ...); float32, ``done``/``time_out`` bool.
+        arrays: :data:`RECORDED` plus ``reward_terms`` and ``terminations`` (each termination term's mask before
+            the env reset), each (T, N, ...); float32, ``done``/``time_out``/``terminations`` bool.
     """
 
     robot: str
@@ -73,6 +74,8 @@ class Rollout:
     obs: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     """The observation groups the models saw at each step, before acting (``keep_obs``): group -> (T, N, ...)
     float32, e.g. ``critic`` (T, N, 16, 48). Row t is s_t, the input of ``action[t]`` and ``value[t]``."""
+    termination_names: list[str] = dataclasses.field(default_factory=list)
+    """Names of the termination terms (columns of ``arrays["terminations"]``), ``nonfinite`` last."""
 
     def qpos(self, num_envs: int) -> np.ndarray:
         """Full qpos of the first ``num_envs`` envs at each step. Shape: (T, num_envs, nq)."""
@@ -102,6 +105,18 @@ class Rollout:
             foot_slip=a["foot_slip"],
         )
 
+    def termination_counts(self) -> dict[str, int]:
+        """Envs whose first episode each termination term ended; ``{}`` when not recorded.
+
+        :func:`~morfic_cli.evaluation.terminations.termination_counts` of the recorded arrays.
+        """
+        from morfic_cli.evaluation.terminations import termination_counts
+
+        a = self.arrays
+        if "terminations" not in a:
+            return {}
+        return termination_counts(a["done"], a["time_out"], a["terminations"], self.termination_names)
+
     def outcomes(self) -> np.ndarray:
         """Each env's validity, ``"ok"`` or its failure (:func:`~morfic_cli.evaluation.metrics.env_outcomes`)."""
         a = self.arrays
@@ -125,11 +140,13 @@ def step_record(
     nominal: torch.Tensor,
     term_names: list[str],
 ) -> dict[str, torch.Tensor]:
-    """What a rollout records of one ``env.step``: :data:`RECORDED` plus ``reward_terms``, each (N, ...).
+    """What a rollout records of one ``env.step``: :data:`RECORDED`, ``reward_terms`` and ``terminations``.
+
+    Each (N, ...); ``terminations`` (N, K) bool, the env's ``last_terminations`` in their order.
 
     Args:
-        env: The :class:`~morfic_cli.envs.locomotion.LocomotionEnv` just stepped (its ``last_state`` and
-            ``last_reward_terms`` are read).
+        env: The :class:`~morfic_cli.envs.locomotion.LocomotionEnv` just stepped (its ``last_state``,
+            ``last_reward_terms`` and ``last_terminations`` are read).
         action: The action given to the step. Shape: (N, 12).
         value: Critic value of the state the action was taken in. Shape: (N,).
         reward: The step's reward. Shape: (N,).
@@ -160,6 +177,7 @@ def step_record(
         "height_ratio": s.base_pos_w[:, 2] / nominal,
         "foot_slip": slip,
         "reward_terms": torch.stack([terms[k] * env.dt for k in term_names], dim=1),
+        "terminations": torch.stack(list(env.last_terminations.values()), dim=1),
     }
 
 
@@ -287,6 +305,7 @@ def run_rollouts(
     env = LocomotionEnv(cfg, mode=mode, robot=per_env, seed=seed)
     try:
         term_names = None
+        stop_names: list[str] = []
         rec: dict[str, np.ndarray] = {}  # key -> (T, N, ...), filled step by step
         obs_rec: dict[str, np.ndarray] = {}
         obs = env.get_observations()
@@ -305,6 +324,7 @@ def run_rollouts(
                 obs, reward, done, extras = env.step(action)
                 if term_names is None:
                     term_names = list(env.last_reward_terms)
+                    stop_names = list(env.last_terminations)
                 step = step_record(env, action, value, reward, done, extras, nominal, term_names)
                 for key, value_t in step.items():
                     arr = value_t.detach().cpu().numpy()
@@ -339,6 +359,7 @@ def run_rollouts(
             models[k],
             qpos_adr,
             {g: a if whole else a[:, envs] for g, a in kept_obs.items()},
+            stop_names,
         )
     return out
 

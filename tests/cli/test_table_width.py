@@ -138,7 +138,7 @@ def test_eval_table_at_80_columns_shows_robot_and_mode_whole(console, run_cli, t
         ["mini_cheetah", "full"],
     ]
     note = " ".join(text.split()).split("left out at this terminal width: ")[1]
-    assert note.endswith("peak, track (--format json or csv has every column)"), note  # d too if need be
+    assert note.endswith("peak, track, ended by (--format json or csv has every column)"), note  # d too if need be
     code, out, err = run_cli(
         "eval",
         "runs/film-cpu-s0",

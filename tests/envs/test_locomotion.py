@@ -11,6 +11,7 @@ from paper_facts import PAPER_DESCRIPTORS
 
 from morfic_cli.config import EnvCfg, SimCfg, eval_env_cfg
 from morfic_cli.envs.locomotion import LocomotionEnv
+from morfic_cli.envs.terminations import NONFINITE, TERMINATIONS
 from morfic_cli.morphology.robots import list_robots, load_robot
 
 ROBOTS = list_robots()
@@ -138,6 +139,9 @@ def test_nan_in_one_envs_state_resets_that_env_only():
         assert dones.tolist() == [0, 1, 0]
         assert env.episode_length_buf.tolist() == [int(before[0]) + 1, 0, int(before[2]) + 1]
         assert extras["log"]["/env/nonfinite_resets"] == 1.0
+        # the pre-reset view of the step's ends (evaluation's termination counts) still says why env 1 ended
+        assert list(env.last_terminations) == [*TERMINATIONS, NONFINITE]
+        assert env.last_terminations[NONFINITE].tolist() == [False, True, False]
         assert rew[1] == 0.0 and torch.isfinite(rew).all()
         for key in ("policy", "history", "critic", "privileged", "morphology"):
             assert torch.isfinite(obs[key]).all(), key

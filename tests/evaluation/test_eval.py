@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from smoke_runs import copy_store
 
-from morfic_cli.evaluation.protocol import EvalCfg, evaluate, rollout_role
+from morfic_cli.evaluation.protocol import EvalCfg, eval_columns, evaluate, rollout_role
+from morfic_cli.evaluation.terminations import read_terminations, termination_counts, termination_names
 from morfic_cli.morphology.robots import list_robots
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -66,6 +67,7 @@ def test_every_robot_in_both_modes_through_the_cli(run_cli, store):
         assert row["command_vx"] == 1.0 and 0.0 <= row["survival"] <= 1.0 and isinstance(row["valid"], bool)
         assert row["num_envs"] == 2 and row["steps"] == 6
         assert " / " in row["cell"]
+        assert list(row["terminations"]) == list(termination_names())  # envs per term, zeros included
     assert next(r for r in rows if r["robot"] == "go2")["d"] == 0.0
     manifest = store.read_manifest("evals/film-s0")
     assert manifest.kind == "eval"
@@ -123,6 +125,30 @@ def test_rollout_metrics_follow_the_recorded_arrays(store):
     assert not a["time_out"].any()  # the eval episode is longer than the rollout
     np.testing.assert_allclose(a["command"][..., 0], 1.0)
     assert a["base_pos"].shape == (30, 4, 3) and a["value"].shape == (30, 4)
+    # the termination counts are those of the recorded masks, stored beside eval.csv (whose columns stay the table's)
+    names = list(termination_names())
+    assert rollout.termination_names == names and a["terminations"].shape == (30, 4, len(names))
+    assert row["terminations"] == termination_counts(a["done"], a["time_out"], a["terminations"], names)
+    assert [(r["robot"], r["term"], r["envs"]) for r in read_terminations(store, result.id)] == [
+        ("go2", k, n) for k, n in row["terminations"].items()
+    ]
+    header = store.read_file(result.id, "eval.csv").decode().splitlines()[0]
+    assert header.split(",") == list(eval_columns())
+
+
+def test_every_fall_of_a_real_eval_is_counted_under_the_terms_that_ended_it(store):
+    """B1 on the Go2 template at 2 m/s: the smoke policy falls within 30 steps (4 envs), so there is something to
+    count; each fallen env tripped at least one term on its fatal step, and no surviving env is counted."""
+    cfg = EvalCfg(robots=("b1",), command_vx=(2.0,), num_envs=4, steps=30, seed=0, scene_envs=0)
+    result = evaluate(store, "runs/film-s0", cfg)
+    a = result.rollouts[rollout_role("b1", "descriptor", 2.0)].arrays
+    row = result.rows[0]
+    fell = a["done"].any(0)
+    assert fell.any() and row["survival"] == pytest.approx(1.0 - fell.mean())
+    assert sum(row["terminations"].values()) >= int(fell.sum())
+    fatal = a["terminations"][a["done"].argmax(0), np.arange(4)]  # (N, K): the terms on each env's first end
+    assert (fatal.any(-1) == fell).all()  # an end has a term, and a term ended the episode
+    assert list(fatal.sum(0)) == list(row["terminations"].values())
 
 
 @pytest.mark.parametrize(
@@ -178,6 +204,7 @@ def test_video_is_stored_and_written_into_out(run_cli, store, tmp_path, gl_backe
     assert videos == sorted(
         [
             "eval.csv",
+            "terminations.csv",
             "go2-descriptor-vx1-frames.png",
             f"go2-descriptor-vx1.{ext}",
             "go2-descriptor-vx1-speed.png",
