@@ -19,6 +19,11 @@ Outputs:
   typed in), each with the artifact ids its numbers come from;
 - the shipped bundles' weight (``--bundles``, default artifacts/bundles): every tar, what it ships and its size in
   MiB, and the total, measured from the files (the repository's bundle weight that docs/results.md reports);
+- the external baselines in our pipeline (issue 57): the paper's row group (its released-weights numbers) and ours
+  (``urma``, ``bot``, ``genloco``, ``film``; "not trained yet" where no run is here) at 2.0 and 2.5 m/s (and 1.0 m/s
+  where rows exist) in descriptor and full mode, their compute (parameters, transitions, wall time from
+  ``<run>-curve.csv``), and what each changes on AlienGo, Mini Cheetah and ANYmal-C against film;
+- film and each actuation variant (table ``actuation``) against issue 58's goal (``morfic_cli/report/goal.py``);
 - with ``--figures DIR``: ``results-ev.png`` (EV per variant per robot), ``results-distance.png`` (speed against
   the normalised distance d, the paper's points beside ours) and ``results-curves.png`` (every run's training curve,
   from ``<run>-curve.csv``).
@@ -27,7 +32,9 @@ With ``--write FILE`` the tables replace what stands between ``<!-- results-tabl
 ``<!-- results-tables:end -->`` in FILE, the claims what stands between ``<!-- results-claims:begin -->`` and
 ``<!-- results-claims:end -->``, the walking checks ``<!-- results-walk:begin -->`` ... ``end``, the bundles
 ``<!-- results-bundles:begin -->`` ... ``end``, the critic study (``critic-study.csv`` and ``.json``, when there)
-``<!-- results-study:begin -->`` ... ``end``; without it all go to stdout.
+``<!-- results-study:begin -->`` ... ``end``, the external baselines ``<!-- results-external:begin -->`` ... ``end``
+and the goal ``<!-- results-goal:begin -->`` ... ``end`` (the last three only where FILE has their markers); without
+it the tables, claims, walking checks and bundles go to stdout.
 
 Usage: python scripts/results_tables.py [--results docs/results] [--write docs/results.md] [--figures docs/img]
                                         [--bundles artifacts/bundles]
@@ -744,6 +751,345 @@ def study_block(results: Path) -> str:
     return "\n".join(out).rstrip() + "\n"
 
 
+# ----------------------------------------------------------------------------------------------- external baselines
+EXTERNAL_BEGIN, EXTERNAL_END = "<!-- results-external:begin -->", "<!-- results-external:end -->"
+GOAL_BEGIN, GOAL_END = "<!-- results-goal:begin -->", "<!-- results-goal:end -->"
+ARCH_ROBOTS = ("aliengo", "mini_cheetah", "anymal_c")
+"""The robots on which issue 57 asks what each architecture changes."""
+EXTERNAL_COMMANDS = (PAPER_COMMAND, 2.5)
+"""The external baselines' tables' commands (m/s): the paper's two; 1.0 m/s is added where a run has rows there."""
+STANDS_STILL = "stands still"
+
+
+def external_table_md(ev: pd.DataFrame, mode: str, command_vx: float) -> list[str]:
+    """Methods x the seven robots at one mode and command: the paper's row group (descriptor mode), then ours.
+
+    The paper's rows are :func:`~morfic_cli.report.compare.paper_external_rows` (its released-weights numbers, as
+    printed); ours are every variant of ``EXTERNAL_TABLE_VARIANTS`` with :func:`transfer_cell`'s cells, or
+    "not trained yet" where no run of it is under results/. Empty when neither group has a row here.
+    """
+    from morfic_cli.report.compare import (
+        EXTERNAL_TABLE_VARIANTS,
+        OURS_GROUP,
+        PAPER_GROUP,
+        method_name,
+        paper_external_rows,
+    )
+
+    paper_rows = [
+        r
+        for r in paper_external_rows()
+        if r["mode"] == mode and abs(r["command_vx"] - command_vx) < 1e-9 and r["robot"] in ROBOTS
+    ]
+    rows = frame_at(ev[ev["mode"] == mode], command_vx) if not ev.empty else ev
+    if not paper_rows and rows.empty:
+        return []
+    width = len(ROBOTS)
+    lines = [
+        "| method | " + " | ".join(robot_label(r) for r in ROBOTS) + " |",
+        "|---|" + "---|" * width,
+    ]
+    if paper_rows:
+        lines.append(f"| *{PAPER_GROUP}* |" + " |" * width)
+        by = {(r["label"], r["robot"]): r for r in paper_rows}
+        for label in dict.fromkeys(r["label"] for r in paper_rows):
+            cells = [by.get((label, robot)) for robot in ROBOTS]
+            text = [_paper_cell(c["vx"], c["vx_std"], c["survival"]) if c else "-" for c in cells]
+            lines.append(f"| {label} (paper) | " + " | ".join(text) + " |")
+    lines.append(f"| *{OURS_GROUP}* |" + " |" * width)
+    trained = set(ev["variant"]) if not ev.empty else set()
+    for v in EXTERNAL_TABLE_VARIANTS:
+        if v not in trained:
+            lines.append(f"| {method_name(v)} `{v}`: not trained yet |" + " - |" * width)
+            continue
+        mine = rows[rows["variant"] == v] if not rows.empty else rows
+        label = f"{method_name(v)} {_seeds_label(ev, v)}"
+        if mine.empty:
+            lines.append(f"| {label}: no {mode}-mode rows at {command_vx:.1f} m/s yet |" + " - |" * width)
+            continue
+        lines.append(f"| {label} | " + " | ".join(transfer_cell(mine[mine["robot"] == r]) for r in ROBOTS) + " |")
+    return lines
+
+
+def _curve_compute(results: Path, variant: str) -> dict[str, Any] | None:
+    """Over ``variant``'s runs: seeds, mean transitions, iterations and wall time (s), from ``<run>-curve.csv``."""
+    last, seeds = [], []
+    for path in sorted(results.glob(f"{variant}-cpu-s*-curve.csv")):
+        parsed = parse_run(path.name[: -len("-curve.csv")])
+        if parsed is None or parsed[0] != variant:
+            continue
+        curve = pd.read_csv(path)
+        if not curve.empty:
+            last.append(curve.iloc[-1])
+            seeds.append(parsed[1])
+    if not last:
+        return None
+    frame = pd.DataFrame(last)
+    return {
+        "n": len(frame),
+        "seeds": seeds,
+        "transitions": float(frame["env_steps"].mean()),
+        "iterations": float(frame["iteration"].mean()),
+        "wall_time_s": float(frame["wall_time_s"].mean()),
+        "wall_min_s": float(frame["wall_time_s"].min()),
+        "wall_max_s": float(frame["wall_time_s"].max()),
+    }
+
+
+def parameter_counts(variant: str) -> tuple[int, int]:
+    """(actor, critic) parameters of a stock variant at the ``cpu`` preset.
+
+    ``sum(p.numel())`` of the models its config builds (:func:`~morfic_cli.rl.build.build_models`), as the report's
+    compute table counts them.
+    """
+    from morfic_cli.rl.build import build_models
+    from morfic_cli.rl.config import preset_cfg
+
+    actor, critic = build_models(preset_cfg("cpu", variant))
+    return sum(p.numel() for p in actor.parameters()), sum(p.numel() for p in critic.parameters())
+
+
+def external_compute_md(results: Path, params: Any = None) -> list[str]:
+    """One line per external-table variant (and Embodiment Scaling): parameters, transitions, wall time here.
+
+    Transitions, iterations and the wall time are the last row of each run's ``<run>-curve.csv``, mean over seeds
+    (the range over seeds beside it); ``params(variant)`` gives the parameter counts (default
+    :func:`parameter_counts`); the paper's hours are its Table "Training compute"'s
+    (:func:`~morfic_cli.report.compare.paper_hours`).
+    """
+    from morfic_cli.report.compare import EXTERNAL_TABLE_VARIANTS, PAPER_ONLY, method_name, paper_hours
+    from morfic_cli.report.tables import _duration, _si
+
+    count = params or parameter_counts
+    lines = [
+        "| method | actor / critic parameters | runs | transitions | iterations | training wall time here "
+        "(mean over seeds) | s / iteration | the paper's GPU-hours |",
+        "|---|---:|---|---:|---:|---|---:|---|",
+    ]
+    for v in EXTERNAL_TABLE_VARIANTS:
+        actor, critic = count(v)
+        c = _curve_compute(results, v)
+        hours = paper_hours(v) or "-"
+        if c is None:
+            lines.append(
+                f"| {method_name(v)} `{v}` | {actor:,} / {critic:,} | not trained yet | - | - | - | - | {hours} |"
+            )
+            continue
+        runs = f"s{c['seeds'][0]}" if c["n"] == 1 else f"n={c['n']}"
+        spread = f" ({_duration(c['wall_min_s'])}-{_duration(c['wall_max_s'])})" if c["n"] > 1 else ""
+        lines.append(
+            f"| {method_name(v)} `{v}` | {actor:,} / {critic:,} | {runs} | "
+            f"{_si(c['transitions'])} | {c['iterations']:,.0f} | {_duration(c['wall_time_s'])}{spread} | "
+            f"{c['wall_time_s'] / c['iterations']:.2f} | {hours} |"
+        )
+    for method in PAPER_ONLY:
+        lines.append(f"| {method_name(method)} (paper only) | - | - | - | - | - | - | {paper_hours(method) or '-'} |")
+    return lines
+
+
+def _verdicts_text(rows: pd.DataFrame) -> str:
+    """``stands still on 6 of 7 robots, falls on 1 (B1)``: a run's (or seeds') validity verdicts over the robots.
+
+    Each robot counts once, under its most common verdict over the seeds.
+    """
+    per_robot = {
+        robot: g["verdict"].astype(str).value_counts().index[0] for robot, g in rows.groupby("robot", sort=False)
+    }
+    counts: dict[str, list[str]] = {}
+    for robot in ROBOTS:
+        if robot in per_robot:
+            counts.setdefault(per_robot[robot], []).append(robot)
+    n = len(per_robot)
+    parts: list[str] = []
+    for verdict, robots in sorted(counts.items(), key=lambda kv: -len(kv[1])):
+        names = f" ({', '.join(robot_label(r) for r in robots)})" if len(robots) <= 2 and len(robots) < n else ""
+        parts.append(f"{verdict} on {len(robots)}" + (f" of {n} robots" if not parts else "") + names)
+    return ", ".join(parts)
+
+
+def _difference(effect: Any, p_holm: float, decimals: int) -> str:
+    """``+0.31 [+0.12, +0.50] (n 3 vs 3, p 0.021, Holm 0.063)`` with a test; the difference alone without."""
+    return effect.text(decimals, p_holm) if effect.has_test else f"{effect.estimate:+.{decimals}f}"
+
+
+def architecture_text(ev: pd.DataFrame, reference: str = "film") -> list[str]:
+    """What each external baseline changes on AlienGo, Mini Cheetah and ANYmal-C against ``reference`` (film).
+
+    Per baseline: its seeds, its validity verdicts over the seven robots at 2.0 m/s (a baseline that stands
+    still is said to); then, at 2.0 m/s and 1.0 m/s (where rows exist) and in descriptor and full mode, its v_x and
+    S on each of :data:`ARCH_ROBOTS` beside film's and the difference. With two seeds or more on both sides the
+    difference has its Welch t interval and p, Holm-corrected over the baseline's comparisons at that command
+    (:mod:`morfic_cli.report.stats`, as the claims); with one seed it has none ("one seed: no interval").
+    """
+    from morfic_cli.report.compare import EXTERNAL_TABLE_VARIANTS, method_name
+    from morfic_cli.report.stats import holm, mean_difference
+
+    out = []
+    for v in (x for x in EXTERNAL_TABLE_VARIANTS if x != reference):
+        mine = ev[ev["variant"] == v] if not ev.empty else ev
+        if mine.empty:
+            out.append(f"- **{method_name(v)}** (`{v}`): not trained yet (no `{v}-cpu-s*-eval.csv` under results/).")
+            continue
+        seeds = sorted(set(mine["seed"]))
+        one = len(seeds) == 1
+        head = f"- **{method_name(v)}** (`{v}`, " + (
+            f"s{seeds[0]}; one seed: no interval" if one else f"n={len(seeds)}"
+        )
+        at2 = frame_at(mine, PAPER_COMMAND)
+        modes = [m for m in ("descriptor", "full") if not at2[at2["mode"] == m].empty]
+        verdicts = "; ".join(f"{m} mode: {_verdicts_text(at2[at2['mode'] == m])}" for m in modes)
+        still = any((at2[at2["mode"] == m]["verdict"].astype(str) == STANDS_STILL).mean() > 0.5 for m in modes)
+        lines = [
+            head
+            + "). "
+            + ("It stands still. " if still else "")
+            + (f"Its validity verdicts at {PAPER_COMMAND:.1f} m/s: {verdicts}." if verdicts else "")
+        ]
+        for command in (PAPER_COMMAND, TRAINED_COMMAND):
+            base_at, ref_at = frame_at(mine, command), frame_at(ev[ev["variant"] == reference], command)
+            if base_at.empty:
+                continue
+            found = []  # (mode, robot, metric, effect, values)
+            missing = []
+            for mode in ("descriptor", "full"):
+                b, r = base_at[base_at["mode"] == mode], ref_at[ref_at["mode"] == mode]
+                if b.empty or r.empty:
+                    missing.append((mode, v if b.empty else reference))
+                    continue
+                for robot in ARCH_ROBOTS:
+                    bb, rr = b[b["robot"] == robot], r[r["robot"] == robot]
+                    if bb.empty or rr.empty:
+                        continue
+                    for metric in ("vx_mean", "survival"):
+                        found.append((mode, robot, metric, mean_difference(bb[metric], rr[metric]), (bb, rr)))
+            adjusted = holm([f[3].p for f in found])
+            for mode in ("descriptor", "full"):
+                parts = []
+                for robot in ARCH_ROBOTS:
+                    cells = [(f, p) for f, p in zip(found, adjusted, strict=True) if f[0] == mode and f[1] == robot]
+                    if not cells:
+                        continue
+                    text = []
+                    for (_, _, metric, effect, (bb, rr)), p in cells:
+                        name, dec = ("v_x", 2) if metric == "vx_mean" else ("S", 3)
+                        text.append(
+                            f"{name} {bb[metric].mean():.{dec}f} vs {rr[metric].mean():.{dec}f}: "
+                            f"{_difference(effect, p, dec)}"
+                        )
+                    stood = (cells[0][0][4][0]["verdict"].astype(str) == STANDS_STILL).mean() > 0.5
+                    parts.append(f"{robot_label(robot)} " + ", ".join(text) + (" (stands still)" if stood else ""))
+                if parts:
+                    lines.append(
+                        f"  - {command:.1f} m/s, {mode} mode, against `{reference}`: " + "; ".join(parts) + "."
+                    )
+            for mode, whose in missing:
+                lines.append(f"  - {command:.1f} m/s, {mode} mode: no rows of `{whose}` yet.")
+        out += lines
+    return out
+
+
+def external_block(results: Path, params: Any = None) -> str:
+    """docs/results.md's "External baselines in our pipeline": tables, compute, and what each architecture changes."""
+    from morfic_cli.report.compare import EXTERNAL_TABLE_VARIANTS, PAPER_ONLY
+
+    ev = load_evals(results)
+    ev = ev[ev["variant"].isin(EXTERNAL_TABLE_VARIANTS)] if not ev.empty else ev
+    out = [
+        "*Generated by `scripts/results_tables.py` from the run CSVs under [results/](results/) and the paper's "
+        "numbers (`morfic_cli/report/paper.py`).* The paper's rows are its released-weights numbers, each method "
+        "in its own simulator with its own robots, rewards and commands (at 2.5 m/s its speed is v_x^max); ours "
+        "re-implement each approach in morfic's pipeline at MorFiC-F's budget (docs/training.md, \"External "
+        "baselines\"). Ours: one seed as the run's v_x ± σ / S (verdict), several as mean ± std over seeds. "
+        + " ".join(PAPER_ONLY.values()),
+        "",
+    ]
+    commands = list(EXTERNAL_COMMANDS)
+    if not ev.empty and not frame_at(ev, TRAINED_COMMAND).empty:
+        commands.append(TRAINED_COMMAND)
+    for command in commands:
+        for mode in ("descriptor", "full"):
+            table = external_table_md(ev, mode, command)
+            if table:
+                where = (
+                    "the target descriptor on the Go2 template" if mode == "descriptor" else "the targets' own models"
+                )
+                out += [f"### {mode.capitalize()} mode, {command:.1f} m/s ({where})", "", *table, ""]
+    out += [
+        "### Compute",
+        "",
+        *external_compute_md(results, params),
+        "",
+        "### What each architecture changes on AlienGo, Mini Cheetah and ANYmal-C",
+        "",
+        *architecture_text(ev),
+    ]
+    return "\n".join(out).rstrip() + "\n"
+
+
+# ----------------------------------------------------------------------------------------------- issue 58's goal
+def goal_block(results: Path) -> str:
+    """docs/results.md's "One policy for seven robots": film and each actuation variant against issue 58's goal.
+
+    The goal's bars are :data:`morfic_cli.report.goal.GOAL`'s; the tables :func:`~morfic_cli.report.goal.goal_table`'s
+    (full mode at each goal command, then descriptor and actuation-matched mode beside them); per column the robots
+    meeting the goal at both commands (k of 7) and, for an actuation variant, Go2, Go1 and A1 against film.
+    """
+    from morfic_cli.report.goal import GOAL, goal_table, reference_effects, reference_text, robots_meeting
+    from morfic_cli.report.markdown import table_markdown
+    from morfic_cli.rl.variants import table_variants
+
+    ev = load_evals(results)
+    present = set(ev["variant"]) if not ev.empty else set()
+    act = [v for v in table_variants("actuation") if v in present]
+    rows = ev[ev["variant"].isin([GOAL.reference, *act])].to_dict("records") if not ev.empty else []
+    frame = pd.DataFrame(rows)
+    label = {v: _seeds_label(frame, v) for v in dict.fromkeys(str(r["variant"]) for r in rows)}
+    if GOAL.reference in label:
+        label[GOAL.reference] = label[GOAL.reference].replace("` (", "` (today, ", 1)
+    columns = [(v, label[v]) for v in (GOAL.reference, *act) if v in label]
+
+    def column(r: Any) -> str:
+        return str(r["variant"])
+
+    out = [
+        "*Generated by `scripts/results_tables.py` from the run CSVs under [results/](results/); the goal's bars "
+        "are `GOAL` in `morfic_cli/report/goal.py`, the one place they live.* The goal (issue 58): "
+        f"{GOAL.text()}.",
+        "",
+    ]
+    if not act:
+        out += [
+            "No run of the actuation variants yet: `morfic train --variant film-act --preset cpu` (likewise "
+            '`ppo-act`; docs/training.md, "Actuation variants"). Below, today\'s film against the goal.',
+            "",
+        ]
+    for mode in (GOAL.mode, "descriptor", "actuation-matched"):
+        tables = {c: goal_table(rows, mode, c, columns, column) for c in GOAL.commands}
+        if mode != GOAL.mode and all(t is None for t in tables.values()):
+            out += [f"**{mode.capitalize()} mode:** no rows of these runs yet.", ""]
+            continue
+        for command, table in tables.items():
+            if table is not None:
+                out += [table_markdown(table)]
+            elif mode == GOAL.mode:
+                have = sorted({str(r["mode"]) for r in rows if abs(float(r["command_vx"]) - command) < 1e-9})
+                out += [
+                    f"**{mode.capitalize()} mode at {command:.1f} m/s:** no rows yet"
+                    + (f" (at {command:.1f} m/s these runs have {' and '.join(have)} mode only so far)" if have else "")
+                    + ".",
+                    "",
+                ]
+    for v, head in columns:
+        met, missing = robots_meeting(rows, v, column)
+        line = f"- {head}: robots meeting the goal (both commands, every seed): **{len(met)} of {len(ROBOTS)}**"
+        line += f" ({', '.join(robot_label(r) for r in met)})" if met else ""
+        if missing:
+            line += f"; no {GOAL.mode}-mode rows at {' and '.join(f'{c:.1f}' for c in missing)} m/s yet"
+        vs = reference_text(reference_effects(rows, v, column)) if v != GOAL.reference else ""
+        out.append(line + (f". Go2, Go1 and A1 against today's film: {vs}" if vs else "") + ".")
+    return "\n".join(out).rstrip() + "\n"
+
+
 # ----------------------------------------------------------------------------------------------- figures
 def write_figures(results: Path, out: Path) -> list[Path]:
     """Write the figures into ``out``; return their paths.
@@ -829,6 +1175,10 @@ def main(argv: list[str] | None = None) -> int:
             write_between_markers(args.write, study_block(args.results), STUDY_BEGIN, STUDY_END)
         if ANSWER_BEGIN in args.write.read_text():
             write_between_markers(args.write, render_answer(args.results), ANSWER_BEGIN, ANSWER_END)
+        if EXTERNAL_BEGIN in args.write.read_text():
+            write_between_markers(args.write, external_block(args.results), EXTERNAL_BEGIN, EXTERNAL_END)
+        if GOAL_BEGIN in args.write.read_text():
+            write_between_markers(args.write, goal_block(args.results), GOAL_BEGIN, GOAL_END)
     if args.readme is not None:
         write_between_markers(args.readme, render_headline(args.results), HEADLINE_BEGIN, HEADLINE_END)
         print(f"{args.readme}: headline written")

@@ -15,7 +15,7 @@ differently builds it anew instead of finding the old one.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -302,6 +302,10 @@ def _sections(
             )
         )
 
+    goal = goal_section(data)
+    if goal is not None:
+        out.append(goal)
+
     out.append(_external_section(tables, with_paper))
 
     # ours at the paper's command, the paper's, then ours at each other command (a run's diagnoses at 2.0 and 1.0 m/s
@@ -383,6 +387,57 @@ def _external_section(tables: dict[str, list[dict[str, Any]]], with_paper: bool)
     ]
     found += [T.paper_table(paper.CRITIC_METRICS_EXTERNAL)] if with_paper else []
     return _Section("External baselines", [t for t in found if t] + [T.external_compute_table(compute)], EXTERNAL_TEXT)
+
+
+GOAL_HEADING = "One policy for seven robots (beyond the paper)"
+
+
+def goal_section(data: StoreData) -> _Section | None:
+    """Issue 58's goal section: today's film and each actuation variant against :data:`~morfic_cli.report.goal.GOAL`.
+
+    Present only when a run of a table-``actuation`` variant (``film-act``, ``ppo-act``, ...) is among the runs.
+    Full mode at each goal command, then descriptor and actuation-matched mode against the same bars
+    (:func:`~morfic_cli.report.goal.goal_table`); the text says the goal, and per column the robots that meet it
+    at both commands (k of 7) and, for an actuation variant, Go2, Go1 and A1 against film of the same preset.
+    """
+    from morfic_cli.report import goal as G
+    from morfic_cli.rl.variants import table_variants
+
+    actuation = table_variants("actuation")
+    if not any(r.variant in actuation for r in data.runs):
+        return None
+    order = (G.GOAL.reference, *actuation)
+    rows = [r for r in data.evals if r["variant"] in order]
+    keys = sorted({(str(r["preset"]), str(r["variant"])) for r in rows}, key=lambda k: (k[0], order.index(k[1])))
+    multi = len({p for p, _ in keys}) > 1
+
+    def column(r: Mapping[str, Any]) -> str:
+        return f"{r['preset']}/{r['variant']}"
+
+    def header(preset: str, variant: str) -> str:
+        n = len({r["seed"] for r in rows if (r["preset"], r["variant"]) == (preset, variant)})
+        return f"{T.method_label(variant, preset, multi)}, {n} seed{'s' if n != 1 else ''}"
+
+    columns = [(f"{p}/{v}", header(p, v)) for p, v in keys]
+    found = [
+        G.goal_table(rows, mode, c, columns, column)
+        for mode in (G.GOAL.mode, "descriptor", "actuation-matched")
+        for c in G.GOAL.commands
+    ]
+    lines = [f"Issue 58's goal: {G.GOAL.text()}. The goal's bars are morfic_cli/report/goal.py's GOAL."]
+    for key, head in columns:
+        met, missing = G.robots_meeting(rows, key, column)
+        line = f"{head}: robots meeting the goal (both commands, every seed): {len(met)} of {len(G.ROBOTS)}"
+        line += f" ({', '.join(T.robot_label(r) for r in met)})" if met else ""
+        if missing:
+            line += f"; no {G.GOAL.mode}-mode rows at {' and '.join(f'{c:.1f}' for c in missing)} m/s"
+        preset, variant = key.split("/", 1)
+        if variant != G.GOAL.reference:
+            ref = f"{preset}/{G.GOAL.reference}"
+            vs = G.reference_text(G.reference_effects(rows, key, column, ref), G.GOAL.reference)
+            line += f". Go2, Go1 and A1 against {G.GOAL.reference}: {vs}" if vs else ""
+        lines.append(line + ".")
+    return _Section(GOAL_HEADING, [t for t in found if t], "\n\n".join(lines))
 
 
 def seeds_note(data: StoreData) -> str:
@@ -552,14 +607,14 @@ def render(
     return files
 
 
-REPORT_LAYOUT = 7
+REPORT_LAYOUT = 8
 """The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
 shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor. 3: training curves as the mean
 and min-max band over seeds, legends off the data. 4: the critic-study section. 5: a run's diagnoses at two
 commands are separate rows, never two seeds (the critic and fixed-rollout tables at 2.0 m/s, then at 1.0 m/s).
 6: the claims' verdicts from Holm-corrected t tests, with the seeds each undecided comparison would need.
 7: the external baselines' section (the paper's rows and ours, their EV figure and compute); the paper's own
-variants' tables and claims without them."""
+variants' tables and claims without them. 8: issue 58's goal section (with runs of the actuation variants)."""
 
 
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:

@@ -324,7 +324,7 @@ def test_the_queue_evaluates_at_one_metre_per_second_as_the_seed0_runs_were():
     from morfic_cli.evaluation.protocol import eval_config
     from morfic_cli.pipeline import _json
 
-    assert _json(eval_config("runs/film-cpu-s1", et.trained_regime_cfg())) == {
+    assert _json(eval_config("runs/film-cpu-s1", et.trained_regime_cfg("film"))) == {
         "spec": "runs/film-cpu-s1",
         "robots": ["go2", "a1", "aliengo", "anymal_c", "b1", "go1", "mini_cheetah"],
         "modes": ["descriptor"],
@@ -495,3 +495,70 @@ def test_the_shipped_answer_and_headline_are_current():
     results = root / "docs" / "results"
     assert rt.render_answer(results) in (root / "docs" / "results.md").read_text()
     assert rt.render_headline(results) in (root / "README.md").read_text()
+    assert rt.goal_block(results) in (root / "docs" / "results.md").read_text()  # issue 58's goal section
+
+
+GOAL_HEAD = "robot,mode,command_vx,d,vx_mean,vx_std,survival,verdict\n"
+
+
+def _still(tmp_path: Path) -> Path:
+    """genloco s0 stands still on AlienGo, Cheetah and ANYmal-C at 2.0 m/s; film s0 walks there (descriptor mode)."""
+    (tmp_path / "genloco-cpu-s0-eval.csv").write_text(
+        GOAL_HEAD
+        + "aliengo,descriptor,2.0,0.324,0.10,0.11,0.531,stands still\n"
+        + "mini_cheetah,descriptor,2.0,0.416,0.01,0.04,0.969,stands still\n"
+        + "anymal_c,descriptor,2.0,0.353,0.10,0.09,0.594,stands still\n"
+    )
+    (tmp_path / "film-cpu-s0-eval.csv").write_text(
+        GOAL_HEAD
+        + "aliengo,descriptor,2.0,0.324,0.84,0.5,0.0,falls\n"
+        + "mini_cheetah,descriptor,2.0,0.416,1.96,0.3,0.984,drags feet\n"
+        + "anymal_c,descriptor,2.0,0.353,0.35,0.2,0.0,falls\n"
+        + "go2,full,2.0,0.0,1.5,0.3,0.9,ok\n"
+    )
+    return tmp_path
+
+
+def test_a_baseline_that_stands_still_is_said_to_and_one_seed_has_no_interval(tmp_path):
+    ev = rt.load_evals(_still(tmp_path))
+    text = "\n".join(rt.architecture_text(ev))
+    assert "- **URMA** (`urma`): not trained yet" in text and "- **BodyTransformer** (`bot`): not trained yet" in text
+    assert "(`genloco`, s0; one seed: no interval). It stands still." in text
+    assert "descriptor mode: stands still on 3 of 3 robots" in text
+    # AlienGo: v_x 0.10 - 0.84 = -0.74, S 0.531 - 0.000 = +0.531; the difference only (one seed each)
+    assert "AlienGo v_x 0.10 vs 0.84: -0.74, S 0.531 vs 0.000: +0.531 (stands still)" in text
+    assert "Cheetah v_x 0.01 vs 1.96: -1.95, S 0.969 vs 0.984: -0.015 (stands still)" in text
+    assert "2.0 m/s, full mode: no rows of `genloco` yet." in text
+    assert "[" not in text  # no interval anywhere at one seed
+
+
+def test_two_seeds_a_side_give_the_welch_interval(tmp_path):
+    _still(tmp_path)
+    for run, vx in (("genloco", 0.30), ("film", 1.24)):  # AlienGo v_x: genloco 0.10, 0.30; film 0.84, 1.24
+        (tmp_path / f"{run}-cpu-s1-eval.csv").write_text(GOAL_HEAD + f"aliengo,descriptor,2.0,0.324,{vx},0.1,0.0,x\n")
+    text = "\n".join(rt.architecture_text(rt.load_evals(tmp_path)))
+    # 0.20 - 1.04 = -0.84 with its t interval over 2 vs 2 seeds, Holm over genloco's six comparisons at 2.0 m/s
+    assert "AlienGo v_x 0.20 vs 1.04: -0.84 [" in text and "(n 2 vs 2, p " in text and ", Holm " in text
+
+
+def test_external_block_has_the_papers_group_ours_and_compute(tmp_path):
+    (_still(tmp_path) / "genloco-cpu-s0-curve.csv").write_text(
+        "iteration,env_steps,wall_time_s\n1,12288,5.0\n1000,12288000,5469.2\n"
+    )
+    text = rt.external_block(tmp_path, params=lambda v: (1000, 2000))
+    assert "| Embodiment Scaling (paper) | 1.23 ± 0.06 / 0.906 |" in text  # the paper's Go2 cell, 2.0 m/s
+    assert "| GenLoco `genloco` (s0) | - | - | - | 0.10 ± 0.11 / 0.531 (stands still) |" in text
+    assert "| URMA `urma`: not trained yet |" in text
+    assert "not retrainable here" in text  # Embodiment Scaling's one-line reason
+    # 5469.2 s over 1000 iterations: 1.52 h, 5.47 s/iteration
+    row = "| GenLoco `genloco` | 1,000 / 2,000 | s0 | 12.3M | 1,000 | 1.52 h | 5.47 | 53.3 (200M); 213.5 (800M) |"
+    assert row in text
+
+
+def test_goal_block_without_actuation_runs_says_how_and_judges_film(tmp_path):
+    text = rt.goal_block(_still(tmp_path))
+    assert "`morfic train --variant film-act --preset cpu`" in text
+    assert "**Full mode at 1.0 m/s:** no rows yet." in text
+    assert "| Go2 | 1.50 / 0.900 / ok / **meets** |" in text  # exactly at 2.0 m/s's bars
+    assert "| clears the bar | 1 of 7 |" in text
+    assert "robots meeting the goal (both commands, every seed): **0 of 7**; no full-mode rows at 1.0 m/s yet" in text

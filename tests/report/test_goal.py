@@ -1,0 +1,111 @@
+"""Issue 58's goal (morfic_cli/report/goal.py): the bars at their edges, the goal table, the report's section."""
+
+from __future__ import annotations
+
+import pytest
+
+from morfic_cli.report import build
+from morfic_cli.report import goal as G
+from morfic_cli.report.gather import RunInfo, StoreData
+
+
+def _row(vx: float, s: float, command: float = 1.0, mode: str = "full", verdict: str = "ok", **kw) -> dict:
+    return {"robot": "go2", "mode": mode, "command_vx": command, "vx_mean": vx, "survival": s, "verdict": verdict, **kw}
+
+
+@pytest.mark.parametrize(
+    ("row", "met"),
+    [
+        (_row(0.9, 0.95), True),  # 1.0 m/s: both bars exactly
+        (_row(0.8999, 0.95), False),
+        (_row(0.9, 0.9499), False),
+        (_row(0.9, 0.95, verdict="drags feet"), False),  # a gait that is not valid
+        (_row(0.9, 0.95, mode="descriptor"), False),  # the goal is full mode
+        (_row(1.5, 0.9, 2.0), True),  # 2.0 m/s: its own bars exactly
+        (_row(1.4999, 0.9, 2.0), False),
+        (_row(1.5, 0.8999, 2.0), False),
+        (_row(0.9, 0.95, 2.0), False),  # 1.0 m/s's bars do not clear 2.0 m/s's
+        (_row(2.5, 1.0, 2.5), False),  # no bar at 2.5 m/s
+        ({"mode": "full", "command_vx": 2.0, "vx": 1.5, "survival": 0.9, "verdict": "ok"}, True),  # a comparison row
+    ],
+)
+def test_meets_goal_at_the_edges_of_the_bars(row, met):
+    assert G.meets_goal(row) is met
+
+
+def test_the_bar_is_read_in_other_modes_but_the_goal_only_in_full_mode():
+    row = _row(1.0, 1.0, mode="actuation-matched")
+    assert G.passes_bar(row) and not G.meets_goal(row)
+
+
+def _seeds() -> list[dict]:
+    """film: two seeds on Go2 at 2.0 m/s (one clears the bar); film-act: one seed that clears it on Go2 and A1."""
+    return [
+        _row(1.0, 1.0, 2.0, variant="film", seed=0, verdict="drags feet"),
+        _row(2.0, 0.9, 2.0, variant="film", seed=1),
+        _row(1.6, 0.95, 2.0, variant="film-act", seed=0),
+        {**_row(1.5, 0.9, 2.0, variant="film-act", seed=0), "robot": "a1"},
+    ]
+
+
+def _variant(r):
+    return str(r["variant"])
+
+
+def test_goal_table_gives_seed_means_with_t_intervals_and_the_marks():
+    table = G.goal_table(_seeds(), "full", 2.0, [("film", "film"), ("film-act", "film-act")], _variant)
+    assert table is not None and table.key == "goal_full_2_0"
+    go2 = [[p.text for p in cell] for cell in table.rows[0].cells]
+    # film's v_x 1.0, 2.0: mean 1.5, s = 0.7071, t(0.975, 1) = 12.706: half 12.706 x 0.7071 / sqrt(2) = 6.353
+    # S 1.0, 0.9: mean 0.95, half 12.706 x 0.07071 / sqrt(2) = 0.635
+    assert go2[0] == ["1.50 [-4.85, 7.85]", "0.950 [0.315, 1.585]", "drags feet 1/2, ok 1/2", "meets in 1 of 2 seeds"]
+    assert go2[1] == ["1.60", "0.950", "ok", "meets"]
+    assert table.rows[0].cells[1][3].bold and not table.rows[0].cells[0][3].bold
+    a1 = [[p.text for p in cell] for cell in table.rows[2].cells]
+    assert a1[0] == [None] * 4 and a1[1][3] == "meets"  # film has no A1 row: missing, never a zero
+    assert table.rows[-1].label == "clears the bar"
+    assert [c[0].text for c in table.rows[-1].cells] == ["0 of 7", "2 of 7"]
+    assert G.goal_table(_seeds(), "full", 2.5, [("film", "film")], _variant) is None  # no bar at 2.5 m/s
+
+
+def test_robots_meeting_needs_every_command_of_the_goal():
+    rows = _seeds()
+    assert G.robots_meeting(rows, "film-act", _variant) == ([], [1.0])  # no 1.0 m/s rows: nothing met
+    rows += [_row(0.95, 1.0, 1.0, variant="film-act", seed=0)]
+    assert G.robots_meeting(rows, "film-act", _variant) == (["go2"], [])
+
+
+def test_reference_effects_one_seed_has_no_test():
+    effects = G.reference_effects(_seeds(), "film-act", _variant)
+    vx = next(e for e in effects if e.robot == "go2" and e.metric == "vx")
+    assert vx.effect.estimate == pytest.approx(1.6 - 1.5) and not vx.effect.has_test and not vx.below
+    assert "Go2 at 2.0 m/s v_x +0.10 (n 1 vs 2: no test)" in G.reference_text(effects)
+
+
+def _run(variant: str, seed: int = 0) -> RunInfo:
+    return RunInfo(
+        spec=f"runs/{variant}-cpu-s{seed}",
+        name=f"{variant}-cpu-s{seed}",
+        checkpoint=f"{variant}{seed}",
+        variant=variant,
+        seed=seed,
+        preset="cpu",
+        iteration=1,
+        max_iterations=1,
+        env_steps=1,
+        wall_time_s=1.0,
+        device="cpu",
+        finished=True,
+        created="",
+    )
+
+
+def test_report_section_only_with_an_actuation_run():
+    rows = [{**r, "preset": "cpu"} for r in _seeds()]
+    assert build.goal_section(StoreData(runs=[_run("film"), _run("film", 1)], evals=rows[:2])) is None
+    section = build.goal_section(StoreData(runs=[_run("film"), _run("film", 1), _run("film-act")], evals=rows))
+    assert section is not None and section.heading == build.GOAL_HEADING
+    assert [t.key for t in section.tables] == ["goal_full_2_0"]
+    assert section.tables[0].columns == ("MorFiC-F, 2 seeds", "MorFiC-F(act), 1 seed")
+    assert "MorFiC-F(act), 1 seed: robots meeting the goal (both commands, every seed): 0 of 7" in section.text
+    assert "no full-mode rows at 1.0 m/s" in section.text
