@@ -6,6 +6,9 @@ so a table is never another run's):
 - ``<out>/RUN-eval.csv`` and ``<out>/RUN-calibration.csv``: the eval's and the diagnosis's files, verbatim;
 - ``<out>/RUN-eval-1.0.csv``: the eval at 1.0 m/s, the trained regime (:func:`trained_regime_cfg`: 64 envs x 500
   steps, as :func:`trained_regime_command`), verbatim;
+- ``<out>/RUN-terminations.csv`` and ``<out>/RUN-terminations-1.0.csv``: the two evals' termination counts (their
+  ``terminations.csv``, verbatim: docs/eval.md, "Termination counts"), where the eval recorded them
+  (:func:`write_terminations`; an eval made before the counts were gives no file);
 - ``<out>/RUN-calibration-1.0.csv``: the critic's diagnosis at 1.0 m/s (:func:`trained_regime_diagnosis`: the
   paper's protocol at that command), verbatim, when the store holds it or the run's weights to make it (a run
   imported from a results-only bundle has none: the file is left out, with a note);
@@ -144,6 +147,27 @@ def write_csv(path: Path, rows: list[dict[str, str]], columns: list[str]) -> Non
     writer.writeheader()
     writer.writerows(rows)
     path.write_text(buf.getvalue())
+
+
+def terminations_path(out: Path, run: str, command_vx: float = PAPER_COMMAND) -> Path:
+    """``out/RUN-terminations.csv`` (the 2.0/2.5 m/s eval), ``out/RUN-terminations-1.0.csv`` (the 1.0 m/s eval)."""
+    return out / f"{run}-terminations{command_suffix(command_vx)}.csv"
+
+
+def write_terminations(store, eval_id: str, path: Path) -> bool:
+    """Write the eval's ``terminations.csv`` verbatim to ``path`` when it records counts; whether it did.
+
+    An eval made before the counts were recorded (or imported without the file) writes nothing and removes a
+    ``path`` left from another eval, so no run's counts are another eval's.
+    """
+    from morfic_cli.evaluation.terminations import TERMINATIONS_CSV, read_terminations
+
+    if not read_terminations(store, eval_id):
+        path.unlink(missing_ok=True)
+        return False
+    path.write_bytes(store.read_file(eval_id, TERMINATIONS_CSV))
+    print(f"{path} (termination counts, artifact {eval_id[:12]})")
+    return True
 
 
 def one_run_pipeline(store, variant: str, seed: int, spec: str):
@@ -385,6 +409,8 @@ def main(argv: list[str] | None = None) -> int:
             path.write_bytes(store.read_file(step.id, file))
             ids[what] = step.id
             print(f"{path} (artifact {step.id[:12]})")
+            if what == "eval":
+                write_terminations(store, step.id, terminations_path(args.out, args.run))
         slow = trained_regime_eval(pipe, spec, args.run_missing)
         if slow is None:
             command = trained_regime_command(spec, eval_modes(variant, trained_regime=True))
@@ -399,6 +425,7 @@ def main(argv: list[str] | None = None) -> int:
         path.write_bytes(store.read_file(slow, "eval.csv"))
         ids["eval-1.0"] = slow
         print(f"{path} (artifact {slow[:12]})")
+        write_terminations(store, slow, terminations_path(args.out, args.run, TRAINED_COMMAND))
         write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, args.run_missing)
     refused = pipe.fixed_rollout_left_out().get(spec)
     if refused is not None:

@@ -5,7 +5,8 @@ Inputs (written by scripts/experiment_tables.py from the experiment store, each 
 run's weights were at hand) ``<run>-calibration-1.0.csv``, ``<run>-artifacts.json`` (the ids of the run's checkpoint,
 evals, diagnoses and fixed-rollout analyses) and ``fixed-rollout-<robot>.csv`` (every critic scored on the frozen film
 actor's one rollout of the robot at 2.0 m/s; ``fixed-rollout-1.0-<robot>.csv`` the same at 1.0 m/s, the critics whose
-weights a store held).
+weights a store held); where the evals recorded them, ``<run>-terminations.csv`` and ``<run>-terminations-1.0.csv``
+(the two evals' termination counts: what ended each failed episode, docs/eval.md).
 
 Outputs:
 
@@ -22,8 +23,11 @@ Outputs:
 - the external baselines in our pipeline (issue 57): the paper's row group (its released-weights numbers) and ours
   (``urma``, ``bot``, ``genloco``, ``film``; "not trained yet" where no run is here) at 2.0 and 2.5 m/s (and 1.0 m/s
   where rows exist) in descriptor and full mode, their compute (parameters, transitions, wall time from
-  ``<run>-curve.csv``), and what each changes on AlienGo, Mini Cheetah and ANYmal-C against film;
-- film and each actuation variant (table ``actuation``) against issue 58's goal (``morfic_cli/report/goal.py``);
+  ``<run>-curve.csv``), what each changes on AlienGo, Mini Cheetah and ANYmal-C against film, and what ended their
+  failed episodes there (the termination counts, where recorded);
+- film and each actuation variant (table ``actuation``) against issue 58's goal (``morfic_cli/report/goal.py``),
+  with what ended the failed episodes in full mode (where recorded; else a line saying they come with the next
+  evaluations);
 - with ``--figures DIR``: ``results-ev.png`` (EV per variant per robot), ``results-distance.png`` (speed against
   the normalised distance d, the paper's points beside ours) and ``results-curves.png`` (every run's training curve,
   from ``<run>-curve.csv``).
@@ -474,6 +478,20 @@ def _load_all(results: Path, kinds: tuple[str, ...]) -> pd.DataFrame:
 def load_evals(results: Path) -> pd.DataFrame:
     """Every run's eval rows: ``<run>-eval.csv`` and each of :data:`EXTRA_EVALS` (``<run>-eval-1.0.csv``)."""
     return _load_all(results, ("eval", *EXTRA_EVALS))
+
+
+#: Each run's termination counts (scripts/experiment_tables.py, where the eval recorded them):
+#: ``<run>-terminations.csv`` (the 2.0/2.5 m/s eval's) and ``<run>-terminations-1.0.csv`` (the 1.0 m/s eval's).
+TERMINATION_KINDS: tuple[str, ...] = ("terminations", "terminations-1.0")
+NO_COUNTS = (
+    "no termination counts in these runs' evals yet: evals made before `terminations.csv` existed did not record "
+    'them; they come with the next evaluations (docs/eval.md, "Termination counts").'
+)
+
+
+def load_terminations(results: Path) -> pd.DataFrame:
+    """Every run's termination lines (``robot``, ``mode``, ``command_vx``, ``term``, ``envs`` + run, variant, seed)."""
+    return _load_all(results, TERMINATION_KINDS)
 
 
 def load_calibrations(results: Path) -> pd.DataFrame:
@@ -1022,8 +1040,51 @@ def external_block(results: Path, params: Any = None) -> str:
         "### What each architecture changes on AlienGo, Mini Cheetah and ANYmal-C",
         "",
         *architecture_text(ev),
+        "",
+        "### What ended the failed episodes on AlienGo, Mini Cheetah and ANYmal-C",
+        "",
+        *ended_by_md(load_terminations(results), EXTERNAL_TABLE_VARIANTS, [*EXTERNAL_COMMANDS, TRAINED_COMMAND]),
     ]
     return "\n".join(out).rstrip() + "\n"
+
+
+def ended_by_md(
+    ended: pd.DataFrame, variants: tuple[str, ...], commands: list[float], robots: tuple[str, ...] = ARCH_ROBOTS
+) -> list[str]:
+    """Methods x modes x commands against ``robots``: what ended the failed episodes (:func:`load_terminations`).
+
+    One row per variant, mode and command with counts on one of ``robots``; each cell the terms that ended envs,
+    summed over the seeds the row names (:func:`~morfic_cli.report.goal.ended_by_text`). One line
+    (:data:`NO_COUNTS`) where none exist.
+    """
+    from morfic_cli.report.compare import method_name
+    from morfic_cli.report.goal import ended_by_counts, ended_by_text
+
+    ended = ended[ended["variant"].isin(list(variants))] if not ended.empty else ended
+    if ended.empty:
+        return [NO_COUNTS[0].upper() + NO_COUNTS[1:]]
+    lines = ended.to_dict("records")
+    out = [
+        'The envs each termination term ended, summed over the seeds named (docs/eval.md, "Termination counts"); '
+        "an env counts under every term it tripped on its fatal step. `none`: no env failed; `-`: no counts.",
+        "",
+        "| method, mode, command | " + " | ".join(robot_label(r) for r in robots) + " |",
+        "|---|" + "---:|" * len(robots),
+    ]
+    for v in variants:
+        mine = [r for r in lines if r["variant"] == v and r["robot"] in robots]
+        for command in commands:
+            for mode in ("descriptor", "full"):
+                counts = ended_by_counts(mine, mode, command, lambda r: str(r["variant"]))
+                if not counts:
+                    continue
+                at = {int(r["seed"]) for r in mine if r["mode"] == mode and abs(r["command_vx"] - command) < 1e-9}
+                seeds = ", ".join(f"s{s}" for s in sorted(at))
+                cells = [ended_by_text(counts[(v, r)][0]) if (v, r) in counts else "-" for r in robots]
+                out.append(
+                    f"| {method_name(v)} `{v}` ({seeds}), {mode}, {command:.1f} m/s | " + " | ".join(cells) + " |"
+                )
+    return out
 
 
 # ----------------------------------------------------------------------------------------------- issue 58's goal
@@ -1032,9 +1093,18 @@ def goal_block(results: Path) -> str:
 
     The goal's bars are :data:`morfic_cli.report.goal.GOAL`'s; the tables :func:`~morfic_cli.report.goal.goal_table`'s
     (full mode at each goal command, then descriptor and actuation-matched mode beside them); per column the robots
-    meeting the goal at both commands (k of 7) and, for an actuation variant, Go2, Go1 and A1 against film.
+    meeting the goal at both commands (k of 7) and, for an actuation variant, Go2, Go1 and A1 against film; what
+    ended the failed episodes in full mode (:func:`~morfic_cli.report.goal.ended_by_table`, from
+    :func:`load_terminations`), or :data:`NO_COUNTS` where no eval recorded them.
     """
-    from morfic_cli.report.goal import GOAL, goal_table, reference_effects, reference_text, robots_meeting
+    from morfic_cli.report.goal import (
+        GOAL,
+        ended_by_table,
+        goal_table,
+        reference_effects,
+        reference_text,
+        robots_meeting,
+    )
     from morfic_cli.report.markdown import table_markdown
     from morfic_cli.rl.variants import table_variants
 
@@ -1079,6 +1149,16 @@ def goal_block(results: Path) -> str:
                     + ".",
                     "",
                 ]
+    ended = load_terminations(results)
+    lines = ended[ended["variant"].isin([GOAL.reference, *act])].to_dict("records") if not ended.empty else []
+    ended_tables = {c: ended_by_table(lines, rows, GOAL.mode, c, columns, column) for c in GOAL.commands}
+    if not any(ended_tables.values()):
+        out += [f"**What ended the failed episodes:** {NO_COUNTS}", ""]
+    for command, table in ended_tables.items():
+        if table is not None:
+            out += [table_markdown(table)]
+        elif any(ended_tables.values()):
+            out += [f"**What ended the failed episodes at {command:.1f} m/s:** no counts in {GOAL.mode} mode yet.", ""]
     for v, head in columns:
         met, missing = robots_meeting(rows, v, column)
         line = f"- {head}: robots meeting the goal (both commands, every seed): **{len(met)} of {len(ROBOTS)}**"

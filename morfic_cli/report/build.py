@@ -398,7 +398,9 @@ def goal_section(data: StoreData) -> _Section | None:
     Present only when a run of a table-``actuation`` variant (``film-act``, ``ppo-act``, ...) is among the runs.
     Full mode at each goal command, then descriptor and actuation-matched mode against the same bars
     (:func:`~morfic_cli.report.goal.goal_table`); the text says the goal, and per column the robots that meet it
-    at both commands (k of 7) and, for an actuation variant, Go2, Go1 and A1 against film of the same preset.
+    at both commands (k of 7) and, for an actuation variant, Go2, Go1 and A1 against film of the same preset. Then,
+    where the evals recorded termination counts, what ended the failed episodes in full mode at each goal command
+    (:func:`~morfic_cli.report.goal.ended_by_table`).
     """
     from morfic_cli.report import goal as G
     from morfic_cli.rl.variants import table_variants
@@ -424,6 +426,8 @@ def goal_section(data: StoreData) -> _Section | None:
         for mode in (G.GOAL.mode, "descriptor", "actuation-matched")
         for c in G.GOAL.commands
     ]
+    ended = [r for r in data.terminations if r["variant"] in order]
+    found += [G.ended_by_table(ended, rows, G.GOAL.mode, c, columns, column) for c in G.GOAL.commands]
     lines = [f"Issue 58's goal: {G.GOAL.text()}. The goal's bars are morfic_cli/report/goal.py's GOAL."]
     for key, head in columns:
         met, missing = G.robots_meeting(rows, key, column)
@@ -607,14 +611,15 @@ def render(
     return files
 
 
-REPORT_LAYOUT = 8
+REPORT_LAYOUT = 9
 """The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
 shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor. 3: training curves as the mean
 and min-max band over seeds, legends off the data. 4: the critic-study section. 5: a run's diagnoses at two
 commands are separate rows, never two seeds (the critic and fixed-rollout tables at 2.0 m/s, then at 1.0 m/s).
 6: the claims' verdicts from Holm-corrected t tests, with the seeds each undecided comparison would need.
 7: the external baselines' section (the paper's rows and ours, their EV figure and compute); the paper's own
-variants' tables and claims without them. 8: issue 58's goal section (with runs of the actuation variants)."""
+variants' tables and claims without them. 8: issue 58's goal section (with runs of the actuation variants).
+9: the goal section's "what ended the failed episodes" tables (where the evals recorded termination counts)."""
 
 
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:

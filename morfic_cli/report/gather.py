@@ -81,6 +81,9 @@ class StoreData:
     Attributes:
         runs: The runs, in the order given (or by name).
         evals: eval.csv rows (+ ``run``, ``variant``, ``seed``, ``preset``, ``checkpoint``, ``artifact``).
+        terminations: The termination counts of the kept eval rows, from the same artifacts: ``terminations.csv``
+            lines (``robot``, ``mode``, ``command_vx``, ``term``, ``envs``) with the same added keys; none for a row
+            whose eval predates the counts (:func:`~morfic_cli.evaluation.terminations.read_terminations`).
         calibration: calibration.csv rows (+ the same keys).
         fixed: fixed_rollout.csv rows of critics among the runs and their MC reference rows (+ ``artifact``).
         study: critic_study.csv rows of the newest critic study one of whose frozen actors is one of the runs
@@ -93,6 +96,7 @@ class StoreData:
 
     runs: list[RunInfo]
     evals: list[dict[str, Any]] = field(default_factory=list)
+    terminations: list[dict[str, Any]] = field(default_factory=list)
     calibration: list[dict[str, Any]] = field(default_factory=list)
     fixed: list[dict[str, Any]] = field(default_factory=list)
     study: list[dict[str, Any]] = field(default_factory=list)
@@ -279,6 +283,8 @@ def parameter_counts(store: Store, runs: Sequence[RunInfo]) -> dict[str, tuple[i
 
 def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> StoreData:
     """Collect every stored result of ``runs`` (see the module docstring for the rules)."""
+    from morfic_cli.evaluation.terminations import read_terminations
+
     data = StoreData(runs=list(runs))
     by_ckpt = {r.checkpoint: r for r in runs}
     labels = ref_labels(store)
@@ -291,6 +297,7 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
         use(run.checkpoint, "checkpoint", f"checkpoint/{run.name}")
 
     evals: dict[tuple, dict[str, Any]] = {}
+    ended: dict[tuple, dict[str, int]] = {}  # (eval artifact, robot, mode, command) -> term -> envs
     calib: dict[tuple, dict[str, Any]] = {}
     fixed: dict[tuple, dict[str, Any]] = {}
     for kind in ("eval", "diagnosis"):
@@ -300,6 +307,9 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
                 owner = by_ckpt.get(manifest.inputs.get("checkpoint", ""))
                 if owner is None:
                     continue
+                for line in read_terminations(store, manifest.id):
+                    where = (manifest.id, line["robot"], line["mode"], line["command_vx"])
+                    ended.setdefault(where, {})[line["term"]] = line["envs"]
                 for row in read_csv_rows(store.read_file(manifest.id, "eval.csv")):
                     key = (owner.checkpoint, row["robot"], row["mode"], float(row["command_vx"]))
                     _keep(evals, key, {**row, **_run_keys(owner), "artifact": manifest.id})
@@ -345,6 +355,13 @@ def gather(store: Store, runs: Sequence[RunInfo], *, curves: bool = True) -> Sto
     if data.study:
         use(data.study[0]["artifact"], "diagnosis", f"critic-study/{data.study[0]['artifact'][:12]}")
     data.evals = list(evals.values())
+    for row in data.evals:  # the counts of the kept rows only, from the artifact each row came from
+        where = (row["artifact"], row["robot"], row["mode"], float(row["command_vx"]))
+        keys = {k: row[k] for k in ("run", "variant", "seed", "preset", "checkpoint", "artifact")}
+        data.terminations += [
+            {**keys, "robot": where[1], "mode": where[2], "command_vx": where[3], "term": term, "envs": n}
+            for term, n in ended.get(where, {}).items()
+        ]
     data.calibration = list(calib.values())
     data.fixed = list(fixed.values())
     if curves:

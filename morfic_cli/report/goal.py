@@ -6,7 +6,8 @@ every one of the seven robots in full mode (each robot's own model) with S >= 0.
 Go2, Go1 and A1 stay at least as good as today's film. :data:`GOAL` holds those bars; :func:`meets_goal` judges one
 eval row (one run, one robot, one mode and command) against them; :func:`goal_table` lays the seven robots out
 against them for docs/results.md ("One policy for seven robots") and ``morfic report``; :func:`reference_effects`
-compares Go2, Go1 and A1 with film's seeds (Welch's t, Holm-corrected: :mod:`morfic_cli.report.stats`).
+compares Go2, Go1 and A1 with film's seeds (Welch's t, Holm-corrected: :mod:`morfic_cli.report.stats`);
+:func:`ended_by_table` says, per robot and column, what ended the failed episodes (the evals' termination counts).
 
 Rows are eval rows (``eval.csv``'s columns, with ``variant`` and ``seed``): ``vx_mean`` (or a comparison row's
 ``vx``), ``survival``, ``verdict``, ``mode``, ``command_vx``.
@@ -340,3 +341,87 @@ def reference_text(effects: Sequence[ReferenceEffect], reference: str = GOAL.ref
         for e in effects
     ]
     return head + "; " + ", ".join(parts)
+
+
+# ----------------------------------------------------------------------------------------------- ended by
+def ended_by_counts(
+    lines: Sequence[Mapping[str, Any]], mode: str, command_vx: float, column: Callable[[Mapping[str, Any]], str]
+) -> dict[tuple[str, str], tuple[dict[str, int], int]]:
+    """(column, robot) -> (term -> envs summed over seeds, seeds that recorded counts) in ``mode`` at ``command_vx``.
+
+    Args:
+        lines: Termination lines (``terminations.csv``'s columns: ``robot``, ``mode``, ``command_vx``, ``term``,
+            ``envs``; docs/eval.md, "Termination counts") with the keys ``column`` reads and ``seed``.
+        mode: The eval mode.
+        command_vx: The command (m/s).
+        column: A line's column key (its variant, or preset and variant).
+    """
+    groups: dict[tuple[str, str], dict[Any, dict[str, int]]] = {}
+    for line in lines:
+        if line.get("mode") == mode and abs(float(line["command_vx"]) - command_vx) < 1e-9:
+            seeds = groups.setdefault((column(line), str(line["robot"])), {})
+            seeds.setdefault(line.get("seed", 0), {})[str(line["term"])] = int(line["envs"])
+    out: dict[tuple[str, str], tuple[dict[str, int], int]] = {}
+    for key, seeds in groups.items():
+        total: dict[str, int] = {}
+        for counts in seeds.values():
+            for term, n in counts.items():
+                total[term] = total.get(term, 0) + n
+        out[key] = (total, len(seeds))
+    return out
+
+
+def ended_by_text(counts: Mapping[str, int]) -> str:
+    """The terms that ended envs, most first (ties in recorded order), e.g. ``illegal_contact 12, excessive_tilt 3``.
+
+    ``none`` when counts were recorded and no env failed.
+    """
+    from morfic_cli.evaluation.terminations import failure_text
+
+    ranked = dict(sorted(counts.items(), key=lambda kv: -kv[1]))  # stable: ties keep the recorded order
+    return failure_text(ranked) or "none"
+
+
+def ended_by_table(
+    lines: Sequence[Mapping[str, Any]],
+    rows: Sequence[Mapping[str, Any]],
+    mode: str,
+    command_vx: float,
+    columns: Sequence[tuple[str, str]],
+    column: Callable[[Mapping[str, Any]], str],
+) -> Table | None:
+    """The seven robots x ``columns``: what ended the failed episodes in ``mode`` at ``command_vx``.
+
+    Each cell is :func:`ended_by_text` of the counts summed over the column's seeds; where fewer seeds recorded
+    counts than have eval rows (``rows``: evals made before ``terminations.csv`` existed), ``(k of n seeds)``.
+    A cell without counts is missing (``-``), never ``none``.
+
+    Returns:
+        The table; None when no column has counts in ``mode`` at ``command_vx``.
+    """
+    counts = ended_by_counts(lines, mode, command_vx, column)
+    cols = [(k, h) for k, h in columns if any(key[0] == k for key in counts)]
+    if not cols:
+        return None
+    seeds = {key: cell.n for key, cell in goal_cells(rows, mode, command_vx, column).items()}
+    out_rows = []
+    for robot in ROBOTS:
+        parts: list[tuple[Part, ...]] = []
+        for key, _ in cols:
+            found = counts.get((key, robot))
+            if found is None:
+                parts.append((Part(None),))
+                continue
+            total, k = found
+            n = max(seeds.get((key, robot), k), k)
+            parts.append((Part(None, text=ended_by_text(total) + (f" ({k} of {n} seeds)" if k < n else "")),))
+        out_rows.append(Row(_label(robot), tuple(parts)))
+    caption = (
+        f"What ended the failed episodes in {mode} mode at a commanded {command_vx:.1f} m/s: the envs each "
+        'termination term ended, summed over the seeds (docs/eval.md, "Termination counts"); an env counts under '
+        "every term it tripped on its fatal step. `none`: no env failed; `-`: no counts recorded (an eval made "
+        "before they were)."
+    )
+    key = f"ended_by_{mode}_{command_vx:.1f}".replace(".", "_").replace("-", "_")
+    title = f"What ended the failed episodes: {mode} mode at {command_vx:.1f} m/s"
+    return Table(key, title, caption, "Robot", tuple(h for _, h in cols), tuple(out_rows), math=False)

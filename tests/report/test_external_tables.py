@@ -223,6 +223,18 @@ def test_our_group_is_the_mean_over_seeds_of_each_evaluation(data):
     assert "Ours: not trained yet" not in labels and C.external_note(False) not in table.notes
 
 
+def test_every_kept_eval_row_carries_its_evals_termination_counts(data):
+    from morfic_cli.evaluation.terminations import termination_names
+
+    assert len(data.terminations) == 4 * 2 * len(termination_names())  # 4 runs x 2 commands on go2, every term
+    for ev in data.evals:
+        mine = [r for r in data.terminations if (r["run"], r["command_vx"]) == (ev["run"], ev["command_vx"])]
+        assert [r["term"] for r in mine] == list(termination_names())
+        assert {r["artifact"] for r in mine} == {ev["artifact"]}
+        fell = round((1 - ev["survival"]) * ev["num_envs"])  # each fallen env counts under one term at least
+        assert sum(r["envs"] for r in mine) >= fell and (fell > 0) == (sum(r["envs"] for r in mine) > 0)
+
+
 def test_the_compute_table_counts_each_models_parameters(store, data):
     from morfic_cli.rl.load import load_trained
 

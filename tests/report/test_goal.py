@@ -109,3 +109,97 @@ def test_report_section_only_with_an_actuation_run():
     assert section.tables[0].columns == ("MorFiC-F, 2 seeds", "MorFiC-F(act), 1 seed")
     assert "MorFiC-F(act), 1 seed: robots meeting the goal (both commands, every seed): 0 of 7" in section.text
     assert "no full-mode rows at 1.0 m/s" in section.text
+
+
+def test_report_section_shows_what_ended_the_failed_episodes_only_where_counts_exist():
+    rows = [{**r, "preset": "cpu"} for r in _seeds()]
+    runs = [_run("film"), _run("film", 1), _run("film-act")]
+    ended = [
+        {**r, "preset": "cpu"}
+        for r in _ended("film-act", 0, "go2", (4, 1, 0, 0)) + _ended("ppo", 0, "go2", (1, 0, 0, 0))
+    ]
+    section = build.goal_section(StoreData(runs=runs, evals=rows, terminations=ended))
+    assert section is not None and [t.key for t in section.tables] == ["goal_full_2_0", "ended_by_full_2_0"]
+    table = section.tables[1]
+    assert table.columns == ("MorFiC-F(act), 1 seed",)  # ppo is no column of the goal section; film has no counts
+    assert [c[0].text for c in table.rows[0].cells] == ["illegal_contact 4, excessive_tilt 1"]
+
+
+TERMS = ("illegal_contact", "excessive_tilt", "base_too_low", "nonfinite")
+
+
+def _ended(variant: str, seed: int, robot: str, counts: tuple[int, ...], command: float = 2.0) -> list[dict]:
+    """One eval row's termination lines (terminations.csv's columns, every term) with its run's keys."""
+    return [
+        {"robot": robot, "mode": "full", "command_vx": command, "term": t, "envs": n, "variant": variant, "seed": seed}
+        for t, n in zip(TERMS, counts, strict=True)
+    ]
+
+
+def test_ended_by_counts_sum_over_seeds_and_name_the_terms_most_first():
+    lines = _ended("film", 0, "go2", (3, 5, 0, 0)) + _ended("film", 1, "go2", (9, 0, 1, 0))
+    # illegal_contact 3 + 9 = 12, excessive_tilt 5 + 0 = 5, base_too_low 0 + 1 = 1, over 2 seeds
+    counts = G.ended_by_counts(lines, "full", 2.0, _variant)
+    assert counts == {
+        ("film", "go2"): ({"illegal_contact": 12, "excessive_tilt": 5, "base_too_low": 1, "nonfinite": 0}, 2)
+    }
+    assert G.ended_by_text(counts[("film", "go2")][0]) == "illegal_contact 12, excessive_tilt 5, base_too_low 1"
+    assert G.ended_by_text({"illegal_contact": 2, "excessive_tilt": 3}) == "excessive_tilt 3, illegal_contact 2"
+    assert G.ended_by_text({"illegal_contact": 2, "excessive_tilt": 2}) == "illegal_contact 2, excessive_tilt 2"
+    assert G.ended_by_text(dict.fromkeys(TERMS, 0)) == "none"  # recorded, nothing failed
+    assert G.ended_by_counts(lines, "full", 1.0, _variant) == {}
+    assert G.ended_by_counts(lines, "descriptor", 2.0, _variant) == {}
+
+
+def test_ended_by_table_marks_seeds_without_counts_and_leaves_unrecorded_cells_missing():
+    # film has eval rows of 2 seeds on Go2 at 2.0 m/s (_seeds), counts of seed 0 only; film-act none on Go2, A1 a tie
+    lines = _ended("film", 0, "go2", (3, 5, 0, 0)) + _ended("film-act", 0, "a1", (2, 2, 0, 0))
+    lines += _ended("film-act", 0, "go2", (0, 0, 0, 0))
+    cols = [("film", "film"), ("film-act", "film-act")]
+    table = G.ended_by_table(lines, _seeds(), "full", 2.0, cols, _variant)
+    assert table is not None and table.key == "ended_by_full_2_0" and table.columns == ("film", "film-act")
+    cells = {row.label: [cell[0].text for cell in row.cells] for row in table.rows}
+    assert cells["Go2"] == ["excessive_tilt 5, illegal_contact 3 (1 of 2 seeds)", "none"]
+    assert cells["A1"] == [None, "illegal_contact 2, excessive_tilt 2"]  # film: no counts there, "-"
+    assert cells["B1"] == [None, None] and len(table.rows) == len(G.ROBOTS)
+    assert G.ended_by_table(lines, _seeds(), "full", 1.0, cols, _variant) is None  # no counts at 1.0 m/s
+    only_act = G.ended_by_table(_ended("film-act", 0, "a1", (1, 0, 0, 0)), _seeds(), "full", 2.0, cols, _variant)
+    assert only_act is not None and only_act.columns == ("film-act",)  # a column without counts is left out
+
+
+def test_gather_reads_the_counts_of_the_eval_each_kept_row_came_from(tmp_path):
+    from morfic_cli.evaluation.terminations import TERMINATION_COLUMNS, TERMINATIONS_CSV, termination_lines
+    from morfic_cli.recording.tables import rows_to_csv
+    from morfic_cli.report.gather import gather, resolve_runs
+    from morfic_cli.store import Store
+
+    store = Store(tmp_path / "store")
+    meta = {"variant": "mine", "seed": 0, "preset": "cpu"}
+    store.set_ref("runs/x", ckpt := store.put_manifest("checkpoint", meta=meta, files={"model.pt": b"w"}))
+    head = b"robot,mode,command_vx,vx_mean,survival,verdict,num_envs,steps\n"
+
+    def put_eval(rows: bytes, counts: dict[str, dict[str, int]] | None) -> str:
+        files = {"eval.csv": head + rows}
+        if counts is not None:
+            lines = termination_lines(
+                [{"robot": r, "mode": "full", "command_vx": 2.0, "terminations": c} for r, c in counts.items()]
+            )
+            files[TERMINATIONS_CSV] = rows_to_csv(lines, TERMINATION_COLUMNS)
+        return store.put_manifest("eval", inputs={"checkpoint": ckpt}, files=files)
+
+    protocol = put_eval(
+        b"go2,full,2.0,1.5,0.75,falls,64,500\ngo1,full,2.0,1.9,1.0,ok,64,500\n",
+        {"go2": {"illegal_contact": 16, "excessive_tilt": 3}, "go1": {"illegal_contact": 0, "excessive_tilt": 0}},
+    )
+    put_eval(b"go2,full,2.0,0.1,0.0,falls,2,10\n", {"go2": {"illegal_contact": 2, "excessive_tilt": 0}})  # quick
+    put_eval(b"a1,full,2.0,1.0,0.5,falls,64,500\n", None)  # made before the counts were recorded
+    data = gather(store, resolve_runs(store, None), curves=False)
+    got = {(r["robot"], r["term"]): (r["envs"], r["artifact"], r["variant"]) for r in data.terminations}
+    # the protocol's 64 x 500 rows are kept (not the quick eval's), and their counts with them; A1: none recorded
+    assert got == {
+        ("go2", "illegal_contact"): (16, protocol, "mine"),
+        ("go2", "excessive_tilt"): (3, protocol, "mine"),
+        ("go1", "illegal_contact"): (0, protocol, "mine"),
+        ("go1", "excessive_tilt"): (0, protocol, "mine"),
+    }
+    assert {r["robot"] for r in data.evals} == {"go2", "go1", "a1"}

@@ -95,3 +95,17 @@ def test_the_eval_command_of_the_1_0_eval_where_one_choice_of_mode_makes_it():
     )
     assert et.trained_regime_command("runs/x", (A,)) == "morfic eval runs/x --command-vx 1.0 --mode actuation-matched"
     assert et.trained_regime_command("runs/film-act-cpu-s0", (D, F, A)) is None  # only --run-missing makes it
+
+
+def test_an_evals_termination_counts_are_copied_verbatim_and_an_older_eval_writes_none(tmp_path):
+    from morfic_cli.evaluation.terminations import TERMINATIONS_CSV
+
+    store = Store(tmp_path / "store")
+    counts = b"robot,mode,command_vx,term,envs\ngo2,full,1.0,illegal_contact,12\ngo2,full,1.0,excessive_tilt,3\n"
+    new = store.put_manifest("eval", files={"eval.csv": b"robot\ngo2\n", TERMINATIONS_CSV: counts})
+    old = store.put_manifest("eval", files={"eval.csv": b"robot\ngo1\n"})
+    assert et.terminations_path(tmp_path, "film-act-cpu-s0").name == "film-act-cpu-s0-terminations.csv"
+    path = et.terminations_path(tmp_path, "film-act-cpu-s0", 1.0)
+    assert path.name == "film-act-cpu-s0-terminations-1.0.csv"
+    assert et.write_terminations(store, new, path) and path.read_bytes() == counts
+    assert not et.write_terminations(store, old, path) and not path.exists()  # no empty file, no other eval's counts

@@ -562,3 +562,37 @@ def test_goal_block_without_actuation_runs_says_how_and_judges_film(tmp_path):
     assert "| Go2 | 1.50 / 0.900 / ok / **meets** |" in text  # exactly at 2.0 m/s's bars
     assert "| clears the bar | 1 of 7 |" in text
     assert "robots meeting the goal (both commands, every seed): **0 of 7**; no full-mode rows at 1.0 m/s yet" in text
+
+
+TERM_HEAD = "robot,mode,command_vx,term,envs\n"
+
+
+def test_goal_and_external_blocks_say_what_ended_the_failed_episodes_where_counts_exist(tmp_path):
+    _still(tmp_path)
+    (tmp_path / "film-cpu-s0-terminations.csv").write_text(
+        TERM_HEAD + "go2,full,2.0,illegal_contact,4\ngo2,full,2.0,excessive_tilt,6\ngo2,full,2.0,nonfinite,0\n"
+        "aliengo,descriptor,2.0,illegal_contact,64\naliengo,descriptor,2.0,base_too_low,0\n"
+    )
+    (tmp_path / "genloco-cpu-s0-terminations-1.0.csv").write_text(
+        TERM_HEAD + "anymal_c,descriptor,1.0,base_too_low,33\nanymal_c,descriptor,1.0,illegal_contact,0\n"
+    )
+    (tmp_path / "genloco-cpu-s1-terminations-1.0.csv").write_text(
+        TERM_HEAD + "anymal_c,descriptor,1.0,base_too_low,7\nanymal_c,descriptor,1.0,illegal_contact,1\n"
+    )
+    goal = rt.goal_block(tmp_path)
+    assert "**What ended the failed episodes: full mode at 2.0 m/s.**" in goal
+    assert "| Go2 | excessive_tilt 6, illegal_contact 4 |" in goal and "| B1 | - |" in goal
+    assert "**What ended the failed episodes at 1.0 m/s:** no counts in full mode yet." in goal
+    assert rt.NO_COUNTS not in goal
+    ext = rt.external_block(tmp_path, params=lambda v: (1, 1))
+    # ANYmal-C at 1.0 m/s over s0 and s1: base_too_low 33 + 7 = 40, illegal_contact 0 + 1 = 1
+    assert "| GenLoco `genloco` (s0, s1), descriptor, 1.0 m/s | - | - | base_too_low 40, illegal_contact 1 |" in ext
+    assert "| MorFiC-F `film` (s0), descriptor, 2.0 m/s | illegal_contact 64 | - | - |" in ext
+    assert "full, 2.0 m/s" not in ext  # film's full-mode counts are on Go2 only, not on these three robots
+
+
+def test_without_termination_files_both_blocks_say_the_counts_come_with_the_next_evaluations(tmp_path):
+    _still(tmp_path)
+    assert f"**What ended the failed episodes:** {rt.NO_COUNTS}" in rt.goal_block(tmp_path)
+    assert "No termination counts in these runs' evals yet" in rt.external_block(tmp_path, params=lambda v: (1, 1))
+    assert "envs" not in rt.load_terminations(tmp_path).columns
