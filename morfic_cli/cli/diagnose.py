@@ -202,7 +202,8 @@ def _fixed(
 ) -> None:
     from morfic_cli.diagnostics.fixed_rollout import FIXED_ROLLOUT_COLUMNS, fixed_rollout, load_models
 
-    models = load_models(st, actor, critics, cfg, on_skip=note_skipped)  # defaults, bad refs, incompatible critics fail
+    # named bad refs and incompatible critics fail; the defaults leave them out with a note
+    models = load_models(st, actor, critics, cfg, on_skip=note_skipped)
     with StepBar("diagnose", cfg.steps, quiet) as bar:
         result = fixed_rollout(st, robot, models, cfg, on_rollout_start=_describe(bar), on_step=bar.step)
     _write_out(out, "fixed_rollout.csv", result.rows, FIXED_ROLLOUT_COLUMNS)

@@ -207,7 +207,8 @@ def load_models(
         actor_spec: The actor's checkpoint; None = the newest ``film`` run.
         critic_specs: The critics' checkpoints; None or empty = the newest run of each variant.
         cfg: Rollout and metric settings (its steps are checked against the actor's discount).
-        on_skip: Told ``(ref, why)`` of each run a default choice left out (:func:`newest_runs`).
+        on_skip: Told ``(ref, why)`` of each run a default choice left out (:func:`newest_runs`; with the default
+            critics also those :func:`incompatible` with the actor, which named critics make an error).
 
     Raises:
         MorficError: No default actor, a critic named twice, a spec that is not a checkpoint, an incompatible
@@ -225,6 +226,18 @@ def load_models(
         raise MorficError(f"--critics names a run twice: {','.join(specs)}; give each critic once.")
     actor = load_trained(store, actor_spec)
     critics = [load_trained(store, s) for s in specs]
+    if not critic_specs:  # the default choice leaves out a critic the actor's rollouts cannot feed, and says so
+        keep = [not incompatible(actor.cfg, c.cfg) for c in critics]
+        for spec, critic, k in zip(specs, critics, keep, strict=True):
+            if not k and on_skip is not None:
+                on_skip(spec, f"trained with other {', '.join(incompatible(actor.cfg, critic.cfg))} than the actor")
+        specs = [s for s, k in zip(specs, keep, strict=True) if k]
+        critics = [c for c, k in zip(critics, keep, strict=True) if k]
+        if not critics:
+            raise MorficError(
+                f"no run in {store.root} has a critic that {actor_spec}'s rollouts can feed (same discount, rewards, "
+                "observations and control step); name critics with --critics runs/A,runs/B."
+            )
     for spec, critic in zip(specs, critics, strict=True):
         check_compatible(actor, critic, spec)
     if any(c.cfg.env.obs.body_tokens for c in critics) and not actor.cfg.env.obs.body_tokens:

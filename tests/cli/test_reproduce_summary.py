@@ -6,6 +6,8 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
+from fake_runs import fake_run
+
 from morfic_cli.cli._options import OutputFormat
 from morfic_cli.cli.reproduce import _summary, files_summary
 
@@ -50,28 +52,9 @@ def test_json_keeps_every_path(capsys, tmp_path):
 
 
 def _runs(*pairs: tuple[str, int]):
-    from morfic_cli.report.gather import RunInfo, StoreData
+    from morfic_cli.report.gather import StoreData
 
-    return StoreData(
-        runs=[
-            RunInfo(
-                spec=f"runs/{v}-cpu-s{s}",
-                name=f"{v}-cpu-s{s}",
-                checkpoint="c",
-                variant=v,
-                seed=s,
-                preset="cpu",
-                iteration=1,
-                max_iterations=1,
-                env_steps=1,
-                wall_time_s=1.0,
-                device="cpu",
-                finished=True,
-                created="",
-            )
-            for v, s in pairs
-        ]
-    )
+    return StoreData(runs=[fake_run(v, s, checkpoint="c") for v, s in pairs])
 
 
 def test_a_one_seed_report_says_first_why_it_cannot_tell_and_how_to_get_the_answer():

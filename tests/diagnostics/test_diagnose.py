@@ -171,6 +171,33 @@ def test_incompatible_critics_are_refused():
         check_compatible(actor, SimpleNamespace(cfg=dataclasses.replace(cfg, env=obs)), "runs/y")
 
 
+def test_default_critics_leave_out_an_incompatible_run_and_say_why(monkeypatch, tmp_path):
+    """Named, an incompatible critic is an error; chosen by default (the newest run of each variant), it is left out
+    with its reason, and no compatible critic at all is an error."""
+    from morfic_cli.diagnostics import fixed_rollout as F
+    from morfic_cli.errors import MorficError
+    from morfic_cli.rl import load
+    from morfic_cli.rl.config import smoke_preset
+    from morfic_cli.store import Store
+
+    cfg = smoke_preset("film")
+    act = dataclasses.replace(cfg.env, obs=dataclasses.replace(cfg.env.obs, extended_morphology=True))
+    cfgs = {"runs/film-s0": cfg, "runs/ppo-s0": smoke_preset("ppo"), "runs/act-s0": dataclasses.replace(cfg, env=act)}
+    monkeypatch.setattr(load, "load_trained", lambda store, spec: SimpleNamespace(cfg=cfgs[spec]))
+    monkeypatch.setattr(F, "default_critics", lambda store, on_skip=None: list(cfgs))
+    diag = DiagnoseCfg(num_envs=2, steps=30, trunc_eps=0.8)
+    skipped: list[tuple[str, str]] = []
+    store = Store(tmp_path / "s")
+    models = F.load_models(store, "runs/film-s0", None, diag, on_skip=lambda r, w: skipped.append((r, w)))
+    assert models.critic_specs == ["runs/film-s0", "runs/ppo-s0"]
+    assert skipped == [("runs/act-s0", "trained with other env.obs than the actor")]
+    with pytest.raises(MorficError, match="env.obs"):
+        F.load_models(store, "runs/film-s0", ["runs/act-s0"], diag)
+    monkeypatch.setattr(F, "default_critics", lambda store, on_skip=None: ["runs/act-s0"])
+    with pytest.raises(MorficError, match="--critics"):
+        F.load_models(store, "runs/film-s0", None, diag)
+
+
 def test_ev_figure_handles_nan_and_very_negative_ev():
     from morfic_cli.diagnostics.figures import ev_figure
 

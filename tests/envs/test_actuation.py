@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from fake_runs import fake_run
 
 from morfic_cli.config import ActuationRandCfg, GeometryRandCfg
 from morfic_cli.envs.actuation import (
@@ -311,24 +312,10 @@ def test_both_stays_descriptor_and_full_and_export_refuses_the_extended_descript
 
 def test_report_gives_actuation_matched_its_own_table():
     from morfic_cli.report.compare import transfer_rows
-    from morfic_cli.report.gather import RunInfo, StoreData
+    from morfic_cli.report.gather import StoreData
     from morfic_cli.report.tables import transfer_table
 
-    run = RunInfo(
-        spec="runs/film-act-cpu-s0",
-        name="film-act-cpu-s0",
-        checkpoint="a" * 64,
-        variant="film-act",
-        seed=0,
-        preset="cpu",
-        iteration=1,
-        max_iterations=1,
-        env_steps=1,
-        wall_time_s=1.0,
-        device="cpu",
-        finished=True,
-        created="",
-    )
+    run = fake_run("film-act", checkpoint="a" * 64)
     rows = [
         {
             "run": run.name,

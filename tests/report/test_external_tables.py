@@ -11,6 +11,7 @@ import io
 import json
 
 import pytest
+from fake_runs import fake_run
 
 from morfic_cli.report import compare as C
 from morfic_cli.report import paper
@@ -93,21 +94,7 @@ def data(store) -> StoreData:
 
 
 def _run(variant: str) -> RunInfo:
-    return RunInfo(
-        spec=f"runs/{variant}-cpu-s0",
-        name=f"{variant}-cpu-s0",
-        checkpoint=variant * 8,
-        variant=variant,
-        seed=0,
-        preset="cpu",
-        iteration=1,
-        max_iterations=1,
-        env_steps=1,
-        wall_time_s=1.0,
-        device="cpu",
-        finished=True,
-        created="2026-01-01T00:00:00Z",
-    )
+    return fake_run(variant, checkpoint=variant * 8, created="2026-01-01T00:00:00Z")
 
 
 # ---------------------------------------------------------------------------- the paper's group (no store)

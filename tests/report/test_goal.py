@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from fake_runs import fake_run
 
 from morfic_cli.report import build
 from morfic_cli.report import goal as G
@@ -83,21 +84,7 @@ def test_reference_effects_one_seed_has_no_test():
 
 
 def _run(variant: str, seed: int = 0) -> RunInfo:
-    return RunInfo(
-        spec=f"runs/{variant}-cpu-s{seed}",
-        name=f"{variant}-cpu-s{seed}",
-        checkpoint=f"{variant}{seed}",
-        variant=variant,
-        seed=seed,
-        preset="cpu",
-        iteration=1,
-        max_iterations=1,
-        env_steps=1,
-        wall_time_s=1.0,
-        device="cpu",
-        finished=True,
-        created="",
-    )
+    return fake_run(variant, seed)
 
 
 def test_report_section_only_with_an_actuation_run():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from fake_runs import fake_run
 
 from morfic_cli.diagnostics.figures import ev_plot
 from morfic_cli.report.figures import compute_plot, curves_plot, distance_plot
@@ -162,24 +163,10 @@ def test_curves_draw_one_mean_line_per_variant_and_preset_with_the_legend_off_th
 
 def test_filter_presets_keeps_one_preset_and_names_the_others_when_none_match():
     from morfic_cli.errors import MorficError
-    from morfic_cli.report.gather import RunInfo, filter_presets
+    from morfic_cli.report.gather import filter_presets
 
     def info(name, preset):
-        return RunInfo(
-            spec=f"runs/{name}",
-            name=name,
-            checkpoint=name,
-            variant="film",
-            seed=0,
-            preset=preset,
-            iteration=1,
-            max_iterations=1,
-            env_steps=1,
-            wall_time_s=1.0,
-            device="cpu",
-            finished=True,
-            created="",
-        )
+        return fake_run("film", preset=preset, name=name, checkpoint=name)
 
     runs = [info("film-cpu-s0", "cpu"), info("film-smoke-s0", "smoke"), info("film-cpu-s1", "cpu")]
     assert [r.name for r in filter_presets(runs, ("cpu",))] == ["film-cpu-s0", "film-cpu-s1"]
