@@ -303,8 +303,7 @@ class LocomotionEnv(VecEnv):
         self._nonfinite += bad.sum()
         reward = torch.where(bad, torch.zeros_like(reward), reward)
         terminated = terminated | bad
-        # references, no host read; bad is copied: the CPU backend's frame shares the flags it clears at reset
-        self.last_terminations = {**term_masks, NONFINITE: bad.clone()}
+        self.last_terminations = {**term_masks, NONFINITE: bad}  # references, no host read
         reward = torch.nan_to_num(reward, nan=0.0, posinf=0.0, neginf=0.0)
         time_outs = (self.episode_length_buf >= self.max_episode_length) & ~terminated
         dones = terminated | time_outs

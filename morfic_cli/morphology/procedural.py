@@ -161,9 +161,16 @@ def base_clearance(robot: RobotSpec, height: float) -> float:
 
 
 def sample_geometry(
-    rng: np.random.Generator, cfg: GeometryRandCfg, template: RobotSpec, name: str | None = None
+    rng: np.random.Generator,
+    cfg: GeometryRandCfg,
+    template: RobotSpec,
+    name: str | None = None,
+    *,
+    template_height: float | None = None,
 ) -> tuple[GeometrySample, RobotSpec]:
     """Draw one robot, again until its base clears the ground by ``cfg.min_base_clearance`` at the default pose.
+
+    ``template_height`` is ``builder.nominal_height(template)`` when the caller has it (saves a compile per robot).
 
     Returns:
         The factors and the generated robot (:func:`generate_robot`).
@@ -171,7 +178,7 @@ def sample_geometry(
     Raises:
         ValueError: No draw in :data:`MAX_REDRAWS` clears the ground (the config's ranges cannot meet it).
     """
-    template_height = nominal_height(template)
+    template_height = nominal_height(template) if template_height is None else template_height
     for _ in range(MAX_REDRAWS):
         sample = _draw(rng, cfg)
         robot = generate_robot(template, sample, cfg, name, template_height=template_height)
@@ -330,5 +337,9 @@ def generate_pool(template: RobotSpec, cfg: GeometryRandCfg, seed: int) -> Geome
         The pool; robot k is named ``<template>_gen<k>``.
     """
     rng = np.random.default_rng([int(seed), POOL_SEED_SALT])
-    drawn = [sample_geometry(rng, cfg, template, f"{template.name}_gen{k}") for k in range(cfg.pool_size)]
+    height = nominal_height(template)
+    drawn = [
+        sample_geometry(rng, cfg, template, f"{template.name}_gen{k}", template_height=height)
+        for k in range(cfg.pool_size)
+    ]
     return GeometryPool.of([robot for _, robot in drawn], [sample for sample, _ in drawn])

@@ -156,6 +156,10 @@ def paper_preset(variant: str = "film", seed: int = 0) -> TrainCfg:
 
 _PRESET_FNS = {"smoke": smoke_preset, "cpu": cpu_preset, "paper": paper_preset}
 
+SMOKE_GEOMETRY_POOL = 8
+"""Robots the smoke preset generates for a variant with procedural geometry (GenLoco's 256 elsewhere): its 8 envs
+draw few of them, and compiling the pool is nearly all of a smoke env's construction."""
+
 
 def preset_cfg(preset: str, variant: str = "film", seed: int = 0) -> TrainCfg:
     """The config of a named preset for ``variant``, with the variant's env defaults (:func:`with_env_overrides`).
@@ -167,7 +171,10 @@ def preset_cfg(preset: str, variant: str = "film", seed: int = 0) -> TrainCfg:
     if preset not in _PRESET_FNS:
         raise UnknownNameError("preset", preset, PRESETS)
     overrides = resolve_variant(variant).env_overrides
-    return with_env_overrides(_PRESET_FNS[preset](variant, seed), overrides)
+    cfg = with_env_overrides(_PRESET_FNS[preset](variant, seed), overrides)
+    if preset == "smoke" and cfg.env.rand.geometry.enabled:
+        cfg = with_env_overrides(cfg, {"rand.geometry.pool_size": SMOKE_GEOMETRY_POOL})
+    return cfg
 
 
 def with_env_overrides(cfg: TrainCfg, overrides: dict[str, Any]) -> TrainCfg:

@@ -142,7 +142,8 @@ def geometry_fields(template: mujoco.MjModel, models: Sequence[mujoco.MjModel]) 
     (whose outputs derive from the masses, so they differ between generated robots) makes it equal that model.
     """
     names = [n for n in dir(template) if not n.startswith("_") and isinstance(getattr(template, n), np.ndarray)]
-    differ = {n for n in names if any(not np.array_equal(getattr(template, n), getattr(m, n)) for m in models)}
+    # byte equality: the models share every field's shape and dtype (same sizes), and a NaN equals itself
+    differ = {n for n in names if any(getattr(m, n).tobytes() != getattr(template, n).tobytes() for m in models)}
     return tuple(sorted(differ | set(MUTABLE_FIELDS)))
 
 
@@ -326,7 +327,7 @@ class CpuBackend:
             body_contact_force=self._tensor(
                 np.linalg.norm(sd[:, lay.body_force.reshape(-1)].reshape(n, len(CONTACT_BODIES), 3), axis=-1)
             ),
-            bad=self._tensor(self._bad, torch.bool),
+            bad=self._tensor(self._bad.copy(), torch.bool),  # a copy: resets clear the backend's flags in place
         )
 
     def params(self) -> SimParams:

@@ -30,7 +30,9 @@ def test_its_presets_turn_procedural_geometry_on_and_set_can_turn_it_off():
         base = preset_cfg(preset, "ppo")
         assert not base.env.rand.geometry.enabled  # every other variant unchanged
         assert cfg.env == type(cfg.env)(**{**base.env.__dict__, "rand": cfg.env.rand})
-        assert cfg.env.rand.geometry == type(base.env.rand.geometry)(enabled=True)
+        pool = 8 if preset == "smoke" else 256  # the smoke preset compiles 8 generated robots, not GenLoco's 256
+        assert base.env.rand.geometry.pool_size == 256  # and only where geometry is on: ppo's config is as before
+        assert cfg.env.rand.geometry == type(base.env.rand.geometry)(enabled=True, pool_size=pool)
     off = apply_overrides(preset_cfg("smoke", "genloco"), ["env.rand.geometry.enabled=false"])
     assert not off.env.rand.geometry.enabled
 

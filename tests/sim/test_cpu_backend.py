@@ -196,6 +196,8 @@ def test_bad_targets_and_diverging_states_are_flagged():
     backend.state[0, backend._qvel0 + 7] = 1e12  # a joint velocity MuJoCo calls unstable
     frame = backend.step(q0, DECIMATION)
     assert frame.bad.tolist() == [True, False, False]
+    _reset_home(backend)  # a reset clears the backend's flags, not those of a frame already handed out
+    assert frame.bad.tolist() == [True, False, False] and not backend.frame().bad.any()
     assert 0 in backend.bad_states and backend.bad_states[0][backend._qvel0 + 7] == 1e12
     assert backend.warnings  # MuJoCo's message was captured, not printed
     assert torch.isfinite(frame.joint_vel).all()
