@@ -9,6 +9,12 @@ so a table is never another run's):
 - ``<out>/RUN-terminations.csv`` and ``<out>/RUN-terminations-1.0.csv``: the two evals' termination counts (their
   ``terminations.csv``, verbatim: docs/eval.md, "Termination counts"), where the eval recorded them
   (:func:`write_terminations`; an eval made before the counts were gives no file);
+- ``<out>/RUN-eval-1.0-full.csv`` and ``<out>/RUN-terminations-1.0-full.csv``: for a run of issue 58's reference
+  variant (film), the goal's extra eval (:func:`goal_eval_cfg`: every robot in full mode at 1.0 m/s, 64 envs x 500
+  steps, the eval ``morfic eval RUN --command-vx 1.0 --mode full`` makes), so Go2, Go1 and A1 can be compared with
+  film in the goal's mode (``morfic_cli.report.goal.goal_evals`` says which a variant needs; its other evals, and
+  so their ids, are unchanged); left out, with a note, when the store lacks it (``--run-missing`` or
+  ``--goal-evals-only`` makes it from the run's weights);
 - ``<out>/RUN-calibration-1.0.csv``: the critic's diagnosis at 1.0 m/s (:func:`trained_regime_diagnosis`: the
   paper's protocol at that command), verbatim, when the store holds it or the run's weights to make it (a run
   imported from a results-only bundle has none: the file is left out, with a note);
@@ -23,8 +29,9 @@ so a table is never another run's):
   rollout at the trained regime's command), when the store holds that analysis or both runs' weights to make it (a
   run imported from a results-only bundle has none: left out, with a note);
 - ``<out>/RUN-curve.csv``: the training curve's main columns (:data:`CURVE_COLUMNS`);
-- ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, 1.0 m/s eval (``eval-1.0``), diagnosis, 1.0 m/s
-  diagnosis (``diagnosis-1.0``) and fixed-rollout analyses (``fixed_rollout``, at 1.0 m/s ``fixed_rollout-1.0``).
+- ``<out>/RUN-artifacts.json``: the ids of the checkpoint, eval, 1.0 m/s eval (``eval-1.0``), the goal's extra eval
+  (``eval-1.0-full``, film only), diagnosis, 1.0 m/s diagnosis (``diagnosis-1.0``) and fixed-rollout analyses
+  (``fixed_rollout``, at 1.0 m/s ``fixed_rollout-1.0``).
 
 Each eval holds the modes of RUN's variant (:func:`morfic_cli.rl.variants.eval_modes`; its ``mode`` column tells
 them apart): the paper's variants descriptor and full mode, at 1.0 m/s descriptor mode alone; the external baselines
@@ -37,6 +44,7 @@ with the paper's protocol (``morfic reproduce --preset cpu``'s configs) and skip
 experiment queue's evaluation of a run, without re-evaluating the variant's other seeds. With
 ``--fixed-rollout-only`` only the fixed-rollout rows are written (the analysis run first when the store lacks it);
 with ``--diagnosis-1.0-only`` only the 1.0 m/s diagnosis (run first when the store lacks it and holds the weights),
+with ``--goal-evals-only`` only the goal's extra evals (likewise; an Error for a variant that needs none),
 with ``--fixed-rollout-1.0-only`` only the 1.0 m/s fixed-rollout rows (likewise), for a run whose other tables are
 in ``--out`` already.
 When RUN's critic had to be scored on other samples than the reference (:func:`merge_fixed_rows`), ``--run-missing``
@@ -44,7 +52,8 @@ also scores every seed-0 critic whose weights the store holds on those samples (
 measures what the other samples change.
 
 Usage: python scripts/experiment_tables.py RUN_NAME [--out docs/results] [--store STORE] [--run-missing]
-       [--fixed-rollout-only [--rescore] | --fixed-rollout-1.0-only [--rescore] | --diagnosis-1.0-only]
+       [--fixed-rollout-only [--rescore] | --fixed-rollout-1.0-only [--rescore] | --diagnosis-1.0-only
+        | --goal-evals-only]
 """
 
 from __future__ import annotations
@@ -228,6 +237,65 @@ def trained_regime_eval(pipe, spec: str, run_missing: bool) -> str | None:
     return step.id if step else None
 
 
+def goal_eval_cfg(command_vx: float):
+    """The goal's extra eval of a run at ``command_vx`` (:func:`morfic_cli.report.goal.goal_evals`).
+
+    Every robot in the CLI's order, the goal's mode alone, the paper's 64 envs x 500 steps, not batched: the config
+    (and so the content address) of ``morfic eval RUN --command-vx 1.0 --mode full`` (:func:`goal_eval_command`).
+    """
+    from morfic_cli.evaluation.protocol import EvalCfg
+    from morfic_cli.morphology.distance import parse_robot_list
+    from morfic_cli.report.goal import GOAL
+
+    return EvalCfg(robots=tuple(parse_robot_list("all")), modes=(GOAL.mode,), command_vx=(command_vx,))
+
+
+def goal_eval_command(spec: str, command_vx: float) -> str:
+    """The ``morfic eval`` command that makes :func:`goal_eval_cfg`'s eval of ``spec`` at ``command_vx``."""
+    from morfic_cli.report.goal import GOAL
+
+    return f"morfic eval {spec} --command-vx {command_vx:.1f} --mode {GOAL.mode}"
+
+
+def write_goal_evals(store, pipe, spec: str, run: str, out: Path, ids: dict, run_missing: bool) -> list[float]:
+    """Write the goal's extra evals of ``spec`` (:func:`morfic_cli.report.goal.goal_evals` of its variant).
+
+    Each is the store's, or run first when ``run_missing`` and the store holds the run's weights; written to
+    ``out/RUN-<name>.csv`` (``name`` :func:`~morfic_cli.report.goal.goal_eval_name`: ``eval-1.0-full``), its
+    termination counts beside it (``RUN-terminations-1.0-full.csv``), its id under ``name`` in ``ids``. Returns the
+    commands left out (a note on stderr says how to make each).
+    """
+    from morfic_cli.report.goal import goal_eval_name, goal_evals
+
+    left_out = []
+    for command in goal_evals(pipe.variant_of(spec)):
+        cfg = goal_eval_cfg(command)
+        step = pipe.stored_eval(spec, cfg)
+        if step is None and run_missing and has_weights(store, spec):
+            start = time.monotonic()
+            step = pipe.evaluate(spec, cfg)
+            print(
+                f"eval {spec} for the goal at {command:.1f} m/s: done in {time.monotonic() - start:.0f} s",
+                file=sys.stderr,
+            )
+        if step is None:
+            print(
+                f"note: no {cfg.modes[0]}-mode eval of {spec} at {command:.1f} m/s in {store.root} (issue 58's goal "
+                f"compares with it): `{goal_eval_command(spec, command)}`, or rerun with --goal-evals-only (both need "
+                "the run's weights)",
+                file=sys.stderr,
+            )
+            left_out.append(command)
+            continue
+        name = goal_eval_name(command)
+        path = out / f"{run}-{name}.csv"
+        path.write_bytes(store.read_file(step.id, "eval.csv"))
+        ids[name] = step.id
+        print(f"{path} (artifact {step.id[:12]})")
+        write_terminations(store, step.id, out / f"{run}-{goal_eval_name(command, 'terminations')}.csv")
+    return left_out
+
+
 def trained_regime_diagnose_cfg(pipe):
     """``pipe``'s diagnosis config (the paper's: every robot, descriptor mode, 64 envs x 800 steps) at 1.0 m/s."""
     return pipe.diagnose_cfg(pipe.cfg.robots, TRAINED_COMMAND)
@@ -352,6 +420,13 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="only the 1.0 m/s diagnosis (run if the store lacks it and holds the run's weights)",
     )
+    only.add_argument(
+        "--goal-evals-only",
+        dest="goal_only",
+        action="store_true",
+        help="only the evals issue 58's goal needs beyond the run's own (film: full mode at 1.0 m/s); run "
+        "each the store lacks (it needs the run's weights)",
+    )
     p.add_argument(
         "--rescore",
         action="store_true",
@@ -387,6 +462,21 @@ def main(argv: list[str] | None = None) -> int:
         write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, run_missing=True)
         ids_path.write_text(json.dumps(ids, indent=1) + "\n")
         return 0
+    if args.goal_only:
+        from morfic_cli.report.goal import GOAL, goal_evals
+
+        if not goal_evals(variant):
+            print(
+                f"Error: {args.run} is a run of {variant}; issue 58's goal needs extra evals of {GOAL.reference}'s "
+                "runs only (morfic_cli/report/goal.py, goal_evals); give one of those.",
+                file=sys.stderr,
+            )
+            return 1
+        left_out = write_goal_evals(store, pipe, spec, args.run, args.out, ids, run_missing=True)
+        ids_path.write_text(json.dumps(ids, indent=1) + "\n")
+        if left_out:
+            print(f"Error: {store.root} lacks {spec}'s weights; import its weights bundle first.", file=sys.stderr)
+        return 1 if left_out else 0
     if args.run_missing and not only_fixed:
         for step in (pipe.evaluate, pipe.diagnose):
             start = time.monotonic()
@@ -427,6 +517,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{path} (artifact {slow[:12]})")
         write_terminations(store, slow, terminations_path(args.out, args.run, TRAINED_COMMAND))
         write_trained_regime_diagnosis(store, pipe, spec, args.run, args.out, ids, args.run_missing)
+        write_goal_evals(store, pipe, spec, args.run, args.out, ids, args.run_missing)
     refused = pipe.fixed_rollout_left_out().get(spec)
     if refused is not None:
         print(f"{'Error' if only_fixed else 'note'}: {refused}", file=sys.stderr)

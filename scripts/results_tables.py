@@ -38,10 +38,11 @@ With ``--write FILE`` the tables replace what stands between ``<!-- results-tabl
 ``<!-- results-bundles:begin -->`` ... ``end``, the critic study (``critic-study.csv`` and ``.json``, when there)
 ``<!-- results-study:begin -->`` ... ``end``, the external baselines ``<!-- results-external:begin -->`` ... ``end``
 and the goal ``<!-- results-goal:begin -->`` ... ``end`` (the last three only where FILE has their markers); without
-it the tables, claims, walking checks and bundles go to stdout.
+it the tables, claims, walking checks and bundles go to stdout. ``--only NAME`` (with ``--write``; ``goal``,
+``external``, ``study`` or ``answer``, repeatable) replaces only those blocks and leaves the rest of FILE as it is.
 
 Usage: python scripts/results_tables.py [--results docs/results] [--write docs/results.md] [--figures docs/img]
-                                        [--bundles artifacts/bundles]
+                                        [--bundles artifacts/bundles] [--only goal ...]
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ import argparse
 import json
 import re
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -494,6 +496,17 @@ def load_terminations(results: Path) -> pd.DataFrame:
     return _load_all(results, TERMINATION_KINDS)
 
 
+def goal_kinds(kind: str = "eval") -> tuple[str, ...]:
+    """The files of the evals issue 58's goal needs beyond the runs' own, ``<run>-<kind>.csv`` (goal section only).
+
+    ``("eval-1.0-full",)`` (``kind`` ``terminations``: ``("terminations-1.0-full",)``): film's full-mode eval at
+    1.0 m/s (:func:`morfic_cli.report.goal.goal_evals`, written by scripts/experiment_tables.py).
+    """
+    from morfic_cli.report.goal import GOAL, goal_eval_name, goal_evals
+
+    return tuple(goal_eval_name(c, kind) for c in goal_evals(GOAL.reference))
+
+
 def load_calibrations(results: Path) -> pd.DataFrame:
     """Every run's diagnosis rows: ``<run>-calibration.csv`` and each of :data:`EXTRA_CALIBRATIONS`."""
     return _load_all(results, ("calibration", *EXTRA_CALIBRATIONS))
@@ -724,7 +737,7 @@ def render_answer(results: Path) -> str:
     lines += [
         "",
         "Every comparison, with its interval, p, Holm p and the seeds it would need: "
-        "[the paper's claims](#the-papers-claims). The dated lab notes of sessions 1-29: "
+        "[the paper's claims](#the-papers-claims). The dated lab notes: "
         "[results-history.md](results-history.md).",
     ]
     return "\n".join(lines) + "\n"
@@ -1095,11 +1108,14 @@ def goal_block(results: Path) -> str:
     (full mode at each goal command, then descriptor and actuation-matched mode beside them); per column the robots
     meeting the goal at both commands (k of 7) and, for an actuation variant, Go2, Go1 and A1 against film; what
     ended the failed episodes in full mode (:func:`~morfic_cli.report.goal.ended_by_table`, from
-    :func:`load_terminations`), or :data:`NO_COUNTS` where no eval recorded them.
+    :func:`load_terminations`), or :data:`NO_COUNTS` where no eval recorded them. Besides the runs' own evals it
+    reads the goal's extra ones (:func:`goal_kinds`: film's full mode at 1.0 m/s).
     """
     from morfic_cli.report.goal import (
         GOAL,
         ended_by_table,
+        goal_eval_name,
+        goal_evals,
         goal_table,
         reference_effects,
         reference_text,
@@ -1108,7 +1124,7 @@ def goal_block(results: Path) -> str:
     from morfic_cli.report.markdown import table_markdown
     from morfic_cli.rl.variants import table_variants
 
-    ev = load_evals(results)
+    ev = _load_all(results, ("eval", *EXTRA_EVALS, *goal_kinds()))
     present = set(ev["variant"]) if not ev.empty else set()
     act = [v for v in table_variants("actuation") if v in present]
     rows = ev[ev["variant"].isin([GOAL.reference, *act])].to_dict("records") if not ev.empty else []
@@ -1127,6 +1143,17 @@ def goal_block(results: Path) -> str:
         f"{GOAL.text()}.",
         "",
     ]
+    extra = goal_evals(GOAL.reference)
+    if extra:
+        at = " and ".join(f"{c:.1f}" for c in extra)
+        files = ", ".join(f"`<run>-{goal_eval_name(c)}.csv`" for c in extra)
+        how = "; ".join(f"`morfic eval runs/RUN --command-vx {c:.1f} --mode {GOAL.mode}`" for c in extra)
+        out += [
+            f"`{GOAL.reference}`'s own evals have no {GOAL.mode}-mode rows at {at} m/s (their configs, and so the "
+            f"shipped ids, stay); its {GOAL.mode}-mode rows there come from one more eval of each run, {files}, "
+            f"made and copied by `scripts/experiment_tables.py RUN --goal-evals-only` ({how}).",
+            "",
+        ]
     if not act:
         out += [
             "No run of the actuation variants yet: `morfic train --variant film-act --preset cpu` (likewise "
@@ -1149,7 +1176,7 @@ def goal_block(results: Path) -> str:
                     + ".",
                     "",
                 ]
-    ended = load_terminations(results)
+    ended = _load_all(results, (*TERMINATION_KINDS, *goal_kinds("terminations")))
     lines = ended[ended["variant"].isin([GOAL.reference, *act])].to_dict("records") if not ended.empty else []
     ended_tables = {c: ended_by_table(lines, rows, GOAL.mode, c, columns, column) for c in GOAL.commands}
     if not any(ended_tables.values()):
@@ -1233,15 +1260,40 @@ def write_between_markers(path: Path, block: str, begin: str = BEGIN, end: str =
     path.write_text(f"{head}{begin}\n{block}{end}{tail}")
 
 
+ONLY_BLOCKS: dict[str, tuple[str, str, Callable[[Path], str]]] = {
+    "answer": (ANSWER_BEGIN, ANSWER_END, render_answer),
+    "study": (STUDY_BEGIN, STUDY_END, study_block),
+    "external": (EXTERNAL_BEGIN, EXTERNAL_END, external_block),
+    "goal": (GOAL_BEGIN, GOAL_END, goal_block),
+}
+"""The blocks ``--only`` writes alone, each (begin marker, end marker, what renders it from ``--results``):
+``--write docs/results.md --only goal`` rewrites issue 58's goal section and nothing else of the file."""
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Print the tables and claims, or write them into ``--write``'s marked blocks; 0."""
+    """Print the tables and claims, or write them into ``--write``'s marked blocks (``--only``: just those); 0."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--results", type=Path, default=Path("docs/results"))
     p.add_argument("--write", type=Path, default=None, help="markdown file whose marked blocks to replace")
     p.add_argument("--figures", type=Path, default=None, help="folder for the results-*.png figures")
     p.add_argument("--bundles", type=Path, default=Path("artifacts/bundles"), help="the shipped bundles' folder")
     p.add_argument("--readme", type=Path, default=None, help="README whose headline block to replace")
+    p.add_argument(
+        "--only",
+        choices=sorted(ONLY_BLOCKS),
+        action="append",
+        default=None,
+        help="with --write: replace only this marked block (repeatable), leave the rest of FILE as it is",
+    )
     args = p.parse_args(argv)
+    if args.only:
+        if args.write is None or args.readme is not None or args.figures is not None:
+            p.error("--only goes with --write alone (no --readme or --figures)")
+        for name in dict.fromkeys(args.only):
+            begin, end, render_block = ONLY_BLOCKS[name]
+            write_between_markers(args.write, render_block(args.results), begin, end)
+            print(f"{args.write}: {name} block written")
+        return 0
     block, claims = render(args.results), render_claims(args.results)
     if args.write is None:
         tables = (walk_table(args.results), bundle_table(args.bundles))

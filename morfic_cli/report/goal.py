@@ -7,7 +7,8 @@ Go2, Go1 and A1 stay at least as good as today's film. :data:`GOAL` holds those 
 eval row (one run, one robot, one mode and command) against them; :func:`goal_table` lays the seven robots out
 against them for docs/results.md ("One policy for seven robots") and ``morfic report``; :func:`reference_effects`
 compares Go2, Go1 and A1 with film's seeds (Welch's t, Holm-corrected: :mod:`morfic_cli.report.stats`);
-:func:`ended_by_table` says, per robot and column, what ended the failed episodes (the evals' termination counts).
+:func:`ended_by_table` says, per robot and column, what ended the failed episodes (the evals' termination counts);
+:func:`goal_evals` which evals the goal needs beyond a run's own (film's full mode at 1.0 m/s).
 
 Rows are eval rows (``eval.csv``'s columns, with ``variant`` and ``seed``): ``vx_mean`` (or a comparison row's
 ``vx``), ``survival``, ``verdict``, ``mode``, ``command_vx``.
@@ -21,9 +22,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from morfic_cli.report import stats
-from morfic_cli.report.claims import row_command
+from morfic_cli.report.claims import TRAINED_COMMAND, command_suffix, is_paper_command, row_command
 from morfic_cli.report.model import Part, Row, Table
 from morfic_cli.report.paper import ROBOT_LABELS, ROBOTS
+from morfic_cli.rl.variants import eval_modes
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,36 @@ class Goal:
 
 GOAL = Goal()
 """Issue 58's goal: the one place its numbers live."""
+
+
+def goal_evals(variant: str, goal: Goal = GOAL) -> tuple[float, ...]:
+    """The goal commands (m/s) at which a run of ``variant`` needs one more eval, in the goal's mode, for the goal.
+
+    Only the reference's runs are compared with (Go2, Go1 and A1 against film), so only they can lack rows: at each
+    goal command, the goal's mode unless the run's own eval there has it (:func:`~morfic_cli.rl.variants.eval_modes`
+    at 2.0 m/s, with ``trained_regime`` at 1.0 m/s; none at another command). film: ``(1.0,)``, its 1.0 m/s eval
+    being descriptor mode alone (the shipped runs' config, which stays). Every other variant: ``()``. The one place
+    that says which extra evals the goal needs: scripts/experiment_tables.py makes and copies them
+    (:func:`goal_eval_name`), scripts/results_tables.py reads them.
+    """
+    if variant != goal.reference:
+        return ()
+
+    def own_modes(command: float) -> tuple[str, ...]:
+        if is_paper_command(command):
+            return eval_modes(variant)
+        return eval_modes(variant, trained_regime=True) if abs(command - TRAINED_COMMAND) < 1e-9 else ()
+
+    return tuple(c for c in goal.commands if goal.mode not in own_modes(c))
+
+
+def goal_eval_name(command_vx: float, kind: str = "eval", goal: Goal = GOAL) -> str:
+    """The name of the goal's extra eval at ``command_vx`` (:func:`goal_evals`) beside a run's other results.
+
+    ``eval-1.0-full``: docs/results/ holds ``<run>-eval-1.0-full.csv`` and, with ``kind`` ``terminations``, its
+    termination counts ``<run>-terminations-1.0-full.csv``; ``<run>-artifacts.json`` its id under ``eval-1.0-full``.
+    """
+    return f"{kind}{command_suffix(command_vx)}-{goal.mode}"
 
 
 def row_vx(row: Mapping[str, Any]) -> float:

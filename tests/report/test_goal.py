@@ -190,3 +190,19 @@ def test_gather_reads_the_counts_of_the_eval_each_kept_row_came_from(tmp_path):
         ("go1", "excessive_tilt"): (0, protocol, "mine"),
     }
     assert {r["robot"] for r in data.evals} == {"go2", "go1", "a1"}
+
+
+def test_only_the_references_runs_need_an_extra_eval_and_only_where_their_own_lack_the_goals_mode():
+    # film: descriptor and full at 2.0 m/s, descriptor alone at 1.0 m/s (eval_modes) -> full mode at 1.0 m/s
+    assert G.goal_evals("film") == (1.0,)
+    assert G.goal_evals("film-act") == () and G.goal_evals("ppo") == ()  # not the reference
+    assert G.goal_evals("genloco", G.Goal(reference="genloco")) == ()  # full mode at 1.0 m/s already (issue 57)
+    assert G.goal_evals("film", G.Goal(mode="actuation-matched")) == (1.0, 2.0)  # in none of film's evals
+    at_1_5 = G.Goal(bars=(G.GoalBar(1.5, 1.2, 0.9), G.GoalBar(2.0, 1.5, 0.9)))
+    assert G.goal_evals("film", at_1_5) == (1.5,)  # no eval of film at 1.5 m/s at all; 2.0 m/s has full mode
+
+
+def test_the_extra_evals_name_is_its_command_and_mode():
+    assert G.goal_eval_name(1.0) == "eval-1.0-full"
+    assert G.goal_eval_name(1.0, "terminations") == "terminations-1.0-full"
+    assert G.goal_eval_name(2.0, goal=G.Goal(mode="actuation-matched")) == "eval-actuation-matched"

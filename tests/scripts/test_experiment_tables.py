@@ -109,3 +109,70 @@ def test_an_evals_termination_counts_are_copied_verbatim_and_an_older_eval_write
     assert path.name == "film-act-cpu-s0-terminations-1.0.csv"
     assert et.write_terminations(store, new, path) and path.read_bytes() == counts
     assert not et.write_terminations(store, old, path) and not path.exists()  # no empty file, no other eval's counts
+
+
+def test_films_goal_eval_is_full_mode_at_1_0_beside_its_unchanged_1_0_eval():
+    # written out by hand: `morfic eval runs/film-cpu-s0 --command-vx 1.0 --mode full` (the CLI's robot order);
+    # the 1.0 m/s eval film's runs already have stays descriptor mode (its shipped id, the plan test above)
+    goal = et.goal_eval_cfg(1.0)
+    assert _json(eval_config("runs/film-cpu-s0", goal)) == {
+        "spec": "runs/film-cpu-s0",
+        "robots": ["go2", "a1", "aliengo", "anymal_c", "b1", "go1", "mini_cheetah"],
+        "modes": ["full"],
+        "command_vx": [1.0],
+        "num_envs": 64,
+        "steps": 500,
+        "seed": 0,
+        "scene_envs": 4,
+    }
+    assert et.trained_regime_cfg("film").modes == (D,)
+    assert et.goal_eval_command("runs/film-cpu-s0", 1.0) == "morfic eval runs/film-cpu-s0 --command-vx 1.0 --mode full"
+
+
+def _film_with_goal_eval(tmp_path: Path, variant: str = "film") -> tuple[Store, str, bytes, bytes]:
+    """A store with run ``<variant>-cpu-s0`` (no weights) and its stored goal eval: (store, eval id, csv, counts)."""
+    from morfic_cli.evaluation.terminations import TERMINATIONS_CSV
+
+    store = Store(tmp_path / "store")
+    spec = f"runs/{variant}-cpu-s0"
+    ckpt = store.put_manifest("checkpoint", config={"variant": variant, "seed": 0}, files={"x": b"x"})
+    store.set_ref(spec, ckpt)
+    rows = b"robot,mode,command_vx,vx_mean,survival,verdict\ngo2,full,1.0,0.93,1.0,ok\n"
+    counts = b"robot,mode,command_vx,term,envs\ngo2,full,1.0,illegal_contact,0\n"
+    config = _json(eval_config(spec, et.goal_eval_cfg(1.0)))
+    ev = store.put_manifest(
+        "eval", config=config, inputs={"checkpoint": ckpt}, files={"eval.csv": rows, TERMINATIONS_CSV: counts}
+    )
+    return store, ev, rows, counts
+
+
+def test_films_goal_eval_is_found_and_copied_with_its_counts_and_id(tmp_path):
+    store, ev, rows, counts = _film_with_goal_eval(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    pipe = et.one_run_pipeline(store, "film", 0, "runs/film-cpu-s0")
+    ids: dict = {}
+    assert et.write_goal_evals(store, pipe, "runs/film-cpu-s0", "film-cpu-s0", out, ids, run_missing=False) == []
+    assert (out / "film-cpu-s0-eval-1.0-full.csv").read_bytes() == rows
+    assert (out / "film-cpu-s0-terminations-1.0-full.csv").read_bytes() == counts
+    assert ids == {"eval-1.0-full": ev}
+    # the script alone: --goal-evals-only copies it (the store lacks the run's weights: nothing to run)
+    other = tmp_path / "other"
+    assert et.main(["film-cpu-s0", "--goal-evals-only", "--out", str(other), "--store", str(store.root)]) == 0
+    assert (other / "film-cpu-s0-eval-1.0-full.csv").read_bytes() == rows
+    assert json.loads((other / "film-cpu-s0-artifacts.json").read_text())["eval-1.0-full"] == ev
+
+
+def test_a_missing_goal_eval_is_a_note_and_a_variant_that_needs_none_an_error(tmp_path, capsys):
+    store = Store(tmp_path / "store")
+    ckpt = store.put_manifest("checkpoint", config={"variant": "film", "seed": 1}, files={"x": b"x"})
+    store.set_ref("runs/film-cpu-s1", ckpt)
+    pipe = et.one_run_pipeline(store, "film", 1, "runs/film-cpu-s1")
+    assert et.write_goal_evals(store, pipe, "runs/film-cpu-s1", "film-cpu-s1", tmp_path, {}, run_missing=False) == [1.0]
+    assert "note: no full-mode eval of runs/film-cpu-s1 at 1.0 m/s" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.csv"))
+    act, *_ = _film_with_goal_eval(tmp_path / "act", "film-act")
+    assert et.main(["film-act-cpu-s0", "--goal-evals-only", "--out", str(tmp_path), "--store", str(act.root)]) == 1
+    assert "Error: film-act-cpu-s0 is a run of film-act; issue 58's goal needs extra evals of film's" in (
+        capsys.readouterr().err
+    )

@@ -596,3 +596,31 @@ def test_without_termination_files_both_blocks_say_the_counts_come_with_the_next
     assert f"**What ended the failed episodes:** {rt.NO_COUNTS}" in rt.goal_block(tmp_path)
     assert "No termination counts in these runs' evals yet" in rt.external_block(tmp_path, params=lambda v: (1, 1))
     assert "envs" not in rt.load_terminations(tmp_path).columns
+
+
+def test_goal_block_reads_films_full_mode_1_0_eval_and_only_the_goal_block_is_rewritten(tmp_path):
+    _still(tmp_path)
+    # film s0's goal eval (scripts/experiment_tables.py: <run>-eval-1.0-full.csv): Go2 at the 1.0 m/s bars exactly,
+    # Go1 drags its feet; its counts beside it
+    (tmp_path / "film-cpu-s0-eval-1.0-full.csv").write_text(
+        GOAL_HEAD + "go2,full,1.0,0.0,0.9,0.1,0.95,ok\ngo1,full,1.0,0.215,1.2,0.1,1.0,drags feet\n"
+    )
+    (tmp_path / "film-cpu-s0-terminations-1.0-full.csv").write_text(TERM_HEAD + "go2,full,1.0,excessive_tilt,3\n")
+    assert rt.goal_kinds() == ("eval-1.0-full",) and rt.goal_kinds("terminations") == ("terminations-1.0-full",)
+    text = rt.goal_block(tmp_path)
+    assert "**Full mode at 1.0 m/s:** no rows yet" not in text
+    assert "**Against issue 58's goal: full mode at 1.0 m/s.**" in text
+    assert "| Go2 | 0.90 / 0.950 / ok / **meets** |" in text and "| Go1 | 1.20 / 1.000 / drags feet / misses |" in text
+    assert "| clears the bar | 1 of 7 |" in text
+    assert "| Go2 | excessive_tilt 3 |" in text  # what ended film's failed episodes at 1.0 m/s, full mode
+    assert "`<run>-eval-1.0-full.csv`, made and copied by `scripts/experiment_tables.py RUN --goal-evals-only`" in text
+    # Go2 meets at both commands (1.5 / 0.9 at 2.0 m/s), the only robot with rows at both
+    assert "robots meeting the goal (both commands, every seed): **1 of 7** (Go2)." in text
+    ev = rt.load_evals(tmp_path)  # the other blocks read the runs' own evals alone
+    assert ev[(ev["mode"] == "full") & (ev["command_vx"] == 1.0)].empty and not ev[ev["command_vx"] == 2.0].empty
+    doc = tmp_path / "doc.md"
+    doc.write_text(f"hand\n{rt.GOAL_BEGIN}\nold\n{rt.GOAL_END}\n{rt.BEGIN}\nold tables\n{rt.END}\nhand\n")
+    assert rt.main(["--results", str(tmp_path), "--write", str(doc), "--only", "goal"]) == 0
+    assert doc.read_text() == f"hand\n{rt.GOAL_BEGIN}\n{text}{rt.GOAL_END}\n{rt.BEGIN}\nold tables\n{rt.END}\nhand\n"
+    with pytest.raises(SystemExit):
+        rt.main(["--results", str(tmp_path), "--only", "goal"])  # --only without --write
