@@ -611,7 +611,7 @@ def render(
     return files
 
 
-REPORT_LAYOUT = 9
+REPORT_LAYOUT = 10
 """The report's layout (tables, sections, wording); bump it with any change to what a report of the same results
 shows. 2: the every-variant zero-shot table; fixed-rollout rows per frozen actor. 3: training curves as the mean
 and min-max band over seeds, legends off the data. 4: the critic-study section. 5: a run's diagnoses at two
@@ -619,7 +619,8 @@ commands are separate rows, never two seeds (the critic and fixed-rollout tables
 6: the claims' verdicts from Holm-corrected t tests, with the seeds each undecided comparison would need.
 7: the external baselines' section (the paper's rows and ours, their EV figure and compute); the paper's own
 variants' tables and claims without them. 8: issue 58's goal section (with runs of the actuation variants).
-9: the goal section's "what ended the failed episodes" tables (where the evals recorded termination counts)."""
+9: the goal section's "what ended the failed episodes" tables (where the evals recorded termination counts).
+10: the goal tables' intervals of S clipped to [0, 1]."""
 
 
 def report_config(cfg: ReportCfg, data: StoreData) -> dict[str, Any]:

@@ -191,11 +191,16 @@ class GoalCell:
         return "misses" if k == 0 else f"meets in {k} of {self.n} seeds"
 
 
-def _number(values: Sequence[float], decimals: int) -> str:
-    """One seed's value; over several the seed mean with its 95 % t interval (:func:`stats.mean_interval`)."""
+def _number(values: Sequence[float], decimals: int, bounds: tuple[float, float] | None = None) -> str:
+    """One seed's value; over several the seed mean with its 95 % t interval (:func:`stats.mean_interval`).
+
+    ``bounds``: the range the quantity cannot leave (S: [0, 1]); the interval's ends are clipped to it.
+    """
     if len(values) == 1:
         return f"{values[0]:.{decimals}f}"
     mean, lo, hi = stats.mean_interval(values)
+    if bounds is not None:
+        lo, hi = max(lo, bounds[0]), min(hi, bounds[1])
     return f"{mean:.{decimals}f} [{lo:.{decimals}f}, {hi:.{decimals}f}]"
 
 
@@ -276,7 +281,7 @@ def goal_table(
             parts.append(
                 (
                     Part(None, text=_number(c.vx, 2)),
-                    Part(None, text=_number(c.survival, 3)),
+                    Part(None, text=_number(c.survival, 3, (0.0, 1.0))),
                     Part(None, text=c.verdict_text()),
                     Part(None, text=c.mark(), bold=c.met),
                 )
@@ -289,8 +294,8 @@ def goal_table(
         f"Each cell is v_x / S / validity verdict / the goal's mark at a commanded {command_vx:.1f} m/s in "
         f"{mode} mode; the bar: v_x >= {bar.min_vx:g} m/s, S >= {bar.min_survival:g}, verdict `{goal.verdict}`"
         + ("" if own else f" (the goal is judged in {goal.mode} mode; here its bar is read in {mode} mode)")
-        + ". One seed: its own numbers; several: the seed mean with its 95 % t interval over seeds; a cell meets "
-        "the bar when every seed does."
+        + ". One seed: its own numbers; several: the seed mean with its 95 % t interval over seeds (S's clipped to "
+        "[0, 1]); a cell meets the bar when every seed does."
     )
     key = f"goal_{mode}_{command_vx:.1f}".replace(".", "_").replace("-", "_")
     title = f"Against issue 58's goal: {mode} mode at {command_vx:.1f} m/s"

@@ -58,8 +58,8 @@ def test_goal_table_gives_seed_means_with_t_intervals_and_the_marks():
     assert table is not None and table.key == "goal_full_2_0"
     go2 = [[p.text for p in cell] for cell in table.rows[0].cells]
     # film's v_x 1.0, 2.0: mean 1.5, s = 0.7071, t(0.975, 1) = 12.706: half 12.706 x 0.7071 / sqrt(2) = 6.353
-    # S 1.0, 0.9: mean 0.95, half 12.706 x 0.07071 / sqrt(2) = 0.635
-    assert go2[0] == ["1.50 [-4.85, 7.85]", "0.950 [0.315, 1.585]", "drags feet 1/2, ok 1/2", "meets in 1 of 2 seeds"]
+    # S 1.0, 0.9: mean 0.95, half 12.706 x 0.07071 / sqrt(2) = 0.635: [0.315, 1.585], clipped to [0, 1] (a share)
+    assert go2[0] == ["1.50 [-4.85, 7.85]", "0.950 [0.315, 1.000]", "drags feet 1/2, ok 1/2", "meets in 1 of 2 seeds"]
     assert go2[1] == ["1.60", "0.950", "ok", "meets"]
     assert table.rows[0].cells[1][3].bold and not table.rows[0].cells[0][3].bold
     a1 = [[p.text for p in cell] for cell in table.rows[2].cells]
