@@ -17,6 +17,8 @@
 # --stop-at (UTC) is for a machine that goes away: at that time a training still running gets Ctrl-C (it finishes
 # its iteration and checkpoints), its full bundle (with the trainer state, so `morfic train --resume` continues it
 # bit-identically elsewhere) goes to artifacts/bundles/partial/<run>.tar, and the queue stops. Commit what it wrote.
+# A Ctrl-C to the training from outside (`kill -INT` of its `morfic train`) does the same: an unfinished run is
+# never evaluated or shipped.
 # --last-start (UTC): no training starts (or resumes) at or after that time; the queue stops there instead, so a
 # run that could not finish before --stop-at is not begun (its partial bundle, ~25 MiB with the trainer state, would
 # stay in git history). A finished run is still evaluated and shipped.
@@ -80,6 +82,12 @@ seconds_until() {  # seconds until the next time $1 (UTC; past midnight when the
 }
 seconds_left() { seconds_until "$STOP_AT"; }
 
+export_partial() {  # an unfinished run's full bundle (with its trainer state) under artifacts/bundles/partial/
+  morfic store export "runs/$1" --latest --out artifacts/bundles/partial --force
+  echo "== partial run exported: artifacts/bundles/partial/$1.tar (resume: morfic store import it, then" \
+       "morfic train --resume runs/$1)"
+}
+
 for item in "$@"; do
   [[ "$item" =~ ^[a-z][a-z0-9_-]*:[0-9]+$ ]] || { echo "Error: '$item' is not VARIANT:SEED (e.g. concat:1)" >&2; exit 1; }
 done
@@ -112,14 +120,17 @@ for item in "$@"; do
       if [ "$(seconds_left)" -le 0 ]; then
         echo "== $(date -u +%T) stop time: Ctrl-C to $name, it checkpoints"
         kill -INT "$pid"; wait "$pid" || true
-        morfic store export "runs/$name" --latest --out artifacts/bundles/partial --force
-        echo "== partial run exported: artifacts/bundles/partial/$name.tar (resume: morfic store import it, then" \
-             "morfic train --resume runs/$name)"
+        export_partial "$name"
         exit 0
       fi
-      sleep 20
+      sleep "${MORFIC_QUEUE_POLL_S:-20}"  # how often the stop time is checked (tests poll faster)
     done
     wait "$pid"
+    if [ "$(run_state "$name")" != finished ]; then  # a Ctrl-C from outside: it checkpointed and exited 0
+      echo "== $(date -u +%T) $name stopped before its last iteration: not evaluated; the queue stops"
+      export_partial "$name"
+      exit 0
+    fi
   fi
   if ! flock -n 9; then
     echo "== $(date -u +%T) $name waits for another queue's evaluation (lock $LOCK)"

@@ -161,3 +161,37 @@ def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_pat
         "done film-cpu-s0" in got.stdout
         and "artifacts/bundles/results/film-cpu-s0.tar and artifacts/bundles/film-cpu-s0.tar" in got.stdout
     )
+
+
+def test_a_training_stopped_from_outside_is_exported_partial_and_not_evaluated(tmp_path):
+    """Ctrl-C to the training (not the queue's --stop-at) checkpoints and exits 0: the run is still unfinished, so
+    the queue exports it as a partial bundle and stops instead of evaluating and shipping it as a finished run."""
+    repo = _repo_with_queue(tmp_path)
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    unfinished = FAKE_MORFIC.replace('"finished": true', '"finished": false')  # train returns, the run stays unfinished
+    (bin_dir / "morfic").write_text(unfinished)
+    (bin_dir / "morfic").chmod(0o755)
+    calls = tmp_path / "calls.txt"
+    env = {
+        **os.environ,
+        "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
+        "MORFIC_CALLS": str(calls),
+        "MORFIC_STORE": str(tmp_path / "store"),
+        "MORFIC_QUEUE_LOCK": str(tmp_path / "queue.lock"),
+        "MORFIC_QUEUE_POLL_S": "0.1",
+    }
+    got = subprocess.run(
+        ["bash", str(repo / "scripts" / "experiment_queue.sh"), "film-act:0", "ppo:1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert got.returncode == 0, got.stdout + got.stderr
+    lines = calls.read_text().splitlines()
+    assert "train --resume runs/film-act-cpu-s0 -q" in lines
+    assert [line for line in lines if line.startswith(("store export", "eval"))] == [
+        "store export runs/film-act-cpu-s0 --latest --out artifacts/bundles/partial --force"
+    ]
+    assert "film-act-cpu-s0 stopped before its last iteration" in got.stdout and "ppo-cpu-s1" not in got.stdout
