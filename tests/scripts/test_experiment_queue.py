@@ -117,15 +117,11 @@ esac
 """
 
 
-def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_path):
-    """Seed 0's weights go where `reproduce --preset shipped` imports them (artifacts/bundles/), other seeds' under
-    weights/; every seed's results-only bundle under results/ (the queue's shipping step, morfic stubbed out)."""
-    repo = _repo_with_queue(tmp_path)
-    for stub in ("experiment_tables.py", "results_tables.py"):  # the tables' steps are not this test's
-        (repo / "scripts" / stub).write_text("")
+def _stubbed_morfic(tmp_path: Path, script: str) -> tuple[dict[str, str], Path]:
+    """The queue's environment with ``script`` as ``morfic`` first on PATH; (env, the file its calls are logged to)."""
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
-    (bin_dir / "morfic").write_text(FAKE_MORFIC)
+    (bin_dir / "morfic").write_text(script)
     (bin_dir / "morfic").chmod(0o755)
     calls = tmp_path / "calls.txt"
     env = {
@@ -135,6 +131,16 @@ def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_pat
         "MORFIC_STORE": str(tmp_path / "store"),
         "MORFIC_QUEUE_LOCK": str(tmp_path / "queue.lock"),
     }
+    return env, calls
+
+
+def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_path):
+    """Seed 0's weights go where `reproduce --preset shipped` imports them (artifacts/bundles/), other seeds' under
+    weights/; every seed's results-only bundle under results/ (the queue's shipping step, morfic stubbed out)."""
+    repo = _repo_with_queue(tmp_path)
+    for stub in ("experiment_tables.py", "results_tables.py"):  # the tables' steps are not this test's
+        (repo / "scripts" / stub).write_text("")
+    env, calls = _stubbed_morfic(tmp_path, FAKE_MORFIC)
     got = subprocess.run(
         ["bash", str(repo / "scripts" / "experiment_queue.sh"), "film:0", "ppo:1"],
         env=env,
@@ -167,20 +173,9 @@ def test_a_training_stopped_from_outside_is_exported_partial_and_not_evaluated(t
     """Ctrl-C to the training (not the queue's --stop-at) checkpoints and exits 0: the run is still unfinished, so
     the queue exports it as a partial bundle and stops instead of evaluating and shipping it as a finished run."""
     repo = _repo_with_queue(tmp_path)
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
     unfinished = FAKE_MORFIC.replace('"finished": true', '"finished": false')  # train returns, the run stays unfinished
-    (bin_dir / "morfic").write_text(unfinished)
-    (bin_dir / "morfic").chmod(0o755)
-    calls = tmp_path / "calls.txt"
-    env = {
-        **os.environ,
-        "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
-        "MORFIC_CALLS": str(calls),
-        "MORFIC_STORE": str(tmp_path / "store"),
-        "MORFIC_QUEUE_LOCK": str(tmp_path / "queue.lock"),
-        "MORFIC_QUEUE_POLL_S": "0.1",
-    }
+    env, calls = _stubbed_morfic(tmp_path, unfinished)
+    env["MORFIC_QUEUE_POLL_S"] = "0.1"
     got = subprocess.run(
         ["bash", str(repo / "scripts" / "experiment_queue.sh"), "film-act:0", "ppo:1"],
         env=env,
