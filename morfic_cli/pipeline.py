@@ -309,6 +309,13 @@ class ReproduceResult:
         return sum(s.status not in ("skipped", NOT_RUN) for s in self.steps)
 
 
+#: Step kinds that ``reproduce --jobs`` runs side by side in worker processes (:meth:`Pipeline.run`).
+SIDE_BY_SIDE: tuple[str, ...] = ("eval", "diagnose")
+
+SideBySide = Callable[[list[tuple[str, str]]], list[StepResult]]
+"""Runs (kind, label) steps of :data:`SIDE_BY_SIDE` kinds together; their results in the given order."""
+
+
 def _json(doc: Any) -> Any:
     return json.loads(json.dumps(doc))
 
@@ -390,8 +397,13 @@ class Pipeline:
         return steps
 
     # ------------------------------------------------------------------ run
-    def run(self) -> ReproduceResult:
+    def run(self, side_by_side: SideBySide | None = None) -> ReproduceResult:
         """Run (or skip) every step in order; after a Ctrl-C (:meth:`interrupt`) stop once training checkpointed.
+
+        Args:
+            side_by_side: Runs the steps of :data:`SIDE_BY_SIDE` kinds together, when the first of them comes up,
+                and returns their results in plan order (``reproduce --jobs``: :class:`~morfic_cli.cluster.pool.
+                JobPool`); None runs every step here, one after another.
 
         Returns:
             Every step's result; ``interrupted`` when it stopped early (run it again to continue).
@@ -403,8 +415,14 @@ class Pipeline:
         threads = torch.get_num_threads()
         if self.cfg.torch_threads:
             torch.set_num_threads(self.cfg.torch_threads)
+        plan = self.plan()
+        batch = [(kind, label) for kind, label, _ in plan if side_by_side is not None and kind in SIDE_BY_SIDE]
         try:
-            for _kind, _label, fn in self.plan():
+            for kind, label, fn in plan:
+                if (kind, label) in batch:
+                    if side_by_side is not None and (kind, label) == batch[0]:
+                        result.steps += side_by_side(batch)
+                    continue
                 t0 = time.perf_counter()
                 step = fn()
                 step.seconds = time.perf_counter() - t0

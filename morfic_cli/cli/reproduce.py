@@ -146,6 +146,15 @@ def reproduce(
             "dies (user errors are never retried).",
         ),
     ] = 3,
+    jobs: Annotated[
+        int | None,
+        typer.Option(
+            "--jobs",
+            "-j",
+            help="Evaluations and diagnoses run side by side in this many worker processes (one keeps about one "
+            "core busy); default: one per core with --preset shipped, else 1. Training always runs one run at a time.",
+        ),
+    ] = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
     trust_variant: TrustOpt = None,
@@ -169,6 +178,7 @@ def reproduce(
     """
     check_args(store=store, out_dir=out, variants=variants, trust=trust_variant)
     _check_executor(executor, address, retries)
+    _check_jobs(jobs, executor)
     _check_shipped(preset, bundles, full_protocol, executor, overrides)
     from morfic_cli.pipeline import Pipeline, reproduce_cfg
     from morfic_cli.rl.devices import check_device
@@ -216,8 +226,11 @@ def reproduce(
         note = float32_note(bf16_matmul(cfg.device, cpu_bf16_kernels()))
         if note:
             info(note)
+    side_by_side = _job_pool(pipeline, jobs, shipped) if executor is Executor.local else None
     if not quiet:
         where = "" if executor is Executor.local else f", executor ray ({address or 'local instance'})"
+        if side_by_side is not None:
+            where += f", evaluations and diagnoses {side_by_side.jobs} side by side"
         info(
             f"reproduce: preset {preset.value}, {len(cfg.variants)} variants ({', '.join(cfg.variants)}) x "
             f"{cfg.seeds} seed(s), "
@@ -239,7 +252,7 @@ def reproduce(
     previous = signal.signal(signal.SIGINT, on_sigint)
     try:
         with view:
-            result = pipeline.run()
+            result = pipeline.run(side_by_side)
     finally:
         signal.signal(signal.SIGINT, previous)
     if result.interrupted:
@@ -267,6 +280,27 @@ def _check_shipped(
         raise MorficError("--preset shipped trains nothing and runs here; use it without --executor ray.")
     if overrides:
         raise MorficError("--set changes training configs; --preset shipped trains nothing (leave out --set).")
+
+
+def _check_jobs(jobs: int | None, executor: Executor) -> None:
+    from morfic_cli.errors import MorficError
+
+    if jobs is None:
+        return
+    if jobs < 1:
+        raise MorficError(f"--jobs must be 1 or more, got {jobs}.")
+    if executor is not Executor.local:
+        raise MorficError(
+            "--jobs is for --executor local; Ray places the jobs by the cluster's CPUs (leave out --jobs)."
+        )
+
+
+def _job_pool(pipeline, jobs: int | None, shipped: bool):
+    """The worker pool of ``--jobs`` (default: one per core for the shipped preset, else none)."""
+    from morfic_cli.cluster.pool import JobPool, cores
+
+    n = jobs if jobs is not None else (cores() if shipped else 1)
+    return JobPool(pipeline, n) if n > 1 else None
 
 
 def _check_executor(executor: Executor, address: str | None, retries: int) -> None:

@@ -16,16 +16,15 @@ from __future__ import annotations
 
 import contextlib
 import signal
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from morfic_cli import __version__
 from morfic_cli.cluster.jobs import CPUS_PER_JOB, Job, plan_jobs, stored
+from morfic_cli.cluster.worker import export_inputs, import_outcome
 from morfic_cli.errors import MorficError
 from morfic_cli.pipeline import Pipeline, ReproduceResult, StepResult
 
@@ -174,17 +173,7 @@ class RayExecutor:
         }
 
     def _export(self, specs: list[str], *, with_resume: bool = False) -> bytes:
-        """An export tar of ``specs`` from the user's store (latest version; a run to resume: full history)."""
-        from morfic_cli.runs import RESUME_PREFIX, run_of
-
-        store = self.pipeline.store
-        refs = list(specs)
-        if with_resume:
-            refs += [RESUME_PREFIX + run_of(s) for s in specs if store.has_ref(RESUME_PREFIX + run_of(s))]
-        with tempfile.TemporaryDirectory(prefix="morfic-bundle-") as tmp:
-            path = Path(tmp) / "inputs.tar"
-            store.export_tar(refs, path, latest=not with_resume)
-            return path.read_bytes()
+        return export_inputs(self.pipeline.store, specs, with_resume=with_resume)
 
     def _run_jobs(self, ray, result: ReproduceResult) -> list[StepResult]:
         from morfic_cli.cluster.worker import Outcome, execute
@@ -272,18 +261,10 @@ class RayExecutor:
             return StepResult(job.kind, job.label, "failed", detail=js.detail)
         assert isinstance(out, outcome_cls)
         js.node = f"{out.node} pid {out.pid}"
-        if out.error:
-            js.state, js.detail = "failed", out.error
-            return StepResult(job.kind, job.label, "failed", detail=out.error)
-        if out.bundle:
-            with tempfile.TemporaryDirectory(prefix="morfic-result-") as tmp:
-                path = Path(tmp) / "result.tar"
-                path.write_bytes(out.bundle)
-                try:
-                    self.pipeline.store.import_tar(path, append=True)
-                except MorficError as exc:  # nothing was imported (all or nothing)
-                    js.state, js.detail = "failed", f"import: {exc}"
-                    return StepResult(job.kind, job.label, "failed", detail=js.detail)
+        error = import_outcome(self.pipeline.store, out)
+        if error:
+            js.state, js.detail = "failed", error
+            return StepResult(job.kind, job.label, "failed", detail=error)
         step = out.step
         js.state = "done"
         js.seconds = time.time() - js.started if js.started else 0.0

@@ -81,6 +81,38 @@ def input_bundle(result: Outcome | bytes) -> bytes:
     return result
 
 
+def export_inputs(store, specs: list[str], *, with_resume: bool = False) -> bytes:
+    """An export tar of ``specs`` from ``store`` (their latest versions; a run to resume: its full history)."""
+    from morfic_cli.runs import RESUME_PREFIX, run_of
+
+    refs = list(specs)
+    if with_resume:
+        refs += [RESUME_PREFIX + run_of(s) for s in specs if store.has_ref(RESUME_PREFIX + run_of(s))]
+    with tempfile.TemporaryDirectory(prefix="morfic-bundle-") as tmp:
+        path = Path(tmp) / "inputs.tar"
+        store.export_tar(refs, path, latest=not with_resume)
+        return path.read_bytes()
+
+
+def import_outcome(store, out: Outcome) -> str:
+    """Import a finished job's bundle into ``store`` (all or nothing); "" or why the job failed.
+
+    The import appends (``import_tar(append=True)``): refs that every job of a kind extends (``diagnoses/
+    calibration``) get one version per job, in the order the driver imports them.
+    """
+    if out.error:
+        return out.error
+    if out.bundle:
+        with tempfile.TemporaryDirectory(prefix="morfic-result-") as tmp:
+            path = Path(tmp) / "result.tar"
+            path.write_bytes(out.bundle)
+            try:
+                store.import_tar(path, append=True)
+            except MorficError as exc:  # nothing was imported (all or nothing)
+                return f"import: {exc}"
+    return ""
+
+
 def execute(
     job: Job,
     cfg: ReproduceCfg,

@@ -468,6 +468,8 @@ def test_a_bundle_that_is_not_the_named_variant_is_refused(tmp_path):
         (["--seeds", "2"], "one seed per variant"),
         (["--set", "max_iterations=1"], "trains nothing"),
         (["--executor", "ray"], "without --executor ray"),
+        (["--jobs", "0"], "--jobs must be 1 or more, got 0"),
+        (["--jobs", "2", "--executor", "ray"], "--jobs is for --executor local"),
     ],
 )
 def test_shipped_bad_input(run_cli, bundles, tmp_path, args, message):
@@ -507,3 +509,43 @@ def test_shipped_imports_the_shipped_critic_study_once(bundles, tmp_path):
     assert "critic_study.csv" in store.read_manifest(first.id).files
     again = Pipeline(store, _tiny(reproduce_cfg("shipped", bundles=folder))).critic_study()
     assert (again.status, again.id) == ("skipped", first.id)  # importing the same tar again changes nothing
+
+
+def test_shipped_side_by_side_stores_what_one_process_stores(bundles, tmp_path):
+    """``--jobs 2``: the evals and diagnoses in two worker processes leave the store one process leaves, ref
+    versions in the same order; a job's user error fails the command after the others, naming the job."""
+    from morfic_cli.cluster.pool import JobPool
+    from morfic_cli.errors import MorficError
+    from tests.cluster.store_contents import comparable, differences
+
+    folder = tmp_path / "bundles"
+    folder.mkdir()
+    shutil.copy(bundles / "film-cpu-s0.tar", folder)
+    _bundle(folder, "concat", "concat-cpu-s0")
+    cfg = _tiny(reproduce_cfg("shipped", bundles=folder))
+    assert cfg.variants == ("concat", "film")
+    one = Pipeline(Store(tmp_path / "one"), cfg, out=tmp_path / "out-one").run()
+    pipe = Pipeline(Store(tmp_path / "two"), cfg, out=tmp_path / "out-two")
+    ended: list[str] = []
+    pipe.progress.step_end = lambda step: ended.append(f"{step.kind} {step.label}")  # type: ignore[method-assign]
+    two = pipe.run(JobPool(pipe, 2))
+    assert [(s.kind, s.label, s.status) for s in two.steps] == [(s.kind, s.label, s.status) for s in one.steps]
+    assert ended == [f"{s.kind} {s.label}" for s in one.steps]  # results arrive in plan order
+    assert all(s.seconds > 0 for s in two.steps if s.kind in ("eval", "diagnose"))
+    assert differences(comparable(tmp_path / "one"), comparable(tmp_path / "two")) == []
+    assert len(Store(tmp_path / "two").ref_history("diagnoses/calibration")) == 2
+
+    bad = Pipeline(Store(tmp_path / "bad"), dataclasses.replace(cfg, robots=("go2", "nosuchbot")))
+    for spec in ("runs/concat-cpu-s0", "runs/film-cpu-s0"):
+        bad.import_run(spec.split("/")[1].split("-")[0], spec)
+    with pytest.raises(
+        MorficError, match=r"4 job\(s\) failed; the 0 that finished .* First: eval runs/concat-cpu-s0: "
+    ):
+        JobPool(bad, 2)(
+            [
+                ("eval", "runs/concat-cpu-s0"),
+                ("eval", "runs/film-cpu-s0"),
+                ("diagnose", "runs/concat-cpu-s0"),
+                ("diagnose", "runs/film-cpu-s0"),
+            ]
+        )
