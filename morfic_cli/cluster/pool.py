@@ -19,7 +19,9 @@ from __future__ import annotations
 import dataclasses
 import multiprocessing
 import os
+import shutil
 import signal
+import tempfile
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -41,10 +43,12 @@ def _ignore_ctrl_c() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def run_timed(job: Job, cfg: ReproduceCfg, driver_version: str, inputs: bytes, trusted: tuple[str, ...]) -> Outcome:
+def run_timed(
+    job: Job, cfg: ReproduceCfg, driver_version: str, inputs: bytes, trusted: tuple[str, ...], workdir: str
+) -> Outcome:
     """:func:`~morfic_cli.cluster.worker.execute` with the job's wall time in its step result (on the worker)."""
     start = time.perf_counter()
-    out = execute(job, cfg, driver_version, inputs, trusted=trusted)
+    out = execute(job, cfg, driver_version, inputs, trusted=trusted, workdir=workdir)
     if out.step is not None:
         out.step.seconds = time.perf_counter() - start
     return out
@@ -117,12 +121,13 @@ class JobPool:
                         pipeline.progress.step_start(first, total, label, len(todo), "jobs")
                         pipeline.progress.step_advance(completed=len(results))
 
+        workdir = tempfile.mkdtemp(prefix="morfic-jobs-")  # the jobs' stores: gone at the end, even after Ctrl-C
         pool = ProcessPoolExecutor(workers, multiprocessing.get_context("spawn"), initializer=_ignore_ctrl_c)
         try:
             futures: dict[Future, Job] = {}
             for job in todo:
                 inputs = export_inputs(store, list(job.needs))
-                futures[pool.submit(run_timed, job, cfg, __version__, inputs, trusted)] = job
+                futures[pool.submit(run_timed, job, cfg, __version__, inputs, trusted, workdir)] = job
             while futures:
                 ready, _ = wait(futures, timeout=0.5, return_when=FIRST_COMPLETED)
                 for future in ready:
@@ -131,11 +136,16 @@ class JobPool:
                     pipeline.progress.step_advance(advance=1, detail=job.key)
                 import_ready()
         except BaseException:  # Ctrl-C or a bug in a worker: stop the others now, keep what finished
-            for child in multiprocessing.active_children():
+            children = multiprocessing.active_children()
+            for child in children:
                 child.terminate()
+            for child in children:
+                child.join(5)
             pool.shutdown(wait=False, cancel_futures=True)
             import_ready(everything=True)
             raise
+        finally:
+            shutil.rmtree(workdir, ignore_errors=True)
         pool.shutdown()
         return results
 

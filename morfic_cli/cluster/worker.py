@@ -120,12 +120,14 @@ def execute(
     *inputs: Outcome | bytes,
     board=None,
     trusted: tuple[str, ...] = (),
+    workdir: str | None = None,
 ) -> Outcome:
     """Run ``job`` in a fresh store fed with ``inputs``; return its refs as one export bundle.
 
     ``trusted``: the user variants the driver's user consented to (its command line and allow-list,
     :func:`~morfic_cli.rl.variants.trusted_variants`); the job imports those and no other user code, whatever
-    its input runs name (plus what this node's own allow-list holds).
+    its input runs name (plus what this node's own allow-list holds). ``workdir``: where the job's temporary store
+    goes (default the system's temporary folder; ``--jobs`` gives a folder it removes even after killing the job).
 
     A :class:`MorficError` (a user error: bad config, a mismatched morfic version, an input job that failed) is
     returned in ``Outcome.error``, so Ray does not retry it; anything else raises (a bug keeps its traceback).
@@ -139,7 +141,7 @@ def execute(
     out = Outcome(job.key, where(), os.getpid())
     if board is not None:
         board.start.remote(job.key, out.node, out.pid)
-    root = Path(tempfile.mkdtemp(prefix="morfic-job-"))
+    root = Path(tempfile.mkdtemp(prefix="morfic-job-", dir=workdir))
     try:
         check_version(driver_version)
         store = Store(root / "store")

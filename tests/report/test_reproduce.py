@@ -549,3 +549,23 @@ def test_shipped_side_by_side_stores_what_one_process_stores(bundles, tmp_path):
                 ("diagnose", "runs/film-cpu-s0"),
             ]
         )
+
+
+def test_ctrl_c_stops_the_side_by_side_workers_at_once_and_leaves_no_job_folder(bundles, tmp_path, monkeypatch):
+    import _thread
+    import multiprocessing
+    import tempfile
+    import threading
+
+    from morfic_cli.cluster.pool import JobPool
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    pipe = Pipeline(Store(tmp_path / "store"), _tiny(reproduce_cfg("shipped", bundles=bundles)))
+    pipe.import_run("film", "runs/film-cpu-s0")
+    threading.Timer(1.0, _thread.interrupt_main).start()  # a Ctrl-C while the workers start
+    with pytest.raises(KeyboardInterrupt):
+        JobPool(pipe, 2)([("eval", "runs/film-cpu-s0"), ("diagnose", "runs/film-cpu-s0")])
+    assert multiprocessing.active_children() == []
+    assert list((tmp_path / "tmp").iterdir()) == []
+    assert not pipe.store.has_ref("evals/film-cpu-s0") and not pipe.store.has_ref("diagnoses/calibration")
