@@ -1052,7 +1052,7 @@ def external_block(results: Path, params: Any = None) -> str:
         "",
         "### What each architecture changes on AlienGo, Mini Cheetah and ANYmal-C",
         "",
-        *architecture_text(ev),
+        *architecture_text(_load_all(results, ("eval", *EXTRA_EVALS, *goal_kinds()))),
         "",
         "### What ended the failed episodes on AlienGo, Mini Cheetah and ANYmal-C",
         "",

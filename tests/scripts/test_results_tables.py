@@ -532,6 +532,17 @@ def test_a_baseline_that_stands_still_is_said_to_and_one_seed_has_no_interval(tm
     assert "[" not in text  # no interval anywhere at one seed
 
 
+def test_the_architecture_text_reads_films_full_mode_goal_eval_at_1_m_s(tmp_path):
+    """film's full-mode 1.0 m/s rows live in <run>-eval-1.0-full.csv (the goal's eval): the block compares with them."""
+    _still(tmp_path)
+    (tmp_path / "genloco-cpu-s0-eval-1.0.csv").write_text(GOAL_HEAD + "aliengo,full,1.0,0.324,0.10,0.1,0.0,falls\n")
+    (tmp_path / "film-cpu-s0-eval-1.0-full.csv").write_text(GOAL_HEAD + "aliengo,full,1.0,0.324,0.95,0.1,0.5,ok\n")
+    text = "\n".join(rt.architecture_text(rt.load_evals(tmp_path)))
+    assert "1.0 m/s, full mode: no rows of `film` yet." in text  # the runs' own evals alone lack film's rows
+    block = rt.external_block(tmp_path)
+    assert "1.0 m/s, full mode, against `film`: AlienGo v_x 0.10 vs 0.95: -0.85, S 0.000 vs 0.500: -0.500" in block
+
+
 def test_two_seeds_a_side_give_the_welch_interval(tmp_path):
     _still(tmp_path)
     for run, vx in (("genloco", 0.30), ("film", 1.24)):  # AlienGo v_x: genloco 0.10, 0.30; film 0.84, 1.24
