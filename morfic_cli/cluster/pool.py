@@ -89,7 +89,7 @@ class JobPool:
                 results[job.key] = found
                 pipeline.progress.step_end(found)
         if todo:
-            results.update(self._run(todo, jobs, tuple(trusted_variants())))
+            results.update(self._run(todo, tuple(trusted_variants())))
         failed = [r for r in results.values() if r.status == "failed"]
         if failed:
             done = sum(r.status != "failed" for r in results.values())
@@ -99,7 +99,7 @@ class JobPool:
             )
         return [results[j.key] for j in jobs]
 
-    def _run(self, todo: list[Job], jobs: list[Job], trusted: tuple[str, ...]) -> dict[str, StepResult]:
+    def _run(self, todo: list[Job], trusted: tuple[str, ...]) -> dict[str, StepResult]:
         pipeline, store = self.pipeline, self.pipeline.store
         cfg = dataclasses.replace(pipeline.cfg, torch_threads=self.torch_threads)
         workers = min(self.jobs, len(todo))
