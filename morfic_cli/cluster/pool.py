@@ -122,31 +122,32 @@ class JobPool:
                         pipeline.progress.step_advance(completed=len(results))
 
         workdir = tempfile.mkdtemp(prefix="morfic-jobs-")  # the jobs' stores: gone at the end, even after Ctrl-C
-        pool = ProcessPoolExecutor(workers, multiprocessing.get_context("spawn"), initializer=_ignore_ctrl_c)
         try:
-            futures: dict[Future, Job] = {}
-            for job in todo:
-                inputs = export_inputs(store, list(job.needs))
-                futures[pool.submit(run_timed, job, cfg, __version__, inputs, trusted, workdir)] = job
-            while futures:
-                ready, _ = wait(futures, timeout=0.5, return_when=FIRST_COMPLETED)
-                for future in ready:
-                    job = futures.pop(future)
-                    finished[job.key] = _outcome(future)
-                    pipeline.progress.step_advance(advance=1, detail=job.key)
-                import_ready()
-        except BaseException:  # Ctrl-C or a bug in a worker: stop the others now, keep what finished
-            children = multiprocessing.active_children()
-            for child in children:
-                child.terminate()
-            for child in children:
-                child.join(5)
-            pool.shutdown(wait=False, cancel_futures=True)
-            import_ready(everything=True)
-            raise
+            pool = ProcessPoolExecutor(workers, multiprocessing.get_context("spawn"), initializer=_ignore_ctrl_c)
+            try:
+                futures: dict[Future, Job] = {}
+                for job in todo:
+                    inputs = export_inputs(store, list(job.needs))
+                    futures[pool.submit(run_timed, job, cfg, __version__, inputs, trusted, workdir)] = job
+                while futures:
+                    ready, _ = wait(futures, timeout=0.5, return_when=FIRST_COMPLETED)
+                    for future in ready:
+                        job = futures.pop(future)
+                        finished[job.key] = _outcome(future)
+                        pipeline.progress.step_advance(advance=1, detail=job.key)
+                    import_ready()
+            except BaseException:  # Ctrl-C or a bug in a worker: stop the others now, keep what finished
+                children = multiprocessing.active_children()
+                for child in children:
+                    child.terminate()
+                for child in children:
+                    child.join(5)
+                pool.shutdown(wait=False, cancel_futures=True)
+                import_ready(everything=True)
+                raise
+            pool.shutdown()
         finally:
             shutil.rmtree(workdir, ignore_errors=True)
-        pool.shutdown()
         return results
 
     def _finish(self, job: Job, out: Outcome | BaseException) -> StepResult:
