@@ -672,10 +672,17 @@ class Pipeline:
         if found is not None:
             return found
         self._start("diagnose", spec, len(cfg.robots) * cfg.steps, "steps")
+        trained = None
+        if cfg.batch and self.fixed_rollout_reads_tokens() and spec == self.fixed_rollout_models()[0]:
+            from morfic_cli.diagnostics.fixed_rollout import recording_tokens
+            from morfic_cli.rl.load import load_trained
+
+            trained = [recording_tokens(load_trained(self.store, spec))]  # the fixed-rollout analysis reuses them
         res = diagnose_runs(
             self.store,
             [spec],
             cfg,
+            trained=trained,
             on_rollout_start=lambda _r, robot: self.progress.step_advance(detail=robot),
             on_step=lambda _t: self.progress.step_advance(advance=1),
         )
@@ -714,6 +721,20 @@ class Pipeline:
                     "other returns than that actor's rollouts record"
                 )
         return left_out
+
+    def fixed_rollout_reads_tokens(self) -> bool:
+        """Whether a critic of the fixed-rollout analysis reads URMA's token groups (its actor's rollouts record them).
+
+        Under the batched protocol (``batch_robots``) the actor's diagnosis then records them too, so the analysis
+        reuses its rollouts instead of stepping all robots again (the calibration is the same: same physics and
+        actor inputs, more groups kept).
+        """
+        left_out = self.fixed_rollout_left_out()
+        return any(
+            self.train_cfg(variant, seed).env.obs.body_tokens
+            for variant, seed, spec in self.run_specs()
+            if spec not in left_out
+        )
 
     def fixed_rollout_unavailable(self) -> str | None:
         """Why the fixed-rollout analysis cannot run, or None.

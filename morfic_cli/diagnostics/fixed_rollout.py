@@ -193,6 +193,18 @@ class FixedRolloutModels:
     critics: list[TrainedModels]
 
 
+def recording_tokens(trained: TrainedModels) -> TrainedModels:
+    """``trained`` whose rollouts also record URMA's token groups, which a urma critic reads.
+
+    Same physics, same actor inputs, more groups kept (:func:`~morfic_cli.diagnostics.samples.kept_groups`).
+    """
+    env = trained.cfg.env
+    if env.obs.body_tokens:
+        return trained
+    obs = dataclasses.replace(env.obs, body_tokens=True)
+    return dataclasses.replace(trained, cfg=dataclasses.replace(trained.cfg, env=dataclasses.replace(env, obs=obs)))
+
+
 def load_models(
     store: Store,
     actor_spec: str | None,
@@ -240,15 +252,8 @@ def load_models(
             )
     for spec, critic in zip(specs, critics, strict=True):
         check_compatible(actor, critic, spec)
-    if any(c.cfg.env.obs.body_tokens for c in critics) and not actor.cfg.env.obs.body_tokens:
-        # a urma critic reads the token groups: the actor's rollout records them too (same physics, more groups)
-        env = actor.cfg.env
-        actor = dataclasses.replace(
-            actor,
-            cfg=dataclasses.replace(
-                actor.cfg, env=dataclasses.replace(env, obs=dataclasses.replace(env.obs, body_tokens=True))
-            ),
-        )
+    if any(c.cfg.env.obs.body_tokens for c in critics):
+        actor = recording_tokens(actor)
     check_horizon(actor.cfg.ppo.gamma, cfg)
     return FixedRolloutModels(actor_spec, actor, specs, critics)
 

@@ -578,3 +578,26 @@ def test_ctrl_c_stops_the_side_by_side_workers_at_once_and_leaves_no_job_folder(
     assert multiprocessing.active_children() == []
     assert list((tmp_path / "tmp").iterdir()) == []
     assert not pipe.store.has_ref("evals/film-cpu-s0") and not pipe.store.has_ref("diagnoses/calibration")
+
+
+def test_the_actors_diagnosis_records_the_token_groups_a_urma_critic_reads(bundles, tmp_path):
+    """Under the batched protocol film's diagnosis keeps urma's token groups, so the fixed-rollout analysis reuses
+    its rollouts: its calibration is the one without them (same physics, same actor inputs)."""
+    from morfic_cli.diagnostics.calibration import diagnose_runs
+    from morfic_cli.diagnostics.fixed_rollout import recording_tokens
+    from morfic_cli.rl.load import load_trained
+
+    assert Pipeline(
+        Store(tmp_path / "a"), reproduce_cfg("smoke", variants=("film", "urma"))
+    ).fixed_rollout_reads_tokens()
+    assert not Pipeline(
+        Store(tmp_path / "b"), reproduce_cfg("smoke", variants=("film", "ppo"))
+    ).fixed_rollout_reads_tokens()
+    pipe = Pipeline(Store(tmp_path / "store"), _tiny(reproduce_cfg("shipped", bundles=bundles)))
+    pipe.import_run("film", "runs/film-cpu-s0")
+    cfg = pipe.diagnose_cfg(pipe.cfg.robots)
+    film = load_trained(pipe.store, "runs/film-cpu-s0")
+    plain = diagnose_runs(pipe.store, ["runs/film-cpu-s0"], cfg, trained=[film]).rows
+    tokens = diagnose_runs(pipe.store, ["runs/film-cpu-s0"], cfg, trained=[recording_tokens(film)]).rows
+    assert [r["rollout"] for r in plain] != [r["rollout"] for r in tokens]  # other rollouts: more groups kept
+    assert [{**r, "rollout": ""} for r in plain] == [{**r, "rollout": ""} for r in tokens]
