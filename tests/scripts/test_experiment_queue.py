@@ -28,6 +28,17 @@ def _repo_with_queue(tmp_path: Path) -> Path:
     return repo
 
 
+def _queue(repo: Path, env: dict[str, str], *items: str) -> subprocess.CompletedProcess:
+    """``scripts/experiment_queue.sh ITEMS`` of ``repo`` run with ``env``, its output captured."""
+    return subprocess.run(
+        ["bash", str(repo / "scripts" / "experiment_queue.sh"), *items],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
 def _finished_run(store: Store, name: str) -> None:
     """runs/<name>: a finished checkpoint with weights and a curve, and evals/<name> of it."""
     ckpt = store.put_manifest(
@@ -61,13 +72,7 @@ def test_a_results_only_run_stops_the_queue_before_anything_is_written(tmp_path)
     walk.write_text('{"kept": true}')
     env = {**os.environ, "MORFIC_STORE": str(dst.root)}
     # the run with weights first: every item is checked before the first is trained or evaluated
-    got = subprocess.run(
-        ["bash", str(repo / "scripts" / "experiment_queue.sh"), "ppo:2", "film:1"],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    got = _queue(repo, env, "ppo:2", "film:1")
     assert got.returncode == 1, got.stdout + got.stderr
     assert got.stderr.startswith("Error: runs/film-cpu-s1 ") and "results-only bundle" in got.stderr
     assert "artifacts/bundles/results/film-cpu-s1.tar" in got.stderr
@@ -141,13 +146,7 @@ def test_every_seed_ships_results_only_and_its_weights_where_they_belong(tmp_pat
     for stub in ("experiment_tables.py", "results_tables.py"):  # the tables' steps are not this test's
         (repo / "scripts" / stub).write_text("")
     env, calls = _stubbed_morfic(tmp_path, FAKE_MORFIC)
-    got = subprocess.run(
-        ["bash", str(repo / "scripts" / "experiment_queue.sh"), "film:0", "ppo:1"],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    got = _queue(repo, env, "film:0", "ppo:1")
     assert got.returncode == 0, got.stdout + got.stderr
     exports = [line for line in calls.read_text().splitlines() if line.startswith("store export")]
     assert exports == [
@@ -176,13 +175,7 @@ def test_a_training_stopped_from_outside_is_exported_partial_and_not_evaluated(t
     unfinished = FAKE_MORFIC.replace('"finished": true', '"finished": false')  # train returns, the run stays unfinished
     env, calls = _stubbed_morfic(tmp_path, unfinished)
     env["MORFIC_QUEUE_POLL_S"] = "0.1"
-    got = subprocess.run(
-        ["bash", str(repo / "scripts" / "experiment_queue.sh"), "film-act:0", "ppo:1"],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    got = _queue(repo, env, "film-act:0", "ppo:1")
     assert got.returncode == 0, got.stdout + got.stderr
     lines = calls.read_text().splitlines()
     assert "train --resume runs/film-act-cpu-s0 -q" in lines
